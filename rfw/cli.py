@@ -1,0 +1,155 @@
+"""The ``rfw`` command line. Bad input exits non-zero with one line naming file, pass, slot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+from .graph import CompiledGraph, GraphError, MemoryOptions, compile, load_graph, to_toml
+from .graph.inspect import describe, to_dot
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {w}x{h}")
+    return w, h
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    # write beside the target and rename: a failure never leaves half a file
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _compile_file(args: argparse.Namespace) -> CompiledGraph:
+    graph = load_graph(args.file, strict=args.strict)
+    if getattr(args, "output", None):
+        graph = graph.with_outputs(args.output)
+    caps = None if getattr(args, "caps", None) is None else \
+        [c for c in args.caps.split(",") if c]
+    return compile(graph, args.size, caps, cull_passes=not getattr(args, "no_cull", False),
+                   memory=MemoryOptions(alias=not getattr(args, "no_alias", False)))
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    c = _compile_file(args)
+    print(json.dumps(c.to_json(), indent=2) if args.json else describe(c))
+    return 0
+
+
+def cmd_dot(args: argparse.Namespace) -> int:
+    dot = to_dot(_compile_file(args))
+    if args.o is None:
+        sys.stdout.write(dot)
+        return 0
+    out = Path(args.o)
+    _write_atomic(out, dot)
+    print(f"wrote {out}")
+    exe = shutil.which("dot")
+    if exe is None:
+        print("graphviz 'dot' is not installed: no SVG written", file=sys.stderr)
+        return 0
+    svg = out.with_suffix(".svg")
+    done = subprocess.run([exe, "-Tsvg"], input=dot, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise GraphError(f"dot failed: {done.stderr.strip()}", file=str(out))
+    _write_atomic(svg, done.stdout)
+    print(f"wrote {svg}")
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    text = to_toml(load_graph(args.file, strict=args.strict))
+    if args.o is None:
+        sys.stdout.write(text)
+    else:
+        _write_atomic(Path(args.o), text)
+        print(f"wrote {args.o}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    # the renderer lands with the pass plugins; until then `run` shows the compiled plan
+    if args.config is None:
+        from .default_graph import default_graph
+
+        c = compile(default_graph(), args.size)
+    else:
+        c = compile(load_graph(args.config), args.size)
+    print(describe(c))
+    return 0
+
+
+def _graph_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", help="graph file: .toml (rfw) or .json (Raptor)")
+    p.add_argument("--size", type=_size, help="output size WxH (default: the graph's own)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--strict", dest="strict", action="store_true", default=None,
+                      help="inputs that no pass produces are errors (default for TOML)")
+    mode.add_argument("--lenient", dest="strict", action="store_false",
+                      help="report them as diagnostics instead (default for Raptor JSON)")
+    p.add_argument("--output", action="append", metavar="RESOURCE",
+                   help="graph output to keep (repeatable); the rest is culled")
+    p.add_argument("--no-cull", action="store_true", help="keep passes nothing depends on")
+    p.add_argument("--no-alias", action="store_true", help="give every transient its own bytes")
+    p.add_argument("--caps", help="comma-separated device capabilities to check passes against")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="rfw", description="rfw: frame graphs for graphics "
+                                 "research")
+    sub = ap.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a config (default: the embedded deferred graph)")
+    run.add_argument("config", nargs="?")
+    run.add_argument("--size", type=_size)
+    run.set_defaults(func=cmd_run)
+    graph = sub.add_parser("graph", help="inspect frame graphs")
+    gsub = graph.add_subparsers(dest="graph_command", required=True)
+    plan = gsub.add_parser("plan", help="print order, memory, barriers and totals")
+    _graph_args(plan)
+    plan.add_argument("--json", action="store_true", help="one JSON object")
+    plan.set_defaults(func=cmd_plan)
+    dot = gsub.add_parser("dot", help="Graphviz DOT (and SVG when dot is installed)")
+    _graph_args(dot)
+    dot.add_argument("-o", metavar="OUT", help="write DOT here (and OUT.svg)")
+    dot.set_defaults(func=cmd_dot)
+    conv = gsub.add_parser("convert", help="write a graph (e.g. Raptor JSON) as rfw TOML")
+    conv.add_argument("file")
+    conv.add_argument("-o", metavar="OUT")
+    conv.add_argument("--strict", action="store_true", default=None)
+    conv.set_defaults(func=cmd_convert)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except GraphError as e:
+        print(f"rfw: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"rfw: error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,25 @@
+"""The frame graph: declare passes and resources, compile to order, memory and barriers."""
+
+from .compile import CompiledGraph, Diagnostic, MemoryOptions, compile
+from .errors import GraphError
+from .graph import Graph, GraphBuilder, PassDecl
+from .loaders import load_graph, load_raptor, load_toml, loads_raptor, loads_toml, to_toml
+from .resources import (
+    Attachment,
+    Buffer,
+    DepthAttachment,
+    History,
+    Reference,
+    ShadingRate,
+    SizeRule,
+    Slot,
+    Storage,
+    Texture,
+)
+
+__all__ = [
+    "Attachment", "Buffer", "CompiledGraph", "DepthAttachment", "Diagnostic", "Graph",
+    "GraphBuilder", "GraphError", "History", "MemoryOptions", "PassDecl", "Reference",
+    "ShadingRate", "SizeRule", "Slot", "Storage", "Texture", "compile", "load_graph",
+    "load_raptor", "load_toml", "loads_raptor", "loads_toml", "to_toml",
+]

@@ -1,0 +1,96 @@
+"""Human views of a compiled graph: the text plan and Graphviz DOT."""
+
+from __future__ import annotations
+
+from .compile import CompiledGraph
+
+
+def _mib(n: int) -> str:
+    return f"{n / (1 << 20):.2f} MiB"
+
+
+def _table(rows: list[list[str]], header: list[str]) -> list[str]:
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    fmt = "  ".join(f"{{:<{w}}}" for w in widths)
+    return [fmt.format(*header).rstrip(), fmt.format(*("-" * w for w in widths)).rstrip(),
+            *(fmt.format(*map(str, r)).rstrip() for r in rows)]
+
+
+def describe(c: CompiledGraph) -> str:
+    """The plan as text: order, culled/disabled passes, memory, barriers, totals."""
+    out = [f"graph '{c.name}' at {c.size[0]}x{c.size[1]}", ""]
+    out.append(f"order ({len(c.order)} passes):")
+    out += [f"  {i:>3}  {name}" for i, name in enumerate(c.order)]
+    out.append(f"culled:   {', '.join(c.culled) or '-'}")
+    out.append(f"disabled: {', '.join(c.disabled) or '-'}")
+    out.append(f"outputs:  {', '.join(c.outputs) or '-'}")
+    out.append("")
+    rows = []
+    for r in c.resources:
+        life = "transient" if r.transient else "history" if r.history else \
+            "external" if r.external else "persistent"
+        shape = f"{r.width}x{r.height}" if r.kind == "image" else "-"
+        rows.append([r.name, r.kind, r.format or "-", shape, f"{r.bytes:,}",
+                     "-" if r.heap is None else r.heap,
+                     "-" if r.offset is None else f"{r.offset:,}",
+                     f"{r.first or '-'}..{r.last or '-'}", life,
+                     ",".join(sorted(r.usages)) or "-"])
+    out.append("memory:")
+    out += ["  " + line for line in _table(rows, ["resource", "kind", "format", "size", "bytes",
+                                                  "heap", "offset", "first..last", "lifetime",
+                                                  "usage"])]
+    out.append("")
+    out.append(f"barriers ({len(c.barriers)}):")
+    for b in c.barriers:
+        j = b.to_json()
+        src, dst = j["from"], j["to"]
+        alias = f"  [takes memory of {', '.join(b.aliased)}]" if b.aliased else ""
+        out.append(f"  {b.pass_name} / {b.resource}: {src['layout']} -> {dst['layout']}; "
+                   f"{src['stages']}:{src['access']} -> {dst['stages']}:{dst['access']}{alias}")
+    out.append("")
+    out.append("parallel levels:")
+    out += [f"  {i}: {', '.join(level)}" for i, level in enumerate(c.parallel_levels)]
+    out.append("")
+    heaps = ", ".join(f"#{i} {_mib(b)}" for i, b in enumerate(c.heaps)) or "-"
+    out.append(f"heaps:              {heaps}")
+    out.append(f"transient_bytes:    {c.transient_bytes:>14,}  ({_mib(c.transient_bytes)})")
+    out.append(f"unaliased_bytes:    {c.unaliased_bytes:>14,}  ({_mib(c.unaliased_bytes)})")
+    out.append(f"lower_bound_bytes:  {c.lower_bound_bytes:>14,}  ({_mib(c.lower_bound_bytes)})")
+    out.append(f"raptor_reuse_bytes: {c.raptor_reuse_bytes:>14,}  "
+               f"({_mib(c.raptor_reuse_bytes)})")
+    if c.diagnostics:
+        out.append("")
+        out.append("diagnostics:")
+        out += [f"  {d.level}: {d.message}" for d in c.diagnostics]
+    return "\n".join(out)
+
+
+def _q(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def to_dot(c: CompiledGraph) -> str:
+    """Passes as boxes, resources as ellipses; dashed edges order without data."""
+    lines = [f"digraph {_q(c.name)} {{", "  rankdir=LR;", "  node [fontname=Helvetica];"]
+    for name in c.order:
+        lines.append(f"  {_q('pass:' + name)} [shape=box, style=filled, fillcolor=lightblue, "
+                     f"label={_q(name)}];")
+    for r in c.resources:
+        color = "palegreen" if r.transient else "lightgoldenrod"
+        label = f"{r.name}\\n{r.format or r.kind} {r.width}x{r.height}" if r.kind == "image" \
+            else f"{r.name}\\n{r.bytes} B"
+        lines.append(f"  {_q('res:' + r.name)} [shape=ellipse, style=filled, "
+                     f"fillcolor={color}, label=\"{label}\"];")
+    for name in c.order:
+        for a in c.accesses[name]:
+            p, r = _q("pass:" + name), _q("res:" + a.resource)
+            if a.role == "order":
+                lines.append(f"  {r} -> {p} [style=dashed];")
+            elif a.writes:
+                lines.append(f"  {p} -> {r};")
+                if a.role == "modify":
+                    lines.append(f"  {r} -> {p} [color=gray];")
+            else:
+                lines.append(f"  {r} -> {p};")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
