@@ -424,7 +424,8 @@ def _raptor_output(b: PassBuilder, r: Mapping[str, Any], name: str, rtype: str, 
         if not external:
             check.warnings.append(("info", f"{where}: {rtype} without a description is "
                                            "application-owned, as in Raptor"))
-        b.output(name, Slot(rtype, external=True), name=name)
+        usage = frozenset({"storage"}) if rtype == "buffer" else frozenset()
+        b.output(name, Slot(rtype, usage=usage, external=True), name=name)
         return
     if fmt is None:
         check.fail(f"{where}: an attachment needs a 'format'")
