@@ -9,6 +9,7 @@ from __future__ import annotations
 import bisect
 import gc
 import heapq
+import math
 from collections import Counter, OrderedDict, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ STATS: Counter[str] = Counter()
 
 # pass types whose attachments are real render targets (compute writes them as storage)
 RASTER = frozenset({"graphics", "mesh"})
+MAX_DIMENSION = 65536  # beyond any device's image limit: a size rule gone wrong
 IMPLIED_CAPS = {"mesh": ("VK_EXT_mesh_shader",), "ray_tracing": ("VK_KHR_ray_tracing_pipeline",)}
 
 
@@ -617,10 +619,11 @@ def resolve(declared: Declared, used: Iterable[str], size: tuple[int, int],
             out[name] = Resolved(name, "image", None, 0, 0, 1, 1, 1, 0)
             continue
         w, h = _resolve_size(name, declared.resources, size, sizes, [])
-        if w < 1 or h < 1:
+        if not (1 <= w <= MAX_DIMENSION and 1 <= h <= MAX_DIMENSION):
             where = f"pass '{r.producer}', slot '{r.slot}'" if r.producer else "external"
-            problems.error(f"{where}: '{name}' resolves to {w}x{h} texels "
-                           f"(size rule {r.size.describe()})")
+            shape = f"{w}x{h}" if max(w, h) <= MAX_DIMENSION else f"over {MAX_DIMENSION}"
+            problems.error(f"{where}: '{name}' resolves to {shape} texels "
+                           f"(size rule {r.size.describe()}; 1..{MAX_DIMENSION} allowed)")
             continue
         try:
             raw = image_bytes(r.format, w, h, mips=r.mips, layers=r.layers, samples=r.samples)
@@ -649,7 +652,8 @@ def _resolve_size(name: str, resources: dict[str, ResourceDecl], size: tuple[int
         else:
             base = size
         # truncation, as Raptor does: a 0.5 scale of 1281 is 640
-        wh = (int(base[0] * rule.scale[0]), int(base[1] * rule.scale[1]))
+        sx, sy = (base[0] * rule.scale[0], base[1] * rule.scale[1])
+        wh = (int(sx) if math.isfinite(sx) else 0, int(sy) if math.isfinite(sy) else 0)
     memo[name] = wh
     return wh
 
@@ -717,10 +721,13 @@ def assign_memory(items_by_heap: tuple[tuple[Item, ...], ...],
             heaps.append(top)
             continue
         best: tuple[int, dict[str, int]] | None = None
+        floor = lower_bound(items, max(it.last for it in items) + 1)
         for key in _PLACEMENT_ORDERS:
             top, placed = _place(sorted(items, key=key))
             if best is None or top < best[0]:
                 best = (top, placed)
+            if best[0] == floor:
+                break  # optimal: no other order can do better
         assert best is not None
         heaps.append(best[0])
         offsets.update(best[1])

@@ -26,6 +26,7 @@ class GraphError(ValueError):
                  more: Iterable[str] = ()):
         if suggest is not None:
             message += did_you_mean(*suggest)
+        message = message.replace("\n", "\\n")  # one line, whatever names contain
         self.message = message
         self.file = file
         self.more = list(more)

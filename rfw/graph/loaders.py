@@ -7,6 +7,7 @@ Errors name the file, the pass and the slot (and the line where it can be found)
 from __future__ import annotations
 
 import json
+import math
 import re
 import tomllib
 from collections.abc import Callable, Mapping
@@ -66,6 +67,21 @@ class _Checker:
                     self.fail(msg)
                 self.warnings.append(("warning", msg))
 
+    def strings(self, value: Any, where: str) -> list[str]:
+        """A string or a list of strings."""
+        items = [value] if isinstance(value, str) else value
+        if not isinstance(items, list) or not all(isinstance(v, str) for v in items):
+            self.fail(f"{where}: expected a string or a list of strings, got "
+                      f"{json.dumps(value)}")
+        return items
+
+    def number(self, value: Any, where: str, *, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value) or (positive and value <= 0):
+            what = "a positive finite number" if positive else "a finite number"
+            self.fail(f"{where}: expected {what}, got {json.dumps(value)}")
+        return float(value)
+
     def type(self, value: Any, types: type | tuple[type, ...], where: str) -> Any:
         if not isinstance(value, types) or (isinstance(value, bool) and bool not in (
                 types if isinstance(types, tuple) else (types,))):
@@ -118,7 +134,8 @@ def loads_toml(text: str, *, source: str = "<toml>", strict: bool | None = None)
     for i, table in enumerate(passes):
         _toml_pass(g, table, i, text, check)
     if "outputs" in data:
-        g.output(*check.type(data["outputs"], list, "graph 'outputs'"))
+        g.output(*check.strings(check.type(data["outputs"], list, "graph 'outputs'"),
+                                "graph 'outputs'"))
     graph = g.build()
     return _with_warnings(graph, check.warnings)
 
@@ -140,12 +157,14 @@ def _toml_pass(g: GraphBuilder, table: Any, i: int, text: str, check: _Checker) 
     if origin:
         where += f" ({origin})"
     check.keys(table, _PASS_KEYS, where)
-    ptype = table.get("type", "graphics")
+    ptype = check.type(table.get("type", "graphics"), str, f"{where}: 'type'")
     if ptype not in PASS_TYPES:
         check.fail(f"{where}: unknown pass type '{ptype}'" + did_you_mean(str(ptype), PASS_TYPES))
-    p = g.add_pass(name, ptype, enabled=bool(table.get("enabled", True)),
-                   side_effect=bool(table.get("side_effect", False)),
-                   requires=check.type(table.get("requires", []), list, f"{where}: 'requires'"),
+    p = g.add_pass(name, ptype,
+                   enabled=check.type(table.get("enabled", True), bool, f"{where}: 'enabled'"),
+                   side_effect=check.type(table.get("side_effect", False), bool,
+                                          f"{where}: 'side_effect'"),
+                   requires=check.strings(table.get("requires", []), f"{where}: 'requires'"),
                    settings=check.type(table.get("settings", {}), dict, f"{where}: 'settings'"),
                    origin=origin)
     for slot, spec in check.type(table.get("inputs", {}), dict, f"{where}: 'inputs'").items():
@@ -173,13 +192,15 @@ def _toml_output(p: PassBuilder, slot: str, spec: Any, where: str, check: _Check
         if "target" not in spec:
             check.fail(f"{where}: a reference output needs 'target' (the resource written "
                        "in place)")
-        p.output(slot, s, target=spec["target"])
+        p.output(slot, s, target=check.type(spec["target"], str, f"{where}: 'target'"))
     else:
-        p.output(slot, s, name=spec.get("name"))
+        name = spec.get("name")
+        p.output(slot, s, name=None if name is None else check.type(name, str,
+                                                                    f"{where}: 'name'"))
 
 
 def _toml_slot(spec: Mapping[str, Any], where: str, check: _Checker, *, out: bool) -> Slot:
-    stype = spec.get("type", "texture")
+    stype = check.type(spec.get("type", "texture"), str, f"{where}: 'type'")
     if stype not in SLOT_TYPES:
         check.fail(f"{where}: unknown slot type '{stype}'" + did_you_mean(str(stype), SLOT_TYPES))
     kw: dict[str, Any] = {}
@@ -193,19 +214,17 @@ def _toml_slot(spec: Mapping[str, Any], where: str, check: _Checker, *, out: boo
         if key in spec:
             kw[key] = check.type(spec[key], bool, f"{where}: '{key}'")
     if "usage" in spec:
-        usage = spec["usage"]
-        kw["usage"] = frozenset([usage] if isinstance(usage, str) else usage)
+        kw["usage"] = frozenset(check.strings(spec["usage"], f"{where}: 'usage'"))
     if "stages" in spec:
-        kw["stages"] = frozenset(check.type(spec["stages"], list, f"{where}: 'stages'"))
+        kw["stages"] = frozenset(check.strings(spec["stages"], f"{where}: 'stages'"))
     if "load" in spec:
-        if spec["load"] not in LOAD_OPS:
+        if not isinstance(spec["load"], str) or spec["load"] not in LOAD_OPS:
             check.fail(f"{where}: unknown load op '{spec['load']}'"
                        + did_you_mean(str(spec["load"]), LOAD_OPS))
         kw["load"] = spec["load"]
     if "clear" in spec:
         clear = check.type(spec["clear"], list, f"{where}: 'clear'")
-        kw["clear"] = tuple(float(check.type(c, (int, float), f"{where}: 'clear'"))
-                            for c in clear)
+        kw["clear"] = tuple(check.number(c, f"{where}: 'clear'") for c in clear)
     if out:
         kw["size"] = _toml_size(spec, where, check)
     if stype == "buffer" and "usage" not in kw:
@@ -216,9 +235,11 @@ def _toml_slot(spec: Mapping[str, Any], where: str, check: _Checker, *, out: boo
 def _toml_size(spec: Mapping[str, Any], where: str, check: _Checker) -> SizeRule | None:
     scale = spec.get("scale", 1.0)
     if isinstance(scale, int | float) and not isinstance(scale, bool):
-        sx = sy = float(scale)
+        sx = sy = check.number(scale, f"{where}: 'scale'", positive=True)
     else:
         sx, sy = _pair(scale, f"{where}: 'scale'", check, float)
+        check.number(sx, f"{where}: 'scale'", positive=True)
+        check.number(sy, f"{where}: 'scale'", positive=True)
     if "size" in spec:
         if "size_of" in spec or "scale" in spec:
             check.fail(f"{where}: 'size' is fixed; it cannot be combined with 'scale' or "
@@ -240,7 +261,8 @@ def _pair(value: Any, where: str, check: _Checker, kind: Callable[[Any], Any]) -
 
 def _size_pair(value: Any, where: str, check: _Checker) -> tuple[int, int]:
     w, h = _pair(value, where, check, lambda v: v)
-    if w != int(w) or h != int(h) or w < 1 or h < 1:
+    if not (math.isfinite(w) and math.isfinite(h)) or w != int(w) or h != int(h) \
+            or w < 1 or h < 1:
         check.fail(f"{where}: a size must be two positive integers, got {json.dumps(value)}")
     return int(w), int(h)
 
@@ -373,7 +395,7 @@ def _raptor_pass(g: GraphBuilder, p: Any, i: int, text: str, check: _Checker) ->
     origin = f"line {line}" if line else None
     where = f"pass '{name}'" + (f" ({origin})" if origin else "")
     check.keys(p, _R_PASS_KEYS, where)
-    rtype = p.get("type", "")
+    rtype = check.type(p.get("type", ""), str, f"{where}: 'type'")
     if rtype not in _R_PASS_TYPES:
         check.fail(f"{where}: unknown pass type '{rtype}'" + did_you_mean(str(rtype),
                                                                         _R_PASS_TYPES))
@@ -394,7 +416,7 @@ def _raptor_io(r: Mapping[str, Any], where: str, check: _Checker,
                known: tuple[str, ...]) -> tuple[str, str]:
     check.keys(r, known, where)
     rtype = r.get("type")
-    if rtype not in _R_TYPES:
+    if not isinstance(rtype, str) or rtype not in _R_TYPES:
         check.fail(f"{where}: unknown resource type {json.dumps(rtype)}"
                    + did_you_mean(str(rtype), _R_TYPES))
     name = r.get("name")
@@ -431,22 +453,23 @@ def _raptor_output(b: PassBuilder, r: Mapping[str, Any], name: str, rtype: str, 
         check.fail(f"{where}: an attachment needs a 'format'")
     check.type(fmt, str, f"{where}: 'format'")
     load = r.get("load_operation", r.get("op"))
-    if load is not None and load not in _R_LOAD:
+    if load is not None and (not isinstance(load, str) or load not in _R_LOAD):
         check.fail(f"{where}: unknown load operation '{load}'" + did_you_mean(str(load), _R_LOAD))
     if "resolution" in r:
         size = SizeRule.fixed(*_size_pair(r["resolution"], f"{where}: 'resolution'", check))
     elif "resolution_scale" in r:
         sx, sy = _pair(r["resolution_scale"], f"{where}: 'resolution_scale'", check, float)
-        if sx <= 0 or sy <= 0:
+        if not (math.isfinite(sx) and math.isfinite(sy)) or sx <= 0 or sy <= 0:
             check.fail(f"{where}: 'resolution_scale' must be positive, got {[sx, sy]}")
         size = SizeRule.output(sx, sy)
     else:
         size = SizeRule.output()
     clear = None
     if "clear_color" in r:
-        clear = tuple(float(c) for c in check.type(r["clear_color"], list,
-                                                   f"{where}: 'clear_color'"))
+        clear = tuple(check.number(c, f"{where}: 'clear_color'")
+                      for c in check.type(r["clear_color"], list, f"{where}: 'clear_color'"))
     elif "clear_depth" in r:
-        clear = (float(r["clear_depth"]), float(r.get("clear_stencil", 0)))
+        clear = (check.number(r["clear_depth"], f"{where}: 'clear_depth'"),
+                 check.number(r.get("clear_stencil", 0), f"{where}: 'clear_stencil'"))
     b.output(name, Slot(rtype, fmt, size=size, load=_R_LOAD.get(load) if load else None,
                         clear=clear, external=external), name=name)

@@ -63,7 +63,7 @@ class SizeRule:
     def describe(self) -> str:
         if self.mode == "fixed":
             return f"{self.width}x{self.height}"
-        scale = "" if self.scale == (1.0, 1.0) else f"x{self.scale[0]:g},{self.scale[1]:g}"
+        scale = "" if self.scale == (1.0, 1.0) else f" scale {self.scale[0]:g},{self.scale[1]:g}"
         return ("output" if self.mode == "output" else f"like {self.of}") + scale
 
 
