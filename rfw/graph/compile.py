@@ -12,7 +12,7 @@ import heapq
 import math
 from collections import Counter, OrderedDict, defaultdict
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from .errors import GraphError, did_you_mean
@@ -513,6 +513,7 @@ def _hazard_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ...]
     for items in per_resource.values():
         items.sort(key=lambda item: position[item[0]])
         writer: int | None = None
+        writers: list[int] = []
         readers: list[int] = []
         for i, a in items:
             if a.role == "history":
@@ -523,11 +524,15 @@ def _hazard_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ...]
                 for r in readers:
                     add(r, i, "order")  # write after read
                 writer, readers = i, []
-            elif writer is not None:
-                add(writer, i, "order" if a.role == "order" else "data")
-                if a.role != "order":
-                    readers.append(i)
-            elif a.role != "order":
+                writers.append(i)
+            elif a.role == "order":
+                # ordering only: no data edge keeps the last writer alive, so order after
+                # every writer, or culling one would lose the order against the others
+                for w in writers:
+                    add(w, i, "order")
+            else:
+                if writer is not None:
+                    add(writer, i, "data")
                 readers.append(i)
     return edges
 
@@ -565,6 +570,16 @@ def cull(declared: Declared) -> tuple[list[int], list[str]]:
     for (a, b), kind in declared.edges.items():
         if kind == "data":
             preds[b].append(a)
+    # reading last frame's value needs its writers to run every frame (no ordering edge)
+    writers: dict[str, list[int]] = defaultdict(list)
+    for i, p in enumerate(passes):
+        for a in declared.accesses[p.name]:
+            if a.writes:
+                writers[a.resource].append(i)
+    for i, p in enumerate(passes):
+        for a in declared.accesses[p.name]:
+            if a.role == "history":
+                preds[i].extend(writers[declared.history[a.resource]])
     outputs = set(declared.outputs)
     live = [i for i, p in enumerate(passes)
             if p.side_effect or not any(a.writes for a in declared.accesses[p.name])
@@ -882,7 +897,8 @@ class _Track:
                     _write_access(self.write))
         self.layout = s.layout
         if s.writes:
-            self.write, self.reads, self.visible = s, None, s
+            # nothing has seen this write yet, not even reads in the writer's own stages
+            self.write, self.reads, self.visible = s, None, None
         else:
             self.reads = s if self.reads is None else self.reads.merge(s)
             self.visible = s
@@ -955,7 +971,9 @@ def _initial(name: str, declared: Declared, finals: dict[str, _Track],
     # persistent: ping-pong history pairs hand their final state to each other every frame
     twin = declared.history.get(name) or declared.history_of.get(name)
     prev = finals.get(twin or name)
-    return prev.copy() if prev is not None else _Track(None)
+    if prev is None:  # nothing this frame leaves it in a known state
+        return _Track("UNDEFINED" if resolved[name].kind == "image" else None)
+    return prev.copy()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1040,6 +1058,7 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         keep, culled = list(range(len(declared.passes))), []
     schedule = order(declared, keep)
     used = _used_resources(declared, schedule)
+    declared = _kept_history(declared, set(used))
     resolved = resolve(declared, used, size, problems)
     problems.raise_if_any()
     check_attachment_sizes(declared, schedule, resolved, problems)
@@ -1073,6 +1092,14 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
                     if a in kept and b in kept),
         outputs=declared.outputs,
     )
+
+
+def _kept_history(declared: Declared, used: set[str]) -> Declared:
+    """History pairs that scheduled passes read; a culled reader makes no pair."""
+    history = {c: r for c, r in declared.history.items() if c in used}
+    if history == declared.history:
+        return declared
+    return replace(declared, history=history, history_of={r: c for c, r in history.items()})
 
 
 def _used_resources(declared: Declared, schedule: list[int]) -> list[str]:

@@ -468,3 +468,31 @@ def test_recompiling_is_incremental():
     assert v.resources == first.resources
     assert STATS["assign_memory"] == before.get("assign_memory", 0) + 1
     assert _barriers(v)[("b", "a.out")].dst.stages == {"RAY_TRACING_SHADER_KHR"}
+
+
+def test_a_history_reader_keeps_the_producer_alive():
+    # the previous frame's value exists only if its producer runs every frame
+    g = GraphBuilder("h", size=(64, 64))
+    g.add_pass("P", "compute").output("r", Texture("rgba8unorm"))
+    g.add_pass("H", "compute").input("prev", "P.r", History()).output("o", Texture("rgba8unorm"))
+    c = compile(g.output("H.o").build())
+    assert c.order == ("P", "H") or c.order == ("H", "P")
+    assert c.culled == ()
+    assert not c.resource("P.r").transient
+    # a culled history reader makes no pair: P.r is an ordinary transient again
+    g2 = GraphBuilder("h2", size=(64, 64))
+    g2.add_pass("P", "compute").output("r", Texture("rgba8unorm"))
+    g2.add_pass("K", "compute").input("r", "P.r").output("o", Texture("rgba8unorm"))
+    g2.add_pass("C", "compute").input("prev", "P.r", History()).output("x", Texture("r8unorm"))
+    c2 = compile(g2.output("K.o").build())
+    assert c2.culled == ("C",) and c2.resource("P.r").transient
+
+
+def test_reads_after_an_in_place_write_get_a_barrier():
+    g = GraphBuilder("a", size=(64, 64))
+    g.add_pass("make", "compute").output("buf", Buffer(4096))
+    g.add_pass("bump", "compute").output("buf", Reference(), target="make.buf")
+    g.add_pass("use", "compute").input("buf", "make.buf", Buffer()).output("out", Buffer(256))
+    c = compile(g.output("use.out").build())
+    use = _barriers(c)[("use", "make.buf")]
+    assert use.src.access == {"SHADER_STORAGE_WRITE"} and use.src.stages == {"COMPUTE_SHADER"}
