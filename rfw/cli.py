@@ -15,6 +15,8 @@ from pathlib import Path
 from .graph import CompiledGraph, GraphError, MemoryOptions, compile, load_graph, to_toml
 from .graph.inspect import describe, to_dot
 
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "deferred.toml"
+
 
 def _size(text: str) -> tuple[int, int]:
     try:
@@ -96,14 +98,44 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    # the renderer lands with the pass plugins; until then `run` shows the compiled plan
-    if args.config is None:
-        from .default_graph import default_graph
+    from .config import apply_overrides, load_config
+    from .render import render, table, write_outputs
 
-        c = compile(default_graph(), args.size)
-    else:
-        c = compile(load_graph(args.config), args.size)
-    print(describe(c))
+    cfg = load_config(args.config or DEFAULT_CONFIG)
+    sets = list(args.set or [])
+    if args.scene:
+        sets.append(f"scene={args.scene}")
+    if args.size:
+        sets.append(f"size={args.size[0]}x{args.size[1]}")
+    cfg = apply_overrides(cfg, sets)
+    if args.backend != "wgpu":
+        raise GraphError(f"backend '{args.backend}' is not available yet (wgpu is)")
+    result = render(cfg, frames=args.frames)
+    formats = {r.name: r.format for r in result.executor.plan.resources}
+    written = write_outputs(result, Path(args.out), formats)
+    print(table(result.timings))
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from .view import view
+
+    sets = list(args.set or [])
+    if args.size:
+        sets.append(f"size={args.size[0]}x{args.size[1]}")
+    view(Path(args.config or DEFAULT_CONFIG), sets, scene=args.scene, frames=args.frames,
+         script=[k for k in (args.keys or "").split(",") if k])
+    return 0
+
+
+def cmd_new_pass(args: argparse.Namespace) -> int:
+    from .templates import new_pass
+
+    kind = "raster" if args.raster else "compute"
+    for path in new_pass(args.name, Path(args.dir), kind=kind,
+                         tests=Path(args.tests) if args.tests else None):
+        print(f"wrote {path}")
     return 0
 
 
@@ -126,10 +158,32 @@ def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="rfw", description="rfw: frame graphs for graphics "
                                  "research")
     sub = ap.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a config (default: the embedded deferred graph)")
-    run.add_argument("config", nargs="?")
-    run.add_argument("--size", type=_size)
+    run = sub.add_parser("run", help="render a config headless: images and per-pass timings")
+    run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
+    run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...) or 'default'")
+    run.add_argument("--size", type=_size, help="output size WxH")
+    run.add_argument("--frames", type=int, help="frames to time (after one warm-up)")
+    run.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
+    run.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="override a setting, toggle a pass or pick a variant (repeatable)")
+    run.add_argument("--out", default="out", help="output folder (default: out)")
     run.set_defaults(func=cmd_run)
+    v = sub.add_parser("view", help="a live window: camera, pass toggles, timings")
+    v.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
+    v.add_argument("--scene")
+    v.add_argument("--size", type=_size)
+    v.add_argument("--set", action="append", metavar="KEY=VALUE")
+    v.add_argument("--frames", type=int, help="close after this many frames")
+    v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
+    v.set_defaults(func=cmd_view)
+    new = sub.add_parser("new-pass", help="write a working pass folder, shader and test")
+    new.add_argument("name", help="snake_case pass id")
+    kind = new.add_mutually_exclusive_group()
+    kind.add_argument("--compute", action="store_true", help="a compute pass (default)")
+    kind.add_argument("--raster", action="store_true", help="a pass that draws the scene")
+    new.add_argument("--dir", default="passes", help="where pass folders live (default: passes)")
+    new.add_argument("--tests", help="where to put the test (default: beside the pass)")
+    new.set_defaults(func=cmd_new_pass)
     graph = sub.add_parser("graph", help="inspect frame graphs")
     gsub = graph.add_subparsers(dest="graph_command", required=True)
     plan = gsub.add_parser("plan", help="print order, memory, barriers and totals")

@@ -1,6 +1,6 @@
-"""The embedded default: a deferred renderer's frame graph, declared with the builder.
+"""A deferred renderer's frame graph declared with the builder (a compiler example).
 
-``configs/deferred.toml`` declares the same graph in TOML; a test keeps the two identical.
+``tests/data/default_graph.toml`` declares the same graph in TOML; a test keeps the two identical.
 """
 
 from __future__ import annotations

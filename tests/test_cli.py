@@ -678,27 +678,33 @@ def test_convert_bad_input_writes_nothing(capsys, tmp_path):
 # rfw run
 
 
-def test_run_prints_the_default_plan(capsys):
-    rc, out, err = rfw(capsys, "run")
+def test_run_renders_the_default_config_on_the_default_scene(capsys, tmp_path):
+    out_dir = tmp_path / "out"
+    rc, out, err = rfw(capsys, "run", "--size", "160x90", "--out", out_dir)
     assert rc == 0, err
-    for word in ("gbuffer", "lighting", "tonemap", "transient_bytes"):
+    assert sorted(p.name for p in out_dir.iterdir()) == ["timings.json", "tonemap.ldr.png"]
+    timings = json.loads((out_dir / "timings.json").read_text())
+    assert timings["config"] == "deferred" and timings["size"] == [160, 90]
+    assert [p["name"] for p in timings["passes"]] == ["gbuffer", "lighting", "tonemap"]
+    for word in ("gbuffer", "lighting", "tonemap", "gpu ms", "wrote"):
         assert word in out
-    assert "debug_normals" in out  # listed as disabled
-    disabled = next(line for line in out.splitlines() if line.startswith("disabled:"))
-    assert "debug_normals" in disabled
 
 
-def test_run_default_equals_configs_deferred_toml(capsys):
-    rc1, default, _ = rfw(capsys, "run")
-    rc2, from_file, _ = rfw(capsys, "run", DEFERRED_TOML)
-    assert rc1 == rc2 == 0
-    assert default == from_file
+def test_run_with_overrides_and_a_mesh_file(capsys, tmp_path):
+    obj = tmp_path / "tri.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    rc, _, err = rfw(capsys, "run", DEFERRED_TOML, "--scene", obj, "--size", "64x48",
+                       "--set", "shadow.enabled=true", "--frames", "2",
+                       "--out", tmp_path / "o")
+    assert rc == 0, err
+    timings = json.loads((tmp_path / "o" / "timings.json").read_text())
+    assert timings["frames"] == 2 and timings["passes"][0]["name"] == "shadow"
 
 
-def test_run_with_size(capsys):
-    rc, out, _ = rfw(capsys, "run", "--size", "640x360")
-    assert rc == 0
-    assert out.splitlines()[0].endswith("at 640x360")
+def test_run_bad_set_is_one_line(capsys, tmp_path):
+    assert_error(*rfw(capsys, "run", "--set", "lighting.ambeint=2", "--out", tmp_path),
+                 "deferred.toml", "did you mean 'ambient'")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_run_missing_config(capsys, tmp_path):

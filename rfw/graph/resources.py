@@ -84,6 +84,7 @@ class Slot:
     external: bool = False  # owned by the user: never aliased, survives the frame
     read_only: bool = False  # depth test without depth writes
     stages: frozenset[str] = frozenset()  # override the shader stages the pass reads in
+    optional: bool = False  # an input the pass can do without (configs drop it when unfed)
     desc: str = ""
 
     def with_(self, **changes: Any) -> Slot:

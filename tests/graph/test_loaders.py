@@ -72,7 +72,7 @@ def test_python_toml_and_raptor_compile_identically(size):
 
 def test_default_graph_python_equals_configs_toml():
     a = compile(default_graph()).to_json()
-    b = compile(load_graph(ROOT / "configs" / "deferred.toml")).to_json()
+    b = compile(load_graph(DATA / "default_graph.toml")).to_json()
     assert a == b
 
 

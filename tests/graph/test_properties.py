@@ -348,25 +348,23 @@ def per_resource(c: CompiledGraph, with_order: bool = False):
 
 
 def reaches(edges, kinds=("data", "order")) -> dict[str, set[str]]:
-    """Transitive successors over the given edges."""
+    """Transitive successors over the given edges (a breadth-first search per node, so
+    history edges, which may close cycles, are handled)."""
     succ = defaultdict(set)
     for a, b, kind in edges:
         if kind in kinds:
             succ[a].add(b)
-    memo: dict[str, set[str]] = {}
-
-    def visit(x: str) -> set[str]:
-        if x not in memo:
-            memo[x] = set()
-            acc: set[str] = set()
-            for y in succ[x]:
-                acc |= {y} | visit(y)
-            memo[x] = acc
-        return memo[x]
-
-    for a in list(succ):
-        visit(a)
-    return defaultdict(set, memo)
+    out: dict[str, set[str]] = defaultdict(set)
+    for start in list(succ):
+        seen: set[str] = set()
+        todo = list(succ[start])
+        while todo:
+            x = todo.pop()
+            if x not in seen:
+                seen.add(x)
+                todo.extend(succ[x])
+        out[start] = seen
+    return out
 
 
 def compiled(case) -> tuple[Graph, CompiledGraph]:

@@ -1,0 +1,21 @@
+"""Tonemap: linear HDR scene color to display-encoded LDR."""
+
+from rfw import ComputePass, Settings, Tex2D, register_pass
+
+
+@register_pass("tonemap")
+class TonemapPass(ComputePass):
+    """Exposure, then a filmic curve (ACES fit), then sRGB encoding."""
+
+    shader = "tonemap.comp.wgsl"
+    inputs = {"hdr": Tex2D(desc="linear HDR scene color")}
+    outputs = {"ldr": Tex2D("rgba8unorm", size_of="hdr", desc="display color")}
+
+    class Params(Settings):
+        exposure: float = 1.0  # linear multiplier before the curve
+        curve: int = 1  # 0: clamp only, 1: ACES fit
+        sky: tuple[float, float, float] = (0.55, 0.7, 0.95)  # where hdr alpha is 0
+
+    def record(self, ctx) -> None:
+        ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
+                     o_ldr=ctx.storage("ldr"), u_params=self.params)

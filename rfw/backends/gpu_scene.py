@@ -1,0 +1,273 @@
+"""A ``Scene`` on the GPU: vertex and index buffers, materials, instances, camera, lights.
+
+Layouts follow ``shaders/common/scene.wgsl`` (group 1) and ``mesh.wgsl`` (groups 2 and 3).
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+import numpy as np
+import wgpu
+
+from ..scene.model import Camera, Scene
+
+MAX_LIGHTS = 16
+_ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
+_FILTER = {"linear": "linear", "nearest": "nearest"}
+
+
+def _mips(pixels: np.ndarray) -> list[np.ndarray]:
+    # a box-filtered chain on the CPU: textures are small and loaded once
+    levels = [pixels]
+    while max(levels[-1].shape[:2]) > 1:
+        p = levels[-1].astype(np.float32)
+        h, w = p.shape[:2]
+        p = p[: h - h % 2 or 1, : w - w % 2 or 1]
+        if p.shape[0] >= 2:
+            p = (p[0::2] + p[1::2]) / 2
+        if p.shape[1] >= 2:
+            p = (p[:, 0::2] + p[:, 1::2]) / 2
+        levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
+    return levels
+
+
+def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
+    """An orthographic light camera that encloses the scene's bounds along ``direction``."""
+    lo, hi = scene.bounds() if scene.instances else (np.zeros(3), np.ones(3))
+    center = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    d = direction / np.linalg.norm(direction)
+    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    cam = Camera(tuple(center - d * radius * 2), tuple(center), tuple(up))
+    view = cam.view().astype(np.float64)
+    n, f = radius * 0.5, radius * 3.5
+    proj = np.identity(4)
+    proj[0, 0] = proj[1, 1] = 1.0 / radius
+    proj[2, 2] = 1.0 / (n - f)
+    proj[2, 3] = n / (n - f)
+    return (proj @ view).astype(np.float32)
+
+
+class GpuScene:
+    def __init__(self, device: Any, scene: Scene, camera: Camera | None = None):
+        self.device = device
+        self.scene = scene
+        self.camera = camera or scene.default_camera()
+        self._buffers: list[Any] = []
+        self._textures: list[Any] = []
+        self._upload_meshes()
+        self._upload_textures()
+        self.material_data = [self._material_bytes(m) for m in scene.materials]
+        self.instance_data = [self._instance_bytes(i.transform) for i in scene.instances]
+        self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
+        self.sun_camera_buffer = self._uniform(b"\0" * 352, "scene.sun_camera")
+        self.lights_buffer = self._uniform(self._lights_bytes(), "scene.lights")
+        self.linear_sampler = device.create_sampler(
+            mag_filter="linear", min_filter="linear", mipmap_filter="linear",
+            address_mode_u="clamp-to-edge", address_mode_v="clamp-to-edge",
+            label="scene.linear")
+        self.shadow_sampler = device.create_sampler(
+            mag_filter="linear", min_filter="linear", compare="less-equal",
+            address_mode_u="clamp-to-edge", address_mode_v="clamp-to-edge",
+            label="scene.shadow")
+        self._bind_cache: dict[Any, Any] = {}
+        self.size = (1, 1)
+
+    # uploads ------------------------------------------------------------------------------
+    def _buffer(self, data: np.ndarray, usage: int, label: str) -> Any:
+        buf = self.device.create_buffer_with_data(data=np.ascontiguousarray(data), usage=usage,
+                                                  label=label)
+        self._buffers.append(buf)
+        return buf
+
+    def _uniform(self, data: bytes, label: str) -> Any:
+        buf = self.device.create_buffer(size=len(data), usage=wgpu.BufferUsage.UNIFORM |
+                                        wgpu.BufferUsage.COPY_DST, label=label)
+        self.device.queue.write_buffer(buf, 0, data)
+        self._buffers.append(buf)
+        return buf
+
+    def _upload_meshes(self) -> None:
+        v = wgpu.BufferUsage.VERTEX
+        self.meshes = []
+        for m in self.scene.meshes:
+            self.meshes.append((
+                [self._buffer(m.positions.astype(np.float32), v, f"{m.name}.positions"),
+                 self._buffer(m.normals.astype(np.float32), v, f"{m.name}.normals"),
+                 self._buffer(m.uvs.astype(np.float32), v, f"{m.name}.uvs"),
+                 self._buffer(m.tangents.astype(np.float32), v, f"{m.name}.tangents")],
+                self._buffer(m.indices.astype(np.uint32), wgpu.BufferUsage.INDEX,
+                             f"{m.name}.indices"),
+                len(m.indices)))
+
+    def _texture(self, pixels: np.ndarray, srgb: bool, label: str) -> Any:
+        levels = _mips(pixels)
+        tex = self.device.create_texture(
+            size=(pixels.shape[1], pixels.shape[0], 1), mip_level_count=len(levels),
+            format="rgba8unorm-srgb" if srgb else "rgba8unorm",
+            usage=wgpu.TextureUsage.TEXTURE_BINDING | wgpu.TextureUsage.COPY_DST, label=label)
+        for k, lv in enumerate(levels):
+            h, w = lv.shape[:2]
+            self.device.queue.write_texture({"texture": tex, "mip_level": k},
+                                            np.ascontiguousarray(lv),
+                                            {"bytes_per_row": 4 * w}, (w, h, 1))
+        self._textures.append(tex)
+        return tex.create_view()
+
+    def _upload_textures(self) -> None:
+        self.textures = [self._texture(t.pixels, t.srgb, t.name) for t in self.scene.textures]
+        self.samplers = [self.device.create_sampler(
+            mag_filter=_FILTER[t.mag_filter], min_filter=_FILTER[t.min_filter],
+            mipmap_filter=_FILTER[t.mipmap_filter], address_mode_u=t.address_u,
+            address_mode_v=t.address_v, max_anisotropy=1) for t in self.scene.textures]
+        self.default_sampler = self.device.create_sampler(
+            mag_filter="linear", min_filter="linear", mipmap_filter="linear",
+            address_mode_u="repeat", address_mode_v="repeat")
+        one = np.full((1, 1, 4), 255, np.uint8)
+        flat = np.array([[[128, 128, 255, 255]]], np.uint8)
+        self.white = self._texture(one, False, "white")
+        self.white_srgb = self._texture(one, True, "white_srgb")
+        self.flat_normal = self._texture(flat, False, "flat_normal")
+
+    @staticmethod
+    def _material_bytes(m: Any) -> bytes:
+        return struct.pack("<4f4f4f4I", *m.base_color, *m.emissive, m.normal_scale,
+                           m.metallic, m.roughness, m.occlusion_strength, m.alpha_cutoff,
+                           _ALPHA.get(m.alpha_mode, 0), int(m.double_sided), 0, 0)
+
+    @staticmethod
+    def _instance_bytes(model: np.ndarray) -> bytes:
+        model = np.asarray(model, np.float64)
+        normal = np.linalg.inv(model).T
+        # WGSL matrices are column-major
+        return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
+
+    def _lights_bytes(self) -> bytes:
+        lights = self.scene.lights[:MAX_LIGHTS]
+        sun = next((i for i, li in enumerate(lights) if li.kind == "directional"), MAX_LIGHTS)
+        direction = np.array(lights[sun].direction if sun < MAX_LIGHTS else (-0.3, -1, -0.2))
+        self.sun_matrix = sun_view_proj(self.scene, direction)
+        out = struct.pack("<4I", len(lights), sun, 0, 0)
+        out += self.sun_matrix.T.tobytes()
+        out += struct.pack("<4f", 0.03, 0.035, 0.045, 0.0)
+        kinds = {"directional": 0, "point": 1, "spot": 2}
+        for li in lights:
+            out += struct.pack("<4f", *li.position, kinds[li.kind])
+            out += struct.pack("<4f", *li.direction, li.range or 0.0)
+            out += struct.pack("<4f", *li.color, li.intensity)
+            out += struct.pack("<4f", np.cos(li.inner_cone), np.cos(li.outer_cone), 0, 0)
+        return out + b"\0" * (64 * (MAX_LIGHTS - len(lights)))
+
+    # per frame ----------------------------------------------------------------------------
+    def set_viewport(self, size: tuple[int, int]) -> None:
+        self.size = size
+        w, h = size
+        view = self.camera.view()
+        proj = self.camera.projection(w / h)
+        self.device.queue.write_buffer(self.camera_buffer, 0,
+                                       self._camera_bytes(view, proj, self.camera.position,
+                                                          size))
+        # the sun camera: projection only matters, view_proj carries it
+        sun = self.sun_matrix
+        self.device.queue.write_buffer(self.sun_camera_buffer, 0,
+                                       self._camera_bytes(np.identity(4, np.float32), sun,
+                                                          (0, 0, 0), size))
+
+    def _camera_bytes(self, view: np.ndarray, proj: np.ndarray, pos: tuple, size: tuple) -> bytes:
+        vp = (proj.astype(np.float64) @ view.astype(np.float64))
+        inv = np.linalg.inv(vp)
+        mats = [view, proj, vp, inv]
+        out = b"".join(np.asarray(m, np.float32).T.tobytes() for m in mats)
+        out += struct.pack("<4f", *pos, 1.0)
+        out += struct.pack("<4f", size[0], size[1], 1 / size[0], 1 / size[1])
+        out += struct.pack("<4f", self.camera.znear, self.camera.zfar, 0, 0)
+        return out
+
+    def bindings(self) -> dict[str, Any]:
+        return {"camera": {"buffer": self.camera_buffer},
+                "lights": {"buffer": self.lights_buffer}}
+
+    def _material_group(self, layout: Any, k: int) -> Any:
+        key = ("material", id(layout), k)
+        if key not in self._bind_cache:
+            m = self.scene.materials[k]
+
+            def tex(index: int | None, fallback: Any) -> Any:
+                return self.textures[index] if index is not None else fallback
+
+            sampler = self.samplers[m.base_color_texture] if m.base_color_texture is not None \
+                else self.default_sampler
+            ubuf = self._uniform(self.material_data[k], f"material{k}")
+            entries = [{"binding": 0, "resource": {"buffer": ubuf}},
+                       {"binding": 1, "resource": tex(m.base_color_texture, self.white_srgb)},
+                       {"binding": 2, "resource": tex(m.metallic_roughness_texture, self.white)},
+                       {"binding": 3, "resource": tex(m.normal_texture, self.flat_normal)},
+                       {"binding": 4, "resource": tex(m.occlusion_texture, self.white)},
+                       {"binding": 5, "resource": tex(m.emissive_texture, self.white_srgb)},
+                       {"binding": 6, "resource": sampler}]
+            self._bind_cache[key] = self.device.create_bind_group(layout=layout, entries=entries)
+        return self._bind_cache[key]
+
+    def _instance_group(self, layout: Any, k: int) -> Any:
+        key = ("instance", id(layout), k)
+        if key not in self._bind_cache:
+            ubuf = self._uniform(self.instance_data[k], f"instance{k}")
+            self._bind_cache[key] = self.device.create_bind_group(
+                layout=layout, entries=[{"binding": 0, "resource": {"buffer": ubuf}}])
+        return self._bind_cache[key]
+
+    def _scene_group(self, layout: Any, camera: str) -> Any:
+        key = ("scene", id(layout), camera)
+        if key not in self._bind_cache:
+            cam = self.sun_camera_buffer if camera == "sun" else self.camera_buffer
+            self._bind_cache[key] = self.device.create_bind_group(
+                layout=layout, entries=[{"binding": 0, "resource": {"buffer": cam}},
+                                        {"binding": 1, "resource": {"buffer":
+                                                                    self.lights_buffer}}])
+        return self._bind_cache[key]
+
+    def draw(self, rp: Any, prog: Any, pipeline: Any, *, camera: str = "main",
+             group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
+        """Draw every instance whose material's alpha mode is in ``alpha``; returns draws."""
+        rp.set_pipeline(pipeline)
+        if group0 is not None:
+            rp.set_bind_group(0, group0)
+        rp.set_bind_group(1, self._scene_group(prog.layouts[1], camera))
+        draws = 0
+        for k, inst in enumerate(self.scene.instances):
+            mesh = self.scene.meshes[inst.mesh]
+            mat = self.scene.materials[mesh.material]
+            if mat.alpha_mode not in alpha:
+                continue
+            buffers, index, count = self.meshes[inst.mesh]
+            rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
+            rp.set_bind_group(3, self._instance_group(prog.layouts[3], k))
+            for slot, buf in enumerate(buffers):
+                rp.set_vertex_buffer(slot, buf)
+            rp.set_index_buffer(index, "uint32")
+            rp.draw_indexed(count)
+            draws += 1
+        return draws
+
+    def destroy(self) -> None:
+        for b in self._buffers:
+            b.destroy()
+        for t in self._textures:
+            t.destroy()
+        self._buffers.clear()
+        self._textures.clear()
+        self._bind_cache.clear()
+
+
+VERTEX_BUFFERS = [
+    {"array_stride": 12, "attributes": [{"format": "float32x3", "offset": 0,
+                                         "shader_location": 0}]},
+    {"array_stride": 12, "attributes": [{"format": "float32x3", "offset": 0,
+                                         "shader_location": 1}]},
+    {"array_stride": 8, "attributes": [{"format": "float32x2", "offset": 0,
+                                        "shader_location": 2}]},
+    {"array_stride": 16, "attributes": [{"format": "float32x4", "offset": 0,
+                                         "shader_location": 3}]},
+]

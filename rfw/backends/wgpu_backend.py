@@ -1,0 +1,578 @@
+"""Run a compiled frame graph on wgpu: textures from the plan, passes with timestamps, readback.
+
+WebGPU cannot alias memory, so transient resources with identical descriptions and disjoint
+lifetimes share one texture instead; everything else follows the compiled plan.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import wgpu
+
+from ..graph import CompiledGraph
+from ..graph.compile import ResourcePlan
+from ..graph.formats import format_info
+from ..passes import Pass, Settings
+from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, reflect
+
+# wgpu features rfw asks for when the adapter has them
+WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
+                   "bgra8unorm-storage", "texture-adapter-specific-format-features")
+
+
+class Device:
+    """A wgpu adapter and device with what rfw needs to know about them."""
+
+    def __init__(self, *, power_preference: str = "high-performance"):
+        self.adapter = wgpu.gpu.request_adapter_sync(power_preference=power_preference)
+        if self.adapter is None:
+            raise RuntimeError("no wgpu adapter found (is a Vulkan driver installed?)")
+        self.features = tuple(f for f in WANTED_FEATURES if f in self.adapter.features)
+        self.device = self.adapter.request_device_sync(required_features=list(self.features),
+                                                       label="rfw")
+        info = self.adapter.info
+        self.name = info.get("device", "?")
+        self.driver = info.get("description", "") or info.get("driver", "")
+        self.backend = info.get("backend_type", "")
+        self.timestamp_period = _timestamp_period(self.device)
+        self.caps = frozenset(self.features) | frozenset(self.adapter.features)
+
+    def describe(self) -> dict[str, str]:
+        return {"device": self.name, "driver": self.driver, "api": self.backend,
+                "backend": "wgpu"}
+
+
+def _timestamp_period(device: Any) -> float:
+    # wgpu-native resolves raw ticks; the period converts them to nanoseconds
+    try:
+        from wgpu.backends.wgpu_native._ffi import lib
+
+        return float(lib.wgpuQueueGetTimestampPeriod(device.queue._internal)) or 1.0
+    except Exception:
+        return 1.0
+
+
+# ---------------------------------------------------------------------------------------------
+# textures from the plan
+
+
+_USAGE = {"sampled": wgpu.TextureUsage.TEXTURE_BINDING,
+          "storage": wgpu.TextureUsage.STORAGE_BINDING,
+          "color": wgpu.TextureUsage.RENDER_ATTACHMENT,
+          "depth": wgpu.TextureUsage.RENDER_ATTACHMENT,
+          "depth_read": wgpu.TextureUsage.RENDER_ATTACHMENT,
+          "shading_rate": wgpu.TextureUsage.TEXTURE_BINDING,
+          "transfer_src": wgpu.TextureUsage.COPY_SRC,
+          "transfer_dst": wgpu.TextureUsage.COPY_DST}
+
+
+def wgpu_format(name: str) -> str:
+    info = format_info(name)
+    if info.wgpu is None:
+        raise ShaderError(f"format {name} has no WebGPU equivalent")
+    return info.wgpu
+
+
+def texture_usage(r: ResourcePlan, readback: bool) -> int:
+    usage = 0
+    for u in r.usages:
+        usage |= _USAGE.get(u, 0)
+    return usage | (wgpu.TextureUsage.COPY_SRC if readback else 0)
+
+
+def share_textures(plans: list[ResourcePlan], readback: set[str],
+                   spans: dict[str, tuple[int, int]]) -> dict[str, str]:
+    """Map each transient to the resource whose texture it reuses (itself if none).
+
+    Same format, size, mips, layers, samples and usage, and lifetimes that do not overlap.
+    """
+    owner: dict[str, str] = {}
+    busy: dict[tuple, list[tuple[str, int]]] = defaultdict(list)  # key -> [(owner, last)]
+    for r in sorted(plans, key=lambda r: spans[r.name][0]):
+        if not r.transient or r.name in readback:
+            owner[r.name] = r.name
+            continue
+        key = (r.format, r.width, r.height, r.mips, r.layers, r.samples,
+               texture_usage(r, False))
+        first, last = spans[r.name]
+        for k, (o, end) in enumerate(busy[key]):
+            if end < first:
+                owner[r.name] = o
+                busy[key][k] = (o, last)
+                break
+        else:
+            owner[r.name] = r.name
+            busy[key].append((r.name, last))
+    return owner
+
+
+# ---------------------------------------------------------------------------------------------
+# pipelines from reflected shaders
+
+
+_WG_SIZE = re.compile(r"@workgroup_size\(\s*(\d+)\s*(?:,\s*(\d+)\s*)?(?:,\s*(\d+)\s*)?\)")
+_UNFILTERABLE = {"r32float", "rg32float", "rgba32float"}
+
+
+@dataclass
+class Program:
+    source: Source
+    module: Any
+    bindings: dict[str, BindingInfo]
+    layouts: list[Any]
+    pipeline_layout: Any
+    workgroup: tuple[int, int, int] = (1, 1, 1)
+    pipelines: dict[Any, Any] = field(default_factory=dict)
+
+
+class ShaderCache:
+    """Shader modules and pipelines keyed by preprocessed-source hash."""
+
+    def __init__(self, device: Device):
+        self.device = device
+        self.programs: dict[tuple, Program] = {}
+
+    def program(self, path: Path, defines: dict[str, object], stage: str,
+                formats: dict[str, str]) -> Program:
+        source = preprocess(path, defines)
+        key = (source.hash, stage, tuple(sorted(formats.items())))
+        if key in self.programs:
+            return self.programs[key]
+        dev = self.device.device
+        try:
+            module = dev.create_shader_module(code=source.text, label=path.name)
+        except Exception as e:  # wgpu raises its own error types for WGSL problems
+            raise ShaderError(explain(source, str(e))) from None
+        bindings = reflect(source)
+        vis = wgpu.ShaderStage.COMPUTE if stage == "compute" else \
+            wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT
+        groups: dict[int, list[dict]] = defaultdict(list)
+        filterable32 = "float32-filterable" in self.device.features
+        for b in bindings.values():
+            groups[b.group].append(_layout_entry(b, vis, formats.get(b.name), filterable32))
+        layouts = [dev.create_bind_group_layout(entries=groups.get(g, []),
+                                                label=f"{path.name}:group{g}")
+                   for g in range(max(groups, default=-1) + 1)]
+        m = _WG_SIZE.search(source.text)
+        wg = tuple(int(v) if v else 1 for v in m.groups()) if m else (1, 1, 1)
+        prog = Program(source, module, bindings, layouts,
+                       dev.create_pipeline_layout(bind_group_layouts=layouts,
+                                                  label=path.name), wg)
+        self.programs[key] = prog
+        return prog
+
+
+def _layout_entry(b: BindingInfo, visibility: int, fmt: str | None,
+                  filterable32: bool = False) -> dict:
+    entry: dict[str, Any] = {"binding": b.binding, "visibility": visibility}
+    if b.kind in ("uniform", "storage", "read-only-storage"):
+        if b.kind == "storage":
+            entry["visibility"] = visibility & ~wgpu.ShaderStage.VERTEX
+        entry["buffer"] = {"type": b.kind}
+    elif b.kind == "sampler":
+        entry["sampler"] = {"type": "comparison" if "comparison" in b.type else "filtering"}
+    elif b.kind == "storage-texture":
+        inner = b.type[b.type.index("<") + 1:b.type.rindex(">")].split(",")
+        access = {"write": "write-only", "read": "read-only",
+                  "read_write": "read-write"}[inner[1].strip()]
+        entry["visibility"] = visibility & ~wgpu.ShaderStage.VERTEX
+        entry["storage_texture"] = {"access": access, "format": inner[0].strip(),
+                                    "view_dimension": _dimension(b.type)}
+    else:
+        if "depth" in b.type:
+            sample = "depth"
+        elif "<u32>" in b.type:
+            sample = "uint"
+        elif "<i32>" in b.type:
+            sample = "sint"
+        elif fmt in _UNFILTERABLE and not filterable32:
+            sample = "unfilterable-float"
+        else:
+            sample = "float"
+        entry["texture"] = {"sample_type": sample, "view_dimension": _dimension(b.type),
+                            "multisampled": "multisampled" in b.type}
+    return entry
+
+
+def _dimension(wtype: str) -> str:
+    for token, dim in (("cube_array", "cube-array"), ("cube", "cube"),
+                       ("2d_array", "2d-array"), ("3d", "3d"), ("1d", "1d")):
+        if f"_{token}" in wtype:
+            return dim
+    return "2d"
+
+
+# ---------------------------------------------------------------------------------------------
+# the per-pass recording context
+
+
+@dataclass
+class PassTiming:
+    name: str
+    gpu_ms: list[float] = field(default_factory=list)
+    cpu_ms: list[float] = field(default_factory=list)
+
+
+class PassContext:
+    """What ``Pass.record`` sees: its resources by slot name and ways to record work."""
+
+    def __init__(self, executor: Executor, pass_: Pass, encoder: Any, slots: dict[str, str]):
+        self.executor = executor
+        self.pass_ = pass_
+        self.encoder = encoder
+        self.slots = slots  # slot -> resource
+        self.scene = executor.scene
+        self.device = executor.device.device
+        self.frame = executor.frame_index
+
+    # resources ----------------------------------------------------------------------------
+    def resource(self, slot: str) -> str:
+        try:
+            return self.slots[slot]
+        except KeyError:
+            raise ShaderError(f"pass '{self.pass_.name}' has no slot '{slot}' "
+                              f"(slots: {', '.join(self.slots)})") from None
+
+    def texture(self, slot: str) -> Any:
+        return self.executor.texture(self.resource(slot))
+
+    def extent(self, slot: str) -> tuple[int, int]:
+        r = self.executor.plan.resource(self.resource(slot))
+        return r.width, r.height
+
+    def view(self, slot: str) -> Any:
+        return self.executor.view(self.resource(slot))
+
+    sampled = view
+    storage = view
+
+    def format(self, slot: str) -> str:
+        return wgpu_format(self.executor.plan.resource(self.resource(slot)).format)
+
+    def has(self, slot: str) -> bool:
+        return slot in self.slots
+
+    # recording ----------------------------------------------------------------------------
+    def _timestamps(self) -> dict | None:
+        return self.executor.timestamp_writes(self.pass_.name)
+
+    def program(self, stage: str, *, shader: str | None = None,
+                defines: dict[str, object] | None = None,
+                formats: dict[str, str] | None = None) -> Program:
+        path = self.pass_.folder() / (shader or self.pass_.shader or "")
+        return self.executor.shaders.program(path, defines or {}, stage, formats or {})
+
+    def bind(self, prog: Program, values: dict[str, Any], *, groups: tuple[int, ...] = (0,),
+             cache_key: Any = None) -> list[Any]:
+        """Bind groups for ``groups``, matching binding names in the shader to ``values``."""
+        out = []
+        for g in groups:
+            wanted = [b for b in prog.bindings.values() if b.group == g]
+            missing = [b.name for b in wanted if b.name not in values]
+            if missing:
+                raise ShaderError(f"pass '{self.pass_.name}': shader "
+                                  f"{prog.source.lines[0][0] if prog.source.lines else '?'} "
+                                  f"binds {', '.join(missing)} but the pass gives "
+                                  f"{', '.join(sorted(values)) or 'nothing'}")
+            entries = [{"binding": b.binding,
+                        "resource": self.executor.as_resource(values[b.name], b,
+                                                              self.pass_)} for b in wanted]
+            out.append(self.device.create_bind_group(layout=prog.layouts[g], entries=entries,
+                                                     label=f"{self.pass_.name}:g{g}"))
+        return out
+
+    def _check_extra(self, prog: Program, values: dict[str, Any], path: str) -> None:
+        extra = [k for k in values if k not in prog.bindings]
+        if extra:
+            raise ShaderError(f"pass '{self.pass_.name}': {path} has no binding named "
+                              f"{', '.join(extra)} (it declares "
+                              f"{', '.join(sorted(prog.bindings)) or 'none'})")
+
+    def dispatch(self, *, threads: tuple[int, ...], shader: str | None = None,
+                 entry: str = "main", defines: dict[str, object] | None = None,
+                 **bindings: Any) -> None:
+        """Run a compute shader over ``threads`` (rounded up to whole workgroups)."""
+        formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
+        prog = self.program("compute", shader=shader, defines=defines,
+                            formats={k: v for k, v in formats.items() if v})
+        self._check_extra(prog, bindings, shader or self.pass_.shader or "")
+        values = {**self.executor.scene_bindings(), **bindings}
+        groups = tuple(range(len(prog.layouts)))
+        bgs = self.bind(prog, values, groups=groups)
+        pipe = prog.pipelines.get(entry)
+        if pipe is None:
+            pipe = prog.pipelines[entry] = self.device.create_compute_pipeline(
+                layout=prog.pipeline_layout, compute={"module": prog.module,
+                                                      "entry_point": entry},
+                label=f"{self.pass_.name}:{entry}")
+        cp = self.encoder.begin_compute_pass(label=self.pass_.name,
+                                             timestamp_writes=self._timestamps())
+        cp.set_pipeline(pipe)
+        for g, bg in enumerate(bgs):
+            cp.set_bind_group(g, bg)
+        t = (*threads, 1, 1)[:3]
+        cp.dispatch_workgroups(*(max(1, math.ceil(t[i] / prog.workgroup[i])) for i in range(3)))
+        cp.end()
+
+    def draw_scene(self, *, color: list[tuple[str, Any]] = (), depth: tuple[str, Any] | None = None,
+                   shader: str | None = None, defines: dict[str, object] | None = None,
+                   depth_compare: str = "less", depth_write: bool = True,
+                   cull: str = "back", camera: str = "main",
+                   blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
+                   **bindings: Any) -> int:
+        """Draw the scene's instances into ``color`` targets (and ``depth``) with the pass's
+        ``vs_main``/``fs_main``; group 0 takes ``bindings``. Returns the number of draws."""
+        if self.scene is None:
+            raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
+        formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
+        prog = self.program("render", shader=shader, defines=defines,
+                            formats={k: v for k, v in formats.items() if v})
+        self._check_extra(prog, {**bindings, "camera": 0, "lights": 0}, shader or
+                          self.pass_.shader or "")
+        targets = tuple(self.format(slot) for slot, _ in color)
+        dfmt = self.format(depth[0]) if depth is not None else None
+        key = ("scene", targets, dfmt, depth_compare, depth_write, cull, str(blend))
+        pipe = prog.pipelines.get(key)
+        if pipe is None:
+            frag = None
+            if targets:
+                frag = {"module": prog.module, "entry_point": "fs_main",
+                        "targets": [{"format": f, **({"blend": blend} if blend else {})}
+                                    for f in targets]}
+            ds = None
+            if dfmt is not None:
+                ds = {"format": dfmt, "depth_write_enabled": depth_write,
+                      "depth_compare": depth_compare}
+            from .gpu_scene import VERTEX_BUFFERS
+
+            pipe = prog.pipelines[key] = self.device.create_render_pipeline(
+                layout=prog.pipeline_layout,
+                vertex={"module": prog.module, "entry_point": "vs_main",
+                        "buffers": VERTEX_BUFFERS},
+                primitive={"topology": "triangle-list", "cull_mode": cull,
+                           "front_face": "ccw"},
+                depth_stencil=ds, fragment=frag, label=f"{self.pass_.name}:scene")
+        group0 = self.bind(prog, bindings, groups=(0,))[0]
+        rp = self.render_pass(color=color, depth=depth,
+                              depth_read_only=depth is not None and not depth_write)
+        n = self.scene.draw(rp, prog, pipe, camera=camera, group0=group0, alpha=alpha)
+        rp.end()
+        return n
+
+    def render_pass(self, *, color: list[tuple[str, Any]] = (), depth: tuple[str, Any] | None
+                    = None, depth_read_only: bool = False) -> Any:
+        """Begin a render pass; ``color`` is [(slot, clear color or None to load)]."""
+        attachments = [{"view": self.view(slot), "load_op": "load" if clear is None else "clear",
+                        "store_op": "store", "clear_value": clear or (0, 0, 0, 0)}
+                       for slot, clear in color]
+        ds = None
+        if depth is not None:
+            slot, clear = depth
+            ds = {"view": self.view(slot), "depth_read_only": depth_read_only}
+            if not depth_read_only:
+                ds |= {"depth_load_op": "load" if clear is None else "clear",
+                       "depth_store_op": "store", "depth_clear_value": clear or 0.0}
+        return self.encoder.begin_render_pass(color_attachments=attachments,
+                                              depth_stencil_attachment=ds,
+                                              timestamp_writes=self._timestamps(),
+                                              label=self.pass_.name)
+
+
+# ---------------------------------------------------------------------------------------------
+# the executor
+
+
+class Executor:
+    """Owns the textures of one compiled graph on one device and records its frames."""
+
+    def __init__(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
+                 slots: dict[str, dict[str, str]], scene: Any = None,
+                 readback: tuple[str, ...] = (), present: tuple[str, ...] = ()):
+        self.device = device
+        self.plan = plan
+        self.passes = passes
+        self.slots = slots
+        self.scene = scene
+        self.readback = tuple(readback)
+        self.present = tuple(present)  # outputs a window samples to show them
+        self.shaders = ShaderCache(device)
+        self.frame_index = 0
+        self.timings = {name: PassTiming(name) for name in plan.order}
+        self._textures: dict[str, Any] = {}
+        self._views: dict[str, Any] = {}
+        self._uniforms: dict[tuple[str, str], Any] = {}
+        self._allocate()
+        self._timestamp_enabled = "timestamp-query" in device.features
+        self._query_set = None
+        if self._timestamp_enabled:
+            n = 2 * len(plan.order) * 4  # up to four GPU passes per rfw pass
+            self._query_set = device.device.create_query_set(type="timestamp", count=n,
+                                                             label="rfw:timestamps")
+            self._query_buffer = device.device.create_buffer(
+                size=8 * n, usage=wgpu.BufferUsage.QUERY_RESOLVE | wgpu.BufferUsage.COPY_SRC,
+                label="rfw:timestamps")
+        for p in passes.values():
+            p.setup(self)
+
+    # resources ----------------------------------------------------------------------------
+    def _allocate(self) -> None:
+        names = list(self.plan.order)
+        pos = {n: i for i, n in enumerate(names)}
+        spans = {r.name: (pos.get(r.first, 0), pos.get(r.last, len(names)))
+                 for r in self.plan.resources}
+        images = [r for r in self.plan.resources if r.kind == "image" and r.format]
+        self.owner = share_textures(images, set(self.readback) | set(self.present), spans)
+        for r in images:
+            if self.owner[r.name] != r.name:
+                continue
+            # user-owned images are filled by the user: they take copies in
+            upload = wgpu.TextureUsage.COPY_DST if r.external else 0
+            if r.name in self.present:
+                upload |= wgpu.TextureUsage.TEXTURE_BINDING
+            self._textures[r.name] = self.device.device.create_texture(
+                size=(r.width, r.height, r.layers), format=wgpu_format(r.format),
+                usage=(texture_usage(r, r.name in self.readback) | upload) or
+                wgpu.TextureUsage.TEXTURE_BINDING,
+                mip_level_count=r.mips, sample_count=r.samples, label=r.name)
+        self.texture_count = len(self._textures)
+
+    def texture(self, resource: str) -> Any:
+        return self._textures[self.owner[resource]]
+
+    def view(self, resource: str) -> Any:
+        if resource not in self._views:
+            self._views[resource] = self.texture(resource).create_view(label=resource)
+        return self._views[resource]
+
+    def format_of(self, value: Any) -> str | None:
+        tex = getattr(value, "texture", None)
+        return getattr(tex, "format", None) if tex is not None else None
+
+    def scene_bindings(self) -> dict[str, Any]:
+        return self.scene.bindings() if self.scene is not None else {}
+
+    def uniform(self, owner: str, name: str, data: bytes) -> Any:
+        key = (owner, name)
+        buf = self._uniforms.get(key)
+        if buf is None or buf.size < len(data):
+            buf = self._uniforms[key] = self.device.device.create_buffer(
+                size=max(16, len(data)), usage=wgpu.BufferUsage.UNIFORM |
+                wgpu.BufferUsage.COPY_DST, label=f"{owner}.{name}")
+        self.device.device.queue.write_buffer(buf, 0, data)
+        return buf
+
+    def as_resource(self, value: Any, b: BindingInfo, owner: Pass) -> Any:
+        if isinstance(value, Settings):
+            return {"buffer": self.uniform(owner.name, b.name, value.pack())}
+        if isinstance(value, np.ndarray | bytes):
+            data = value.tobytes() if isinstance(value, np.ndarray) else value
+            return {"buffer": self.uniform(owner.name, b.name, data)}
+        if isinstance(value, wgpu.GPUBuffer):
+            return {"buffer": value}
+        return value
+
+    # frames -------------------------------------------------------------------------------
+    def timestamp_writes(self, pass_name: str) -> dict | None:
+        if not self._timestamp_enabled:
+            return None
+        k = self._next_query
+        if k + 2 > self._query_set.count:
+            return None
+        self._next_query += 2
+        self._query_owner.append(pass_name)
+        return {"query_set": self._query_set, "beginning_of_pass_write_index": k,
+                "end_of_pass_write_index": k + 1}
+
+    def run(self, frames: int = 1) -> None:
+        for _ in range(frames):
+            self.frame()
+
+    def frame(self) -> None:
+        dev = self.device.device
+        encoder = dev.create_command_encoder(label=f"rfw:frame{self.frame_index}")
+        self._next_query = 0
+        self._query_owner: list[str] = []
+        cpu: dict[str, float] = {}
+        for name in self.plan.order:
+            p = self.passes[name]
+            ctx = PassContext(self, p, encoder, self.slots[name])
+            encoder.push_debug_group(name)
+            t = time.perf_counter()
+            p.record(ctx)
+            cpu[name] = (time.perf_counter() - t) * 1e3
+            encoder.pop_debug_group()
+        if self._timestamp_enabled and self._next_query:
+            encoder.resolve_query_set(self._query_set, 0, self._next_query,
+                                      self._query_buffer, 0)
+        dev.queue.submit([encoder.finish()])
+        gpu = self._read_timestamps()  # also waits for the frame to finish
+        for name in self.plan.order:
+            self.timings[name].cpu_ms.append(cpu[name])
+            if gpu is not None:
+                self.timings[name].gpu_ms.append(gpu.get(name, 0.0))
+        self.frame_index += 1
+
+    def _read_timestamps(self) -> dict[str, float] | None:
+        dev = self.device.device
+        if not self._timestamp_enabled or not self._next_query:
+            # read something back so the frame is finished before returning
+            dev.queue.read_buffer(self._fence_buffer())
+            return None
+        raw = np.frombuffer(dev.queue.read_buffer(self._query_buffer, 0,
+                                                  8 * self._next_query), np.uint64)
+        out: dict[str, float] = defaultdict(float)
+        for k, name in enumerate(self._query_owner):
+            begin, end = int(raw[2 * k]), int(raw[2 * k + 1])
+            out[name] += max(0, end - begin) * self.device.timestamp_period * 1e-6
+        return out
+
+    def _fence_buffer(self) -> Any:
+        buf = getattr(self, "_fence", None)
+        if buf is None:
+            buf = self._fence = self.device.device.create_buffer(
+                size=16, usage=wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST,
+                label="rfw:fence")
+        return buf
+
+    def upload(self, resource: str, array: np.ndarray) -> None:
+        """Fill an external image from an (H, W, C) array of its texel type."""
+        r = self.plan.resource(resource)
+        data = np.ascontiguousarray(array)
+        self.device.device.queue.write_texture(
+            {"texture": self.texture(resource), "mip_level": 0},
+            data, {"bytes_per_row": data.nbytes // r.height}, (r.width, r.height, 1))
+
+    def read(self, resource: str) -> np.ndarray:
+        """Read an image back as (H, W, C) numpy array in its own texel type."""
+        r = self.plan.resource(resource)
+        info = format_info(r.format)
+        tex = self.texture(resource)
+        bpp = info.block_bytes
+        data = self.device.device.queue.read_texture(
+            {"texture": tex, "mip_level": 0, "origin": (0, 0, 0)},
+            {"offset": 0, "bytes_per_row": r.width * bpp}, (r.width, r.height, 1))
+        dtype = {"float": np.float16 if bpp // max(1, info.components) == 2 else np.float32,
+                 "unorm": np.uint8 if bpp // max(1, info.components) == 1 else np.uint16,
+                 "uint": np.uint32, "depth": np.float32}.get(info.kind, np.uint8)
+        arr = np.frombuffer(data, dtype=dtype)
+        return arr.reshape(r.height, r.width, -1)
+
+    def destroy(self) -> None:
+        for t in self._textures.values():
+            t.destroy()
+        self._textures.clear()
+        self._views.clear()
+        for b in self._uniforms.values():
+            b.destroy()
+        self._uniforms.clear()
+        if self._query_set is not None:
+            self._query_set.destroy()
+            self._query_buffer.destroy()

@@ -1,0 +1,273 @@
+"""Renderer configs: scene, camera, size, passes with settings, and technique variants.
+
+```toml
+name = "deferred"
+scene = "default"                 # or a path (.gltf .glb .obj .ply ...)
+size = [1280, 720]
+outputs = ["tonemap.ldr"]
+
+[[pass]]
+name = "lighting"                 # the instance name; "use" picks the pass id (default: name)
+use = "deferred_lighting"
+inputs = { albedo = "gbuffer.albedo", shadow = "shadow.depth" }
+settings = { ambient = 0.5 }
+
+[variants.shadows]                # --set shadows=off applies these overrides
+default = "on"
+on = {}
+off = { "shadow.enabled" = false }
+```
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from .graph import Graph, GraphBuilder, GraphError
+from .graph.errors import did_you_mean
+from .graph.resources import SizeRule
+from .passes import Pass
+from .registry import get_pass
+
+_KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames")
+_PASS_KEYS = ("name", "use", "enabled", "inputs", "settings")
+_CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
+
+
+@dataclass
+class PassEntry:
+    name: str
+    use: str
+    enabled: bool = True
+    inputs: dict[str, str] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Config:
+    name: str
+    passes: list[PassEntry]
+    outputs: list[str]
+    scene: str = "default"
+    size: tuple[int, int] = (1280, 720)
+    camera: dict[str, Any] | None = None
+    variants: dict[str, dict[str, Any]] = field(default_factory=dict)
+    frames: int = 1
+    source: str = "<config>"
+    chosen: dict[str, str] = field(default_factory=dict)  # variant -> option in force
+    base: list[PassEntry] = field(default_factory=list)  # the passes as the file declares
+
+    def entry(self, name: str) -> PassEntry:
+        for p in self.passes:
+            if p.name == name:
+                return p
+        raise GraphError(f"no pass named '{name}'" + did_you_mean(name, [p.name for p in
+                                                                          self.passes]),
+                         file=self.source)
+
+
+def _fail(source: str, message: str) -> GraphError:
+    return GraphError(message, file=source)
+
+
+def _check_keys(table: dict, known: tuple[str, ...], where: str, source: str) -> None:
+    for key in table:
+        if key not in known:
+            raise _fail(source, f"{where}: unknown key '{key}'" + did_you_mean(key, known))
+
+
+def load_config(path: str | Path) -> Config:
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _fail(str(path), "file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise _fail(str(path), f"malformed TOML: {e}") from None
+    source = str(path)
+    _check_keys(data, _KEYS, "config", source)
+    passes = []
+    for i, t in enumerate(data.get("pass", [])):
+        if not isinstance(t, dict) or not isinstance(t.get("name"), str):
+            raise _fail(source, f"[[pass]] #{i + 1}: needs a 'name'")
+        where = f"pass '{t['name']}'"
+        _check_keys(t, _PASS_KEYS, where, source)
+        for key in ("inputs", "settings"):
+            if not isinstance(t.get(key, {}), dict):
+                raise _fail(source, f"{where}: '{key}' must be a table")
+        if not isinstance(t.get("enabled", True), bool):
+            raise _fail(source, f"{where}: 'enabled' must be true or false")
+        passes.append(PassEntry(t["name"], t.get("use", t["name"]), t.get("enabled", True),
+                                dict(t.get("inputs", {})), dict(t.get("settings", {}))))
+    if not passes:
+        raise _fail(source, "the config has no [[pass]] tables")
+    camera = data.get("camera")
+    if camera is not None:
+        _check_keys(camera, _CAMERA_KEYS, "camera", source)
+    size = data.get("size", [1280, 720])
+    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0
+                                                              for v in size)):
+        raise _fail(source, f"'size' must be two positive integers, got {size!r}")
+    variants = data.get("variants", {})
+    cfg = Config(str(data.get("name", path.stem)), passes, list(data.get("outputs", [])),
+                 str(data.get("scene", "default")), (size[0], size[1]), camera, variants,
+                 int(data.get("frames", 1)), source, base=list(passes))
+    for vname, v in variants.items():
+        default = v.get("default")
+        if default is None or default not in v:
+            raise _fail(source, f"variants.{vname}: 'default' must name one of its options "
+                                f"({', '.join(k for k in v if k != 'default')})")
+        cfg = _apply_variant(cfg, vname, default)
+    return cfg
+
+
+def _apply_variant(cfg: Config, vname: str, option: str) -> Config:
+    v = cfg.variants[vname]
+    options = [k for k in v if k != "default"]
+    if option not in options:
+        raise _fail(cfg.source, f"variant '{vname}' has no option '{option}'"
+                    + did_you_mean(option, options))
+    # undo what the previous option set, then apply the new one
+    prev = cfg.chosen.get(vname)
+    cfg = replace(cfg, chosen={**cfg.chosen, vname: option})
+    keys = set(v.get(prev, {})) if prev else set()
+    for key in keys - set(v[option]):
+        cfg = _set(cfg, key, None, reset=True)
+    for key, value in v[option].items():
+        cfg = _set(cfg, key, value)
+    return cfg
+
+
+def _set(cfg: Config, key: str, value: Any, *, reset: bool = False) -> Config:
+    """Set one pass key; ``reset`` restores what the config file says for it."""
+    head, _, tail = key.partition(".")
+    if not tail:
+        raise _fail(cfg.source, f"cannot set '{key}': use <pass>.<setting>, <pass>.enabled, "
+                                "size, scene, frames or a variant name")
+    entry = cfg.entry(head)
+    passes = []
+    for p in cfg.passes:
+        if p is not entry:
+            passes.append(p)
+        elif tail == "enabled":
+            original = next((b.enabled for b in cfg.base if b.name == p.name), True)
+            passes.append(replace(p, enabled=original if reset
+                                  else _bool(value, key, cfg.source)))
+        elif tail.startswith("inputs."):
+            slot = tail[7:]
+            inputs = dict(p.inputs)
+            original = next((b.inputs.get(slot) for b in cfg.base if b.name == p.name), None)
+            if reset and original is None:
+                inputs.pop(slot, None)
+            else:
+                inputs[slot] = original if reset else value
+            passes.append(replace(p, inputs=inputs))
+        else:
+            settings = dict(p.settings)
+            original = next((b.settings for b in cfg.base if b.name == p.name), {})
+            if reset and tail not in original:
+                settings.pop(tail, None)
+            else:
+                settings[tail] = original[tail] if reset else value
+            passes.append(replace(p, settings=settings))
+    return replace(cfg, passes=passes)
+
+
+def _bool(value: Any, key: str, source: str) -> bool:
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.lower() in ("true", "false", "on", "off", "1", "0"):
+        return value.lower() in ("true", "on", "1")
+    raise _fail(source, f"'{key}' must be true or false, got {value!r}")
+
+
+def apply_overrides(cfg: Config, sets: list[str]) -> Config:
+    """``--set key=value``: a variant, size/scene/frames, pass.enabled or pass.setting."""
+    for item in sets:
+        key, eq, value = item.partition("=")
+        key = key.strip()
+        if not eq or not key:
+            raise _fail(cfg.source, f"--set '{item}': expected key=value")
+        value = value.strip()
+        if key in cfg.variants:
+            cfg = _apply_variant(cfg, key, value)
+        elif key == "size":
+            try:
+                w, h = (int(v) for v in value.lower().split("x"))
+            except ValueError:
+                raise _fail(cfg.source, f"--set size={value}: expected WxH") from None
+            cfg = replace(cfg, size=(w, h))
+        elif key == "scene":
+            cfg = replace(cfg, scene=value)
+        elif key == "frames":
+            cfg = replace(cfg, frames=int(value))
+        else:
+            head = key.partition(".")[0]
+            if head not in [p.name for p in cfg.passes]:
+                known = [p.name for p in cfg.passes] + list(cfg.variants) + ["size", "scene",
+                                                                             "frames"]
+                raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
+                            + did_you_mean(head, known))
+            cfg = _set(cfg, key, value)
+    return cfg
+
+
+@dataclass
+class Built:
+    graph: Graph
+    passes: dict[str, Pass]  # enabled passes by name
+    slots: dict[str, dict[str, str]]  # pass -> slot -> resource
+
+
+def build(cfg: Config) -> Built:
+    """Instantiate the passes and wire their slots into a frame graph."""
+    enabled = {p.name for p in cfg.passes if p.enabled}
+    g = GraphBuilder(cfg.name, size=cfg.size, source=cfg.source)
+    instances: dict[str, Pass] = {}
+    slots: dict[str, dict[str, str]] = {}
+    for entry in cfg.passes:
+        cls = get_pass(entry.use)
+        try:
+            inst = cls(entry.name, **entry.settings)
+        except GraphError as e:
+            raise e.in_file(cfg.source) from None
+        ins, outs = inst.declare()
+        for key in entry.inputs:
+            if key not in ins:
+                raise _fail(cfg.source, f"pass '{entry.name}' ({entry.use}): no input slot "
+                                        f"'{key}'" + did_you_mean(key, ins))
+        b = g.add_pass(entry.name, cls.type, enabled=entry.enabled,
+                       side_effect=cls.side_effect, requires=cls.requires,
+                       settings=inst.params.as_dict(), schema=tuple(inst.params.fields()))
+        mapping: dict[str, str] = {}
+        for slot, spec in ins.items():
+            source = entry.inputs.get(slot)
+            feeder = None if source is None else source.partition(".")[0]
+            if source is None or (feeder in [p.name for p in cfg.passes]
+                                  and feeder not in enabled):
+                if spec.optional:
+                    continue  # unfed: the pass runs without it
+                if entry.enabled:
+                    why = "is not connected" if source is None else \
+                        f"reads '{source}', whose pass is disabled"
+                    raise _fail(cfg.source, f"pass '{entry.name}' ({entry.use}): input "
+                                            f"'{slot}' {why}")
+                continue
+            b.input(slot, source, spec)
+            mapping[slot] = source
+        for slot, spec in outs.items():
+            if spec.size is not None and spec.size.mode == "relative" and spec.size.of in mapping:
+                spec = spec.with_(size=SizeRule.like(mapping[spec.size.of], *spec.size.scale))
+            elif spec.size is not None and spec.size.mode == "relative" and spec.size.of in outs:
+                spec = spec.with_(size=SizeRule.like(f"{entry.name}.{spec.size.of}",
+                                                     *spec.size.scale))
+            b.output(slot, spec)
+            mapping[slot] = f"{entry.name}.{slot}"
+        if entry.enabled:
+            instances[entry.name] = inst
+            slots[entry.name] = mapping
+    g.output(*cfg.outputs)
+    return Built(g.build(), instances, slots)

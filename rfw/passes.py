@@ -1,0 +1,182 @@
+"""The pass contract: named, typed, described slots; typed settings; ``record(ctx)``.
+
+A pass is a class in ``passes/<id>/<id>.py`` with its shader beside it::
+
+    @register_pass("tonemap")
+    class TonemapPass(ComputePass):
+        \"\"\"Exposure, then a filmic curve, then display encoding.\"\"\"
+        shader = "tonemap.comp.wgsl"
+        inputs = {"hdr": Tex2D(desc="linear HDR scene color")}
+        outputs = {"ldr": Tex2D("rgba8unorm", size_of="hdr", desc="display color")}
+
+        class Params(Settings):
+            exposure: float = 1.0
+
+        def record(self, ctx):
+            ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
+                         s_ldr=ctx.storage("ldr"), u_params=self.params)
+"""
+
+from __future__ import annotations
+
+import inspect
+import struct
+import typing
+from pathlib import Path
+from typing import Any, ClassVar
+
+from .graph.errors import GraphError, did_you_mean
+from .graph.resources import SizeRule, Slot, _slot
+
+
+class SettingsError(GraphError):
+    """An unknown or ill-typed setting; names the pass and suggests the closest key."""
+
+
+_SCALARS = {float: "f32", int: "i32", bool: "u32"}
+
+
+class Settings:
+    """Typed settings with defaults, declared as annotated class attributes.
+
+    Unknown keys raise with a suggestion; values are converted to the declared type. Floats,
+    ints, bools and tuples of 2-4 floats pack into a WGSL uniform struct in declaration order
+    (``pack()``); strings and other types are host-side only.
+    """
+
+    def __init__(self, _owner: str = "", **values: Any):
+        fields = self.fields()
+        for key in values:
+            if key not in fields:
+                raise SettingsError(f"{_owner or type(self).__qualname__}: unknown setting "
+                                    f"'{key}'" + did_you_mean(key, fields))
+        for name, (kind, default) in fields.items():
+            object.__setattr__(self, name, _convert(values.get(name, default), kind,
+                                                    f"{_owner}: setting '{name}'"))
+
+    @classmethod
+    def fields(cls) -> dict[str, tuple[Any, Any]]:
+        hints = typing.get_type_hints(cls)
+        out = {}
+        for klass in reversed(cls.__mro__):
+            for name in getattr(klass, "__annotations__", {}):
+                if not name.startswith("_"):
+                    out[name] = (hints[name], getattr(cls, name, None))
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.fields()}
+
+    def replace(self, **values: Any) -> Settings:
+        return type(self)(**{**self.as_dict(), **values})
+
+    def pack(self) -> bytes:
+        """The GPU-visible settings as a WGSL uniform struct (WGSL alignment rules)."""
+        out = bytearray()
+        for name, (kind, _) in self.fields().items():
+            value = getattr(self, name)
+            if kind in _SCALARS:
+                fmt = {"f32": "f", "i32": "i", "u32": "I"}[_SCALARS[kind]]
+                _align(out, 4)
+                out += struct.pack("<" + fmt, int(value) if fmt != "f" else float(value))
+            elif _is_vec(kind):
+                n = len(typing.get_args(kind))
+                _align(out, 8 if n == 2 else 16)
+                out += struct.pack(f"<{n}f", *value)
+        _align(out, 16)
+        return bytes(out or b"\0" * 16)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__qualname__}({self.as_dict()})"
+
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and other.as_dict() == self.as_dict()
+
+
+def _is_vec(kind: Any) -> bool:
+    args = typing.get_args(kind)
+    return typing.get_origin(kind) is tuple and 2 <= len(args) <= 4 and \
+        all(a is float for a in args)
+
+
+def _align(buf: bytearray, n: int) -> None:
+    buf += b"\0" * (-len(buf) % n)
+
+
+def _convert(value: Any, kind: Any, where: str) -> Any:
+    try:
+        if kind is bool:
+            if isinstance(value, str):
+                if value.lower() in ("true", "1", "yes", "on"):
+                    return True
+                if value.lower() in ("false", "0", "no", "off"):
+                    return False
+                raise ValueError(value)
+            return bool(value)
+        if kind in (int, float, str):
+            return kind(value)
+        if _is_vec(kind):
+            items = value.split(",") if isinstance(value, str) else list(value)
+            if len(items) != len(typing.get_args(kind)):
+                raise ValueError(value)
+            return tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        raise SettingsError(f"{where}: expected {getattr(kind, '__name__', kind)}, "
+                            f"got {value!r}") from None
+    return value
+
+
+def Tex2D(format: str | None = None, *, size_of: str | None = None,
+          scale: float = 1.0, **kw: Any) -> Slot:
+    """A 2D texture slot; ``size_of`` names another slot of the same pass."""
+    if size_of is not None:
+        kw["size"] = SizeRule.like(size_of, scale)
+    elif scale != 1.0:
+        kw["size"] = SizeRule.output(scale)
+    return _slot("texture", format, kw)
+
+
+class Pass:
+    """Base of every pass. Subclasses declare slots, settings and a shader, and record."""
+
+    id: ClassVar[str] = ""
+    type: ClassVar[str] = "graphics"
+    shader: ClassVar[str | None] = None
+    inputs: ClassVar[dict[str, Slot]] = {}
+    outputs: ClassVar[dict[str, Slot]] = {}
+    requires: ClassVar[tuple[str, ...]] = ()
+    side_effect: ClassVar[bool] = False
+
+    class Params(Settings):
+        pass
+
+    def __init__(self, name: str, params: Settings | None = None, **settings: Any):
+        self.name = name
+        self.params = params if params is not None else self.Params(f"pass '{name}'",
+                                                                    **settings)
+
+    @classmethod
+    def folder(cls) -> Path:
+        return Path(inspect.getfile(cls)).parent
+
+    @classmethod
+    def describe(cls) -> str:
+        return inspect.getdoc(cls) or ""
+
+    def declare(self) -> tuple[dict[str, Slot], dict[str, Slot]]:
+        """This instance's input and output slots; override when settings change them."""
+        return dict(self.inputs), dict(self.outputs)
+
+    def setup(self, ctx: Any) -> None:
+        """Create persistent GPU objects (pipelines, samplers). Called once per device."""
+
+    def record(self, ctx: Any) -> None:
+        raise NotImplementedError(f"{type(self).__name__}.record")
+
+
+class ComputePass(Pass):
+    type = "compute"
+
+
+class RenderPass(Pass):
+    type = "graphics"

@@ -1,0 +1,75 @@
+"""Pass registry: ``@register_pass("id")``, built-ins in ``passes/<id>/``, third-party passes
+through the ``rfw.passes`` entry-point group."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import pkgutil
+from collections.abc import Callable
+
+from .graph.errors import GraphError, did_you_mean
+from .passes import Pass
+
+ENTRY_POINT_GROUP = "rfw.passes"
+_REGISTRY: dict[str, type[Pass]] = {}
+_loaded = False
+
+
+def register_pass(pass_id: str) -> Callable[[type[Pass]], type[Pass]]:
+    """Class decorator: make a pass available to configs under ``pass_id``."""
+
+    def wrap(cls: type[Pass]) -> type[Pass]:
+        if not (isinstance(cls, type) and issubclass(cls, Pass)):
+            raise TypeError(f"@register_pass('{pass_id}') needs a Pass subclass, got {cls!r}")
+        old = _REGISTRY.get(pass_id)
+        if old is not None and (old.__module__, old.__qualname__) != (cls.__module__,
+                                                                      cls.__qualname__):
+            raise GraphError(f"pass id '{pass_id}' is registered twice: by "
+                             f"{old.__module__}.{old.__qualname__} and "
+                             f"{cls.__module__}.{cls.__qualname__}")
+        cls.id = pass_id
+        _REGISTRY[pass_id] = cls
+        return cls
+
+    return wrap
+
+
+def _load_all() -> None:
+    # built-ins: every folder of the passes package with a module of the same name
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    import passes
+
+    for info in pkgutil.iter_modules(passes.__path__):
+        if info.ispkg:
+            importlib.import_module(f"passes.{info.name}.{info.name}")
+    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            ep.load()
+        except Exception as e:  # a broken plugin must not hide the others
+            raise GraphError(f"cannot load pass plugin '{ep.name}' ({ep.value}) from the "
+                             f"'{ENTRY_POINT_GROUP}' entry points: {e}") from e
+
+
+def reload() -> None:
+    """Look for built-in and installed passes again (after installing a plugin)."""
+    global _loaded
+    _loaded = False
+    _load_all()
+
+
+def get_pass(pass_id: str) -> type[Pass]:
+    _load_all()
+    try:
+        return _REGISTRY[pass_id]
+    except KeyError:
+        raise GraphError(f"unknown pass '{pass_id}'" + did_you_mean(pass_id, _REGISTRY)) \
+            from None
+
+
+def available() -> dict[str, type[Pass]]:
+    _load_all()
+    return dict(sorted(_REGISTRY.items()))

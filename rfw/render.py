@@ -1,0 +1,146 @@
+"""Render a config headless: images for each graph output and per-pass timings."""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import Config, build
+from .graph import compile
+from .graph.formats import format_info
+
+
+@dataclass
+class Result:
+    config: Config
+    images: dict[str, np.ndarray]  # output resource -> (H, W, C) array
+    timings: dict[str, Any]  # what timings.json holds
+    executor: Any
+
+
+def load_scene_for(cfg: Config, scene: Any = None) -> Any:
+    if scene is not None:
+        return scene
+    from .scene import default_scene, load_scene
+
+    return default_scene() if cfg.scene == "default" else load_scene(cfg.scene)
+
+
+def camera_for(cfg: Config, scene: Any) -> Any:
+    cam = scene.default_camera()
+    if cfg.camera:
+        from dataclasses import replace
+
+        values = dict(cfg.camera)
+        if "yfov" in values:
+            values["yfov"] = float(np.radians(values["yfov"]))
+        cam = replace(cam, **{k: tuple(v) if isinstance(v, list) else v
+                              for k, v in values.items()})
+    return cam
+
+
+def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
+           device: Any = None) -> Result:
+    """Build, compile and run ``cfg``; returns images and timings (GPU ms from timestamps)."""
+    from .backends.gpu_scene import GpuScene
+    from .backends.wgpu_backend import Device, Executor
+
+    built = build(cfg)
+    plan = compile(built.graph)
+    device = device or Device()
+    scene = load_scene_for(cfg, scene)
+    gpu_scene = GpuScene(device.device, scene, camera_for(cfg, scene))
+    gpu_scene.set_viewport(cfg.size)
+    outputs = tuple(plan.outputs)
+    ex = Executor(device, plan, built.passes, built.slots, gpu_scene, readback=outputs)
+    try:
+        ex.run(warmup)
+        for t in ex.timings.values():
+            t.gpu_ms.clear()
+            t.cpu_ms.clear()
+        ex.run(frames or cfg.frames)
+        images = {name: ex.read(name) for name in outputs}
+    finally:
+        ex.destroy()
+        gpu_scene.destroy()
+    passes = [{"name": n, "gpu_ms": _median(ex.timings[n].gpu_ms),
+               "cpu_ms": _median(ex.timings[n].cpu_ms)} for n in plan.order]
+    timings = {**device.describe(), "config": cfg.name, "variants": cfg.chosen,
+               "size": list(cfg.size), "frames": frames or cfg.frames,
+               "scene": scene.name, "triangles": scene.triangle_count,
+               "timestamps": "timestamp-query" in device.features, "passes": passes,
+               "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes)}
+    return Result(cfg, images, timings, ex)
+
+
+def _median(values: list[float]) -> float | None:
+    return statistics.median(values) if values else None
+
+
+def to_png_array(image: np.ndarray, fmt: str) -> np.ndarray:
+    """8-bit RGBA for a PNG: unorm as is, floats clamped, depth and single channels grey."""
+    info = format_info(fmt)
+    a = image
+    if a.dtype != np.uint8:
+        a = a.astype(np.float32)
+        if info.kind in ("unorm",):
+            a = a / np.iinfo(image.dtype).max
+        a = np.clip(a, 0.0, 1.0) * 255 + 0.5
+        a = a.astype(np.uint8)
+    if a.shape[2] == 1:
+        a = np.repeat(a, 3, axis=2)
+    if a.shape[2] == 2:
+        a = np.concatenate([a, np.zeros_like(a[..., :1])], axis=2)
+    if a.shape[2] == 3:
+        a = np.concatenate([a, np.full_like(a[..., :1], 255)], axis=2)
+    if fmt.startswith("bgra") or fmt.startswith("VK_FORMAT_B8G8R8A8"):
+        a = a[..., [2, 1, 0, 3]]
+    return a
+
+
+def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -> list[Path]:
+    """``<output>.png`` per graph output and ``timings.json``, each written atomically."""
+    from PIL import Image
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, image in result.images.items():
+        path = out_dir / f"{name}.png"
+        rgba = to_png_array(image, plan_formats[name])
+        _atomic(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+        written.append(path)
+    path = out_dir / "timings.json"
+    _atomic(path, lambda f: f.write(json.dumps(result.timings, indent=2).encode() + b"\n"))
+    written.append(path)
+    return written
+
+
+def _atomic(path: Path, write: Any) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def table(timings: dict[str, Any]) -> str:
+    rows = [f"{timings['config']} on {timings['device']} ({timings['driver']}), "
+            f"{timings['size'][0]}x{timings['size'][1]}, {timings['frames']} frames, "
+            f"{timings['triangles']:,} triangles"]
+    rows.append(f"  {'pass':<24} {'gpu ms':>9} {'cpu ms':>9}")
+    for p in timings["passes"]:
+        gpu = "-" if p["gpu_ms"] is None else f"{p['gpu_ms']:.3f}"
+        rows.append(f"  {p['name']:<24} {gpu:>9} {p['cpu_ms']:>9.3f}")
+    rows.append(f"  {'total':<24} {timings['gpu_ms_total']:>9.3f}")
+    return "\n".join(rows)

@@ -1,0 +1,927 @@
+"""glTF 2.0 (.gltf with external or embedded data, and .glb) to a ``Scene``.
+
+The JSON is decoded into pygltflib's document classes, every value type-checked; every
+index, offset, length and stride is validated before a read, so a malformed file raises a
+``SceneError`` naming the file and the element ("scene.gltf: accessors[3] (POSITION of
+meshes[0].primitives[1]): needs 4800 bytes, bufferViews[2] has 1200") rather than an
+IndexError or a read past a buffer. External files are only read from the scene's folder.
+
+What is read: the node hierarchy (TRS or matrix), the chosen scene, every triangle primitive
+(strips and fans become lists), indexed or not, any accessor component type (normalised or
+not, strided, sparse), POSITION / NORMAL / TANGENT / TEXCOORD_0, metallic-roughness
+materials with their five textures and samplers, perspective cameras and
+KHR_lights_punctual. Normals and tangents are computed where the file has none.
+
+Not read: skins and morph targets (meshes appear in their bind pose), animations,
+TEXCOORD_1 (textures using it are sampled with TEXCOORD_0 and a warning is issued), vertex
+colours. Orthographic cameras are approximated by a narrow perspective camera (warning).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import dataclasses
+import io
+import json
+import math
+import re
+import struct
+import typing
+import urllib.parse
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path, PureWindowsPath
+from typing import Any, NoReturn
+
+import numpy as np
+import pygltflib
+
+from .model import Camera, Instance, Light, Material, Mesh, Scene, SceneError, Texture
+from .util import compute_normals, compute_tangents, normalize
+
+# extensions whose absence would change the result, but which this loader implements
+SUPPORTED_EXTENSIONS = frozenset({
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_mesh_quantization",  # integer positions / normals: any component type is read
+    "EXT_texture_webp",  # Pillow decodes WebP
+})
+
+# componentType -> (numpy dtype, bytes)
+_COMPONENTS = {
+    5120: ("i1", 1), 5121: ("u1", 1), 5122: ("<i2", 2), 5123: ("<u2", 2), 5125: ("<u4", 4),
+    5126: ("<f4", 4),
+}
+_COMPONENT_NAMES = {5120: "BYTE", 5121: "UNSIGNED_BYTE", 5122: "SHORT", 5123: "UNSIGNED_SHORT",
+                    5125: "UNSIGNED_INT", 5126: "FLOAT"}
+# normalised integers: value / max, signed ones clamped at -1 (glTF 2.0 section 3.11)
+_NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+_TYPES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_INDEX_COMPONENTS = (5121, 5123, 5125)
+_MODES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP", 4: "TRIANGLES",
+          5: "TRIANGLE_STRIP", 6: "TRIANGLE_FAN"}
+
+# samplers in WebGPU terms; the model cannot say "no mipmaps", so the non-mipmapped glTF
+# minification filters pick nearest mip selection, the closest to sampling one level
+_MAG_FILTERS = {9728: "nearest", 9729: "linear"}
+_MIN_FILTERS = {
+    9728: ("nearest", "nearest"), 9729: ("linear", "nearest"),
+    9984: ("nearest", "nearest"), 9985: ("linear", "nearest"),
+    9986: ("nearest", "linear"), 9987: ("linear", "linear"),
+}
+_WRAPS = {33071: "clamp-to-edge", 33648: "mirror-repeat", 10497: "repeat"}
+
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = b"JSON"
+_CHUNK_BIN = b"BIN\x00"
+_URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
+# accessors without a bufferView are allocated from ``count`` alone: cap what a file can ask
+_MAX_UNBACKED = 1 << 26
+
+
+def load_gltf(path: str | Path) -> Scene:
+    """Load a ``.gltf`` or ``.glb`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; external buffers and images are read relative to its folder and must lie
+        inside it.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        For anything unreadable, malformed or unsupported, naming the file and the element.
+    """
+    return _Loader(Path(path)).load()
+
+
+# ---------------------------------------------------------------------------------------------
+# JSON to pygltflib's document classes. pygltflib's own from_json (dataclasses_json) takes
+# seconds on large files and fails on wrong types with messages that name no element, so
+# the JSON is decoded here, checked against the type hints of pygltflib's dataclasses.
+
+
+class _ShapeError(Exception):
+    pass
+
+
+def _shape_error(where: str, expected: str, value: Any) -> _ShapeError:
+    text = json.dumps(value)
+    if len(text) > 40:
+        text = text[:37] + "..."
+    return _ShapeError(f"{where.removeprefix('gltf.')}: expected {expected}, got {text}")
+
+
+def _decode(value: Any, hint: Any, where: str) -> Any:
+    """One JSON value as the type ``hint`` says, or _ShapeError naming the element."""
+    if value is None:
+        return None  # required fields are checked where they are used
+    origin = typing.get_origin(hint)
+    if origin is typing.Union:
+        inner = [a for a in typing.get_args(hint) if a is not type(None)]
+        return _decode(value, inner[0], where)
+    if hint is typing.Any:
+        return value
+    if origin is list:
+        if not isinstance(value, list):
+            raise _shape_error(where, "an array", value)
+        (item,) = typing.get_args(hint)
+        for i, v in enumerate(value):
+            if v is None:  # a field set to null reads as absent, a list item cannot
+                raise _shape_error(f"{where}[{i}]", "a value", v)
+        return [_decode(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+    if hint is pygltflib.Attributes:
+        if not isinstance(value, dict):
+            raise _shape_error(where, "an object", value)
+        for k, v in value.items():
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise _shape_error(f"{where}.{k}", "an accessor index", v)
+        return pygltflib.Attributes(**value)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise _shape_error(where, "an object", value)
+        return value
+    if dataclasses.is_dataclass(hint):
+        if not isinstance(value, dict):
+            raise _shape_error(where, "an object", value)
+        hints = _hints(hint)
+        # unknown keys are dropped; extras may hold any JSON value and nothing reads them
+        return hint(**{k: _decode(v, hints[k], f"{where}.{k}") for k, v in value.items()
+                       if k in hints and k != "extras"})
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise _shape_error(where, "true or false", value)
+        return value
+    if hint is int:
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)  # some exporters write 0.0 for offsets
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise _shape_error(where, "an integer", value)
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise _shape_error(where, "a number", value)
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise _shape_error(where, "a string", value)
+        return value
+    return value
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    if cls not in _HINTS:
+        _HINTS[cls] = typing.get_type_hints(cls)
+    return _HINTS[cls]
+
+
+def _reject_constant(name: str) -> NoReturn:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+class _Loader:
+    def __init__(self, path: Path):
+        self.path = path
+        self.source = str(path)
+        self.folder = path.absolute().parent
+        self.root = self.folder.resolve()
+        self.glb_bin: memoryview | None = None
+        self.buffers: dict[int, memoryview] = {}
+        self.images: dict[int, np.ndarray] = {}
+        self.textures: dict[tuple[int, bool], int | None] = {}
+        self.materials: dict[int, int] = {}
+        self.primitives: dict[tuple[int, int], int] = {}
+        self.default_material: int | None = None
+        self.warned: set[str] = set()
+        self.scene = Scene(name=path.stem, materials=[], source=self.source)
+
+    # -- errors --------------------------------------------------------------------------
+
+    def fail(self, where: str, message: str) -> NoReturn:
+        raise SceneError(f"{self.source}: {where}: {message}".replace("\n", " "))
+
+    def warn(self, message: str) -> None:
+        if message not in self.warned:
+            self.warned.add(message)
+            warnings.warn(f"{self.source}: {message}", stacklevel=4)
+
+    @contextmanager
+    def element(self, where: str) -> Iterator[None]:
+        """Last line of defence: any unexpected error inside names the element."""
+        try:
+            yield
+        except SceneError:
+            raise
+        except (ArithmeticError, AttributeError, LookupError, MemoryError, TypeError,
+                ValueError, struct.error) as e:
+            self.fail(where, f"malformed ({type(e).__name__}: {e})")
+
+    def item(self, kind: str, index: Any, where: str) -> Any:
+        items = getattr(self.doc, kind) or []
+        if isinstance(index, bool) or not isinstance(index, int):
+            self.fail(where, f"expected an index into {kind}, got {json.dumps(index)}")
+        if not 0 <= index < len(items):
+            self.fail(where, f"refers to {kind}[{index}], but the file has {len(items)} "
+                             f"{kind}")
+        return items[index]
+
+    def integer(self, value: Any, where: str, name: str, *, default: int | None = None,
+                minimum: int = 0) -> int:
+        if value is None:
+            if default is None:
+                self.fail(where, f"{name} is required")
+            return default
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            self.fail(where, f"{name} must be an integer >= {minimum}, got {json.dumps(value)}")
+        return value
+
+    def number(self, value: Any, where: str, name: str, default: float) -> float:
+        if value is None:
+            return default
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            self.fail(where, f"{name} must be a finite number, got {json.dumps(value)}")
+        return float(value)
+
+    def numbers(self, value: Any, n: int, where: str, name: str,
+                default: tuple[float, ...]) -> tuple[float, ...]:
+        if value is None:
+            return default
+        if not isinstance(value, list) or len(value) != n:
+            self.fail(where, f"{name} must be {n} numbers, got {json.dumps(value)[:60]}")
+        return tuple(self.number(v, where, name, 0.0) for v in value)
+
+    # -- container ------------------------------------------------------------------------
+
+    def load(self) -> Scene:
+        try:
+            data = self.path.read_bytes()
+        except FileNotFoundError:
+            raise SceneError(f"{self.source}: file not found") from None
+        except OSError as e:
+            raise SceneError(f"{self.source}: cannot read: {e.strerror or e}") from None
+        text = self.split_glb(data) if data[:4] == _GLB_MAGIC else data
+        try:
+            raw = json.loads(bytes(text).decode("utf-8-sig"), parse_constant=_reject_constant)
+        except UnicodeDecodeError:
+            self.fail("JSON", "not UTF-8 text (is this a glTF file?)")
+        except (json.JSONDecodeError, ValueError, RecursionError) as e:
+            self.fail("JSON", f"malformed: {e}")
+        if not isinstance(raw, dict):
+            self.fail("JSON", "the top level must be an object")
+        self.check_version(raw)
+        try:
+            self.doc: pygltflib.GLTF2 = _decode(raw, pygltflib.GLTF2, "gltf")
+        except _ShapeError as e:
+            raise SceneError(f"{self.source}: {e}") from None
+        except RecursionError:
+            self.fail("JSON", "nested too deeply")
+        self.check_extensions()
+        self.build()
+        return self.scene
+
+    def split_glb(self, data: bytes) -> memoryview:
+        """The JSON chunk; keeps the BIN chunk in ``self.glb_bin``."""
+        if len(data) < 12:
+            self.fail("GLB", f"truncated: the 12-byte header is {len(data)} bytes")
+        _, version, length = struct.unpack_from("<4sII", data)
+        if version != 2:
+            self.fail("GLB", f"container version {version} (expected 2)")
+        if length > len(data):
+            self.fail("GLB", f"truncated: the header says {length} bytes, the file has "
+                             f"{len(data)}")
+        view = memoryview(data)[:length]
+        offset, chunk, json_chunk = 12, 0, None
+        while offset < length:
+            if offset + 8 > length:
+                self.fail("GLB", f"truncated chunk header at byte {offset}")
+            size, kind = struct.unpack_from("<I4s", view, offset)
+            offset += 8
+            if offset + size > length:
+                self.fail("GLB", f"chunk {chunk} ({kind.decode('latin-1')!r}) needs {size} "
+                                 f"bytes, {length - offset} are left")
+            body = view[offset:offset + size]
+            if chunk == 0:
+                if kind != _CHUNK_JSON:
+                    self.fail("GLB", "the first chunk is not JSON")
+                json_chunk = body
+            elif chunk == 1 and kind == _CHUNK_BIN:
+                self.glb_bin = body
+            offset = self.next_chunk(view, offset + size, length)
+            chunk += 1
+        if json_chunk is None:
+            self.fail("GLB", "no JSON chunk")
+        return json_chunk
+
+    @staticmethod
+    def next_chunk(view: memoryview, offset: int, length: int) -> int:
+        """Where the next chunk starts: chunk lengths include their padding, but some
+        writers leave it out; take the aligned offset when only that finds a chunk."""
+        aligned = offset + (-offset % 4)
+        if aligned == offset or aligned + 8 > length:
+            return offset
+        known = (_CHUNK_JSON, _CHUNK_BIN)
+        if bytes(view[offset + 4:offset + 8]) not in known \
+                and bytes(view[aligned + 4:aligned + 8]) in known:
+            return aligned
+        return offset
+
+    def check_version(self, raw: dict) -> None:
+        asset = raw.get("asset")
+        version = asset.get("version") if isinstance(asset, dict) else None
+        if not isinstance(version, str):
+            self.fail("asset", "no asset.version (is this a glTF 2.0 file?)")
+        if version.split(".")[0] != "2":
+            self.fail("asset", f"glTF version {version!r} is not supported (only 2.x)")
+
+    def check_extensions(self) -> None:
+        used = [e for e in self.doc.extensionsUsed or [] if e not in SUPPORTED_EXTENSIONS
+                and e not in (self.doc.extensionsRequired or [])]
+        if used:
+            # optional by definition, but the scene may look different without them
+            self.warn(f"extensionsUsed: {', '.join(used)} ignored")
+        required = self.doc.extensionsRequired or []
+        missing = [e for e in required if e not in SUPPORTED_EXTENSIONS]
+        if missing:
+            self.fail("extensionsRequired", f"{', '.join(missing)} "
+                      f"{'is' if len(missing) == 1 else 'are'} not supported (supported: "
+                      f"{', '.join(sorted(SUPPORTED_EXTENSIONS))})")
+
+    # -- bytes ----------------------------------------------------------------------------
+
+    def read_uri(self, uri: str, where: str) -> bytes:
+        """A data: URI, or a file inside the scene's folder."""
+        if uri.startswith("data:"):
+            header, comma, payload = uri.partition(",")
+            if not comma:
+                self.fail(where, "malformed data URI (no comma)")
+            if header.endswith(";base64"):
+                try:
+                    return base64.b64decode(payload, validate=True)
+                except (binascii.Error, ValueError) as e:
+                    self.fail(where, f"data URI is not valid base64 ({e})")
+            return urllib.parse.unquote_to_bytes(payload)
+        shown = uri if len(uri) < 80 else uri[:77] + "..."
+        if _URI_SCHEME.match(uri):
+            self.fail(where, f"uri '{shown}' is not a relative path (only files in the "
+                             "scene's folder are read)")
+        rel = urllib.parse.unquote(uri)
+        if not rel or "\x00" in rel or rel.startswith(("/", "\\")) \
+                or PureWindowsPath(rel).is_absolute() or PureWindowsPath(rel).drive:
+            self.fail(where, f"uri '{shown}' is not a relative path (only files in the "
+                             "scene's folder are read)")
+        try:
+            target = (self.folder / rel).resolve()
+        except (OSError, RuntimeError) as e:  # symlink loops
+            self.fail(where, f"uri '{shown}' cannot be resolved ({e})")
+        # resolve() follows symlinks, so a link pointing out of the folder is caught too
+        if not target.is_relative_to(self.root):
+            self.fail(where, f"uri '{shown}' points outside the scene's folder")
+        try:
+            return target.read_bytes()
+        except FileNotFoundError:
+            self.fail(where, f"file '{shown}' not found")
+        except OSError as e:
+            self.fail(where, f"cannot read '{shown}': {e.strerror or e}")
+
+    def buffer(self, index: int, where: str) -> memoryview:
+        if index in self.buffers:
+            return self.buffers[index]
+        buf = self.item("buffers", index, where)
+        where = f"buffers[{index}]"
+        length = self.integer(buf.byteLength, where, "byteLength", minimum=1)
+        if buf.uri is None:
+            if self.glb_bin is None:
+                self.fail(where, "has no uri and the file has no GLB binary chunk")
+            if index != 0:
+                self.fail(where, "has no uri, but only buffers[0] can be the GLB binary chunk")
+            data, name = self.glb_bin, "the GLB binary chunk"
+        else:
+            data, name = memoryview(self.read_uri(buf.uri, where)), f"'{buf.uri}'"
+            if buf.uri.startswith("data:"):
+                name = "its data URI"
+        if len(data) < length:
+            self.fail(where, f"truncated: {name} has {len(data)} bytes, byteLength says "
+                             f"{length}")
+        self.buffers[index] = data[:length]  # reads past byteLength are refused too
+        return self.buffers[index]
+
+    def view(self, index: Any, where: str) -> tuple[memoryview, int | None, str]:
+        """(bytes, byteStride, name) of a buffer view."""
+        view = self.item("bufferViews", index, where)
+        name = f"bufferViews[{index}]"
+        vwhere = f"{name} (used by {where})"
+        data = self.buffer(self.integer(view.buffer, vwhere, "buffer"), vwhere)
+        offset = self.integer(view.byteOffset, vwhere, "byteOffset", default=0)
+        length = self.integer(view.byteLength, vwhere, "byteLength", minimum=1)
+        if offset + length > len(data):
+            self.fail(vwhere, f"bytes {offset}..{offset + length} lie outside "
+                              f"buffers[{view.buffer}] ({len(data)} bytes)")
+        stride = view.byteStride
+        if stride is not None:
+            stride = self.integer(stride, vwhere, "byteStride", minimum=1)
+            if stride > 252:
+                self.fail(vwhere, f"byteStride {stride} exceeds glTF's limit of 252")
+        return data[offset:offset + length], stride, name
+
+    def accessor(self, index: Any, what: str, types: tuple[str, ...], *,
+                 indices: bool = False) -> np.ndarray:
+        """Read an accessor as float64 (count, components), or int64 (count,) for indices."""
+        acc = self.item("accessors", index, what)
+        where = f"accessors[{index}] ({what})"
+        with self.element(where):
+            ctype = acc.componentType
+            if ctype not in _COMPONENTS:
+                self.fail(where, f"componentType {json.dumps(ctype)} is not a glTF component "
+                                 "type")
+            if indices and ctype not in _INDEX_COMPONENTS:
+                self.fail(where, f"indices must be UNSIGNED_BYTE, UNSIGNED_SHORT or "
+                                 f"UNSIGNED_INT, got {_COMPONENT_NAMES[ctype]}")
+            if acc.type not in types:
+                self.fail(where, f"type is {json.dumps(acc.type)}, expected "
+                                 f"{' or '.join(types)}")
+            count = self.integer(acc.count, where, "count", minimum=1)
+            ncomp = _TYPES[acc.type]
+            dtype, size = _COMPONENTS[ctype]
+            elem = ncomp * size
+            if acc.bufferView is None:
+                if count > _MAX_UNBACKED:
+                    self.fail(where, f"count {count} without a bufferView is implausibly large")
+                raw = np.zeros((count, ncomp), dtype)
+            else:
+                data, stride, vname = self.view(acc.bufferView, where)
+                offset = self.integer(acc.byteOffset, where, "byteOffset", default=0)
+                stride = elem if stride is None else stride
+                if stride < elem:
+                    self.fail(where, f"{vname} has byteStride {stride}, smaller than one "
+                                     f"{acc.type} of {_COMPONENT_NAMES[ctype]} ({elem} bytes)")
+                need = offset + stride * (count - 1) + elem
+                if need > len(data):
+                    self.fail(where, f"needs {need} bytes, {vname} has {len(data)}")
+                raw = np.ndarray((count, ncomp), dtype, buffer=data, offset=offset,
+                                 strides=(stride, size)).copy()
+            if acc.sparse is not None:
+                self.sparse(acc.sparse, raw, where)
+            if indices:
+                return raw[:, 0].astype(np.int64)
+            if acc.normalized:
+                if ctype not in _NORMALIZE:
+                    self.fail(where, f"normalized is only allowed for byte and short "
+                                     f"components, not {_COMPONENT_NAMES[ctype]}")
+                out = np.maximum(raw.astype(np.float64) / _NORMALIZE[ctype], -1.0)
+            else:
+                out = raw.astype(np.float64)
+            if not np.all(np.isfinite(out)):
+                self.fail(where, "contains NaN or infinity")
+            return out
+
+    def sparse(self, sparse: Any, raw: np.ndarray, where: str) -> None:
+        """Apply a sparse substitution to ``raw`` in place."""
+        swhere = f"{where}.sparse"
+        count = self.integer(sparse.count, swhere, "count", minimum=1)
+        if count > len(raw):
+            self.fail(swhere, f"count {count} exceeds the accessor's count {len(raw)}")
+        if sparse.indices is None or sparse.values is None:
+            self.fail(swhere, "needs both indices and values")
+        ctype = sparse.indices.componentType
+        if ctype not in _INDEX_COMPONENTS:
+            self.fail(swhere, f"indices.componentType {json.dumps(ctype)} must be "
+                              "UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT")
+        idtype, isize = _COMPONENTS[ctype]
+        data, _, vname = self.view(sparse.indices.bufferView, f"{swhere}.indices")
+        offset = self.integer(sparse.indices.byteOffset, swhere, "indices.byteOffset",
+                              default=0)
+        if offset + count * isize > len(data):
+            self.fail(swhere, f"indices need {offset + count * isize} bytes, {vname} has "
+                              f"{len(data)}")
+        idx = np.frombuffer(data, idtype, count, offset).astype(np.int64)
+        if idx.max() >= len(raw):
+            self.fail(swhere, f"index {int(idx.max())} out of range for count {len(raw)}")
+        data, _, vname = self.view(sparse.values.bufferView, f"{swhere}.values")
+        offset = self.integer(sparse.values.byteOffset, swhere, "values.byteOffset", default=0)
+        nbytes = count * raw.shape[1] * raw.dtype.itemsize
+        if offset + nbytes > len(data):
+            self.fail(swhere, f"values need {offset + nbytes} bytes, {vname} has {len(data)}")
+        values = np.frombuffer(data, raw.dtype, count * raw.shape[1], offset)
+        raw[idx] = values.reshape(count, raw.shape[1])
+
+    # -- scene graph ----------------------------------------------------------------------
+
+    def build(self) -> None:
+        doc = self.doc
+        scenes = doc.scenes or []
+        if doc.scene is not None:
+            roots = self.item("scenes", doc.scene, "scene").nodes or []
+            where = f"scenes[{doc.scene}]"
+        elif scenes:
+            roots, where = scenes[0].nodes or [], "scenes[0]"
+        else:
+            # no scenes: show every root node rather than nothing
+            children = {c for n in doc.nodes or [] for c in n.children or []}
+            roots = [i for i in range(len(doc.nodes or [])) if i not in children]
+            where = "nodes"
+        stack = [(self.item("nodes", r, f"{where}.nodes[{k}]"), r, np.identity(4))
+                 for k, r in enumerate(roots)][::-1]
+        seen: set[int] = set()
+        open_zfar: list[int] = []
+        while stack:
+            node, index, parent = stack.pop()
+            nwhere = f"nodes[{index}]"
+            if index in seen:
+                self.fail(nwhere, "reached twice (the node hierarchy has a cycle or a node "
+                                  "with two parents)")
+            seen.add(index)
+            with self.element(nwhere):
+                world = parent @ self.local(node, nwhere)
+                if node.mesh is not None:
+                    self.instance(node, index, world)
+                if node.camera is not None:
+                    cam, infinite = self.camera(node.camera, nwhere, world)
+                    if infinite:
+                        open_zfar.append(len(self.scene.cameras))
+                    self.scene.cameras.append(cam)
+                ext = (node.extensions or {}).get("KHR_lights_punctual")
+                if ext is not None:
+                    self.light(ext, nwhere, world)
+                for k, c in reversed(list(enumerate(node.children or []))):
+                    stack.append((self.item("nodes", c, f"{nwhere}.children[{k}]"), c, world))
+        if not self.scene.materials:
+            self.scene.materials.append(Material())
+        if open_zfar:
+            # glTF's infinite far plane: far enough for the whole scene
+            far = 500.0
+            if self.scene.instances:
+                lo, hi = self.scene.bounds()
+                far = max(far, 10.0 * float(np.linalg.norm(hi - lo)))
+            for i in open_zfar:
+                self.scene.cameras[i].zfar = far
+
+    def local(self, node: Any, where: str) -> np.ndarray:
+        if node.matrix is not None:
+            m = self.numbers(node.matrix, 16, where, "matrix", ())
+            return np.array(m, np.float64).reshape(4, 4).T  # glTF stores column-major
+        t = self.numbers(node.translation, 3, where, "translation", (0.0, 0.0, 0.0))
+        q = self.numbers(node.rotation, 4, where, "rotation", (0.0, 0.0, 0.0, 1.0))
+        s = self.numbers(node.scale, 3, where, "scale", (1.0, 1.0, 1.0))
+        qn = math.sqrt(sum(c * c for c in q))
+        if qn < 1e-12:
+            self.fail(where, "rotation is a zero quaternion")
+        x, y, z, w = (c / qn for c in q)
+        r = np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ])
+        m = np.identity(4)
+        m[:3, :3] = r * np.array(s)[None, :]  # T @ R @ S
+        m[:3, 3] = t
+        return m
+
+    def instance(self, node: Any, index: int, world: np.ndarray) -> None:
+        mesh = self.item("meshes", node.mesh, f"nodes[{index}].mesh")
+        prims = mesh.primitives or []
+        if not prims:
+            self.fail(f"meshes[{node.mesh}]", "has no primitives")
+        for p in range(len(prims)):
+            key = (node.mesh, p)
+            if key not in self.primitives:
+                self.primitives[key] = len(self.scene.meshes)
+                self.scene.meshes.append(self.primitive(node.mesh, p))
+            self.scene.instances.append(Instance(
+                self.primitives[key], np.ascontiguousarray(world, np.float32),
+                node.name or f"nodes[{index}]"))
+
+    # -- geometry -------------------------------------------------------------------------
+
+    def primitive(self, mi: int, pi: int) -> Mesh:
+        mesh = self.doc.meshes[mi]
+        prim = mesh.primitives[pi]
+        where = f"meshes[{mi}].primitives[{pi}]"
+        with self.element(where):
+            attrs = {k: v for k, v in vars(prim.attributes).items() if v is not None} \
+                if prim.attributes is not None else {}
+            mode = self.integer(prim.mode, where, "mode", default=4)
+            if mode not in (4, 5, 6):
+                name = _MODES.get(mode, "unknown")
+                self.fail(where, f"mode {mode} ({name}) is not supported: only triangles, "
+                                 "triangle strips and triangle fans are")
+            if "POSITION" not in attrs:
+                self.fail(where, "has no POSITION attribute")
+            pos = self.accessor(attrs["POSITION"], f"POSITION of {where}", ("VEC3",))
+            n = len(pos)
+
+            def attribute(name: str, types: tuple[str, ...]) -> np.ndarray | None:
+                if name not in attrs:
+                    return None
+                a = self.accessor(attrs[name], f"{name} of {where}", types)
+                if len(a) != n:
+                    self.fail(f"accessors[{attrs[name]}] ({name} of {where})",
+                              f"count {len(a)} differs from POSITION's {n}")
+                return a
+
+            normals = attribute("NORMAL", ("VEC3",))
+            tangents = attribute("TANGENT", ("VEC4",))
+            uvs = attribute("TEXCOORD_0", ("VEC2",))
+
+            if prim.indices is not None:
+                iwhere = f"accessors[{prim.indices}] (indices of {where})"
+                idx = self.accessor(prim.indices, f"indices of {where}", ("SCALAR",),
+                                    indices=True)
+            else:
+                iwhere, idx = f"{where} (non-indexed)", np.arange(n, dtype=np.int64)
+            if len(idx) and int(idx.max()) >= n:
+                self.fail(iwhere, f"index {int(idx.max())} out of range for {n} vertices "
+                                  f"(POSITION count)")
+            idx = self.triangles(idx, mode, iwhere)
+
+            if normals is None:
+                normals = compute_normals(pos, idx).astype(np.float64)
+            else:
+                bad = np.linalg.norm(normals, axis=1) < 1e-12
+                if bad.any():  # zero normals in the file: fill in computed ones
+                    normals[bad] = compute_normals(pos, idx)[bad]
+                normals = normalize(normals)
+            if tangents is None:
+                tangents = compute_tangents(pos, normals, uvs, idx)
+            else:
+                tangents[:, :3] = normalize(tangents[:, :3])
+                tangents[:, 3] = np.where(tangents[:, 3] < 0, -1.0, 1.0)
+            material = self.material(prim.material, f"{where}.material")
+            name = mesh.name or f"meshes[{mi}]"
+            if len(mesh.primitives) > 1:
+                name = f"{name}.{pi}"
+            return Mesh(
+                name=name,
+                positions=np.ascontiguousarray(pos, np.float32),
+                normals=np.ascontiguousarray(normals, np.float32),
+                uvs=np.ascontiguousarray(np.zeros((n, 2)) if uvs is None else uvs, np.float32),
+                tangents=np.ascontiguousarray(tangents, np.float32),
+                indices=np.ascontiguousarray(idx, np.uint32),
+                material=material,
+            )
+
+    def triangles(self, idx: np.ndarray, mode: int, where: str) -> np.ndarray:
+        """Triangle-list indices for TRIANGLES, TRIANGLE_STRIP or TRIANGLE_FAN."""
+        if mode == 4:
+            if len(idx) % 3:
+                self.fail(where, f"{len(idx)} indices is not a whole number of triangles")
+            return idx
+        if len(idx) < 3:
+            return np.zeros(0, np.int64)
+        i = np.arange(len(idx) - 2)
+        if mode == 5:
+            # glTF 2.0 section 3.7.2.1: every other triangle flips to keep the winding
+            odd = i % 2
+            tri = np.stack([idx[i], idx[i + 1 + odd], idx[i + 2 - odd]], axis=1)
+        else:
+            tri = np.stack([idx[i + 1], idx[i + 2], np.full_like(i, idx[0])], axis=1)
+        # strips stitch with repeated indices: drop the zero-area triangles they make
+        keep = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+        return tri[keep].ravel()
+
+    # -- materials and textures -----------------------------------------------------------
+
+    def material(self, index: Any, where: str) -> int:
+        if index is None:
+            if self.default_material is None:
+                # glTF's default material: the metallic-roughness defaults
+                self.default_material = len(self.scene.materials)
+                self.scene.materials.append(Material(name="default", metallic=1.0))
+            return self.default_material
+        if index in self.materials:
+            return self.materials[index]
+        m = self.item("materials", index, where)
+        mwhere = f"materials[{index}]"
+        with self.element(mwhere):
+            pbr = m.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
+            out = Material(name=m.name or mwhere)
+            out.base_color = self.numbers(pbr.baseColorFactor, 4, mwhere, "baseColorFactor",
+                                          (1.0, 1.0, 1.0, 1.0))
+            out.metallic = self.number(pbr.metallicFactor, mwhere, "metallicFactor", 1.0)
+            out.roughness = self.number(pbr.roughnessFactor, mwhere, "roughnessFactor", 1.0)
+            emissive = self.numbers(m.emissiveFactor, 3, mwhere, "emissiveFactor",
+                                    (0.0, 0.0, 0.0))
+            strength = (m.extensions or {}).get("KHR_materials_emissive_strength")
+            if isinstance(strength, dict):
+                k = self.number(strength.get("emissiveStrength"), mwhere,
+                                "KHR_materials_emissive_strength.emissiveStrength", 1.0)
+                emissive = tuple(c * k for c in emissive)
+            out.emissive = emissive
+            out.base_color_texture = self.texture_info(pbr.baseColorTexture, True,
+                                                       f"{mwhere}.baseColorTexture")
+            out.metallic_roughness_texture = self.texture_info(
+                pbr.metallicRoughnessTexture, False, f"{mwhere}.metallicRoughnessTexture")
+            out.normal_texture = self.texture_info(m.normalTexture, False,
+                                                   f"{mwhere}.normalTexture")
+            if m.normalTexture is not None:
+                out.normal_scale = self.number(m.normalTexture.scale, mwhere,
+                                               "normalTexture.scale", 1.0)
+            out.occlusion_texture = self.texture_info(m.occlusionTexture, False,
+                                                      f"{mwhere}.occlusionTexture")
+            if m.occlusionTexture is not None:
+                out.occlusion_strength = self.number(m.occlusionTexture.strength, mwhere,
+                                                     "occlusionTexture.strength", 1.0)
+            out.emissive_texture = self.texture_info(m.emissiveTexture, True,
+                                                     f"{mwhere}.emissiveTexture")
+            mode = m.alphaMode if m.alphaMode is not None else "OPAQUE"
+            if mode not in ("OPAQUE", "MASK", "BLEND"):
+                self.fail(mwhere, f"alphaMode {json.dumps(mode)} must be OPAQUE, MASK or BLEND")
+            out.alpha_mode = mode
+            out.alpha_cutoff = self.number(m.alphaCutoff, mwhere, "alphaCutoff", 0.5)
+            out.double_sided = bool(m.doubleSided)
+        self.materials[index] = len(self.scene.materials)
+        self.scene.materials.append(out)
+        return self.materials[index]
+
+    def texture_info(self, info: Any, srgb: bool, where: str) -> int | None:
+        if info is None:
+            return None
+        if info.index is None:
+            self.fail(where, "has no index")
+        if info.texCoord not in (None, 0):
+            self.warn(f"{where} uses TEXCOORD_{info.texCoord}; only TEXCOORD_0 is read")
+        return self.texture(info.index, srgb, where)
+
+    def texture(self, index: Any, srgb: bool, where: str) -> int | None:
+        key = (index, srgb)
+        if key in self.textures:
+            return self.textures[key]
+        tex = self.item("textures", index, where)
+        twhere = f"textures[{index}]"
+        source = tex.source
+        webp = (tex.extensions or {}).get("EXT_texture_webp")
+        if isinstance(webp, dict) and webp.get("source") is not None:
+            source = webp["source"]
+        if source is None:
+            self.warn(f"{twhere} has no source this loader can decode; {where} is dropped")
+            self.textures[key] = None
+            return None
+        pixels = self.image(source, f"{twhere}.source")
+        sampler = self.sampler(tex.sampler, f"{twhere}.sampler")
+        image = self.doc.images[source]
+        name = tex.name or image.name or (image.uri if image.uri and
+                                          not image.uri.startswith("data:") else twhere)
+        self.textures[key] = len(self.scene.textures)
+        self.scene.textures.append(Texture(name=name, pixels=pixels, srgb=srgb, **sampler))
+        return self.textures[key]
+
+    def sampler(self, index: Any, where: str) -> dict[str, str]:
+        if index is None:
+            return {}  # glTF: undefined sampler = repeat and auto filtering
+        s = self.item("samplers", index, where)
+        swhere = f"samplers[{index}]"
+        out = {}
+        if s.magFilter is not None:
+            if s.magFilter not in _MAG_FILTERS:
+                self.fail(swhere, f"magFilter {json.dumps(s.magFilter)} is not 9728 or 9729")
+            out["mag_filter"] = _MAG_FILTERS[s.magFilter]
+        if s.minFilter is not None:
+            if s.minFilter not in _MIN_FILTERS:
+                self.fail(swhere, f"minFilter {json.dumps(s.minFilter)} is not a glTF filter")
+            out["min_filter"], out["mipmap_filter"] = _MIN_FILTERS[s.minFilter]
+        for key, value in (("address_u", s.wrapS), ("address_v", s.wrapT)):
+            if value is None:
+                continue
+            if value not in _WRAPS:
+                name = "wrapS" if key == "address_u" else "wrapT"
+                self.fail(swhere, f"{name} {json.dumps(value)} is not 33071, 33648 or 10497")
+            out[key] = _WRAPS[value]
+        return out
+
+    def image(self, index: Any, where: str) -> np.ndarray:
+        if index in self.images:
+            return self.images[index]
+        img = self.item("images", index, where)
+        iwhere = f"images[{index}]"
+        if img.uri is not None:
+            data = self.read_uri(img.uri, iwhere)
+        elif img.bufferView is not None:
+            data = bytes(self.view(img.bufferView, iwhere)[0])
+        else:
+            self.fail(iwhere, "has neither uri nor bufferView")
+        self.images[index] = self.decode(data, iwhere)
+        return self.images[index]
+
+    def decode(self, data: bytes, where: str) -> np.ndarray:
+        from PIL import Image, UnidentifiedImageError  # only needed for textured scenes
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", Image.DecompressionBombWarning)
+                with Image.open(io.BytesIO(data)) as im:
+                    im.load()
+                    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                        # 16-bit greyscale: keep the high byte rather than clipping
+                        grey = (np.asarray(im, np.uint32) >> 8).astype(np.uint8)
+                        im = Image.fromarray(grey, "L")
+                    rgba = np.array(im.convert("RGBA"), np.uint8)
+        except UnidentifiedImageError:
+            self.fail(where, "cannot decode the image: not a format Pillow reads "
+                             f"({len(data)} bytes starting {bytes(data[:8])!r})")
+        except (OSError, ValueError, SyntaxError, Image.DecompressionBombWarning,
+                Image.DecompressionBombError) as e:
+            self.fail(where, f"cannot decode the image ({type(e).__name__}: {e})")
+        return np.ascontiguousarray(rgba)
+
+    # -- cameras and lights ---------------------------------------------------------------
+
+    def camera(self, index: Any, where: str, world: np.ndarray) -> tuple[Camera, bool]:
+        cam = self.item("cameras", index, f"{where}.camera")
+        cwhere = f"cameras[{index}]"
+        eye = world[:3, 3]
+        forward = normalize((world[:3, :3] @ [0.0, 0.0, -1.0])[None])[0]
+        up = normalize((world[:3, :3] @ [0.0, 1.0, 0.0])[None])[0]
+        if not np.all(np.isfinite(world)) or abs(float(forward @ up)) > 0.999:
+            self.fail(where, f"transform of {cwhere} is degenerate")
+        name = cam.name or cwhere
+        if cam.type == "orthographic" or (cam.type is None and cam.orthographic is not None):
+            o = cam.orthographic
+            if o is None:
+                self.fail(cwhere, "type is orthographic but there is no orthographic object")
+            ymag = self.number(o.ymag, cwhere, "ymag", 1.0)
+            znear = max(self.number(o.znear, cwhere, "znear", 0.01), 1e-3)
+            zfar = self.number(o.zfar, cwhere, "zfar", 500.0)
+            # the model is perspective only: a camera far back with a narrow field of view
+            # sees about what the orthographic one sees around its target
+            self.warn(f"{cwhere} is orthographic; approximated by a perspective camera")
+            back = max(10.0 * abs(ymag), 10.0)
+            yfov = 2.0 * math.atan(abs(ymag) / back) if ymag else math.radians(5.0)
+            pos = eye - forward * back
+            return Camera(tuple(map(float, pos)), tuple(map(float, eye)),
+                          tuple(map(float, up)), yfov, znear, zfar + back, name), False
+        if cam.type not in ("perspective", None) or cam.perspective is None:
+            self.fail(cwhere, f"type {json.dumps(cam.type)} needs a perspective object")
+        p = cam.perspective
+        yfov = self.number(p.yfov, cwhere, "perspective.yfov", 0.0)
+        if not 0.0 < yfov < math.pi:
+            self.fail(cwhere, f"perspective.yfov {yfov} must lie in (0, pi)")
+        znear = self.number(p.znear, cwhere, "perspective.znear", 0.0)
+        if znear <= 0:
+            self.fail(cwhere, "perspective.znear must be > 0")
+        zfar = p.zfar
+        if zfar is not None:
+            zfar = self.number(zfar, cwhere, "perspective.zfar", 0.0)
+            if zfar <= znear:
+                self.fail(cwhere, f"perspective.zfar {zfar} must exceed znear {znear}")
+        target = eye + forward
+        return Camera(tuple(map(float, eye)), tuple(map(float, target)), tuple(map(float, up)),
+                      yfov, znear, 500.0 if zfar is None else zfar, name), zfar is None
+
+    def light(self, ext: Any, where: str, world: np.ndarray) -> None:
+        lwhere = f"{where}.extensions.KHR_lights_punctual"
+        if not isinstance(ext, dict):
+            self.fail(lwhere, "must be an object")
+        top = (self.doc.extensions or {}).get("KHR_lights_punctual")
+        lights = top.get("lights") if isinstance(top, dict) else None
+        if not isinstance(lights, list):
+            self.fail(lwhere, "refers to a light, but the file has no KHR_lights_punctual "
+                              "lights array")
+        index = ext.get("light")
+        if isinstance(index, bool) or not isinstance(index, int) \
+                or not 0 <= index < len(lights):
+            self.fail(lwhere, f"light {json.dumps(index)} is not an index into the "
+                              f"{len(lights)} KHR_lights_punctual lights")
+        src = lights[index]
+        swhere = f"extensions.KHR_lights_punctual.lights[{index}]"
+        if not isinstance(src, dict):
+            self.fail(swhere, "must be an object")
+        kind = src.get("type")
+        if kind not in ("directional", "point", "spot"):
+            self.fail(swhere, f"type {json.dumps(kind)} must be directional, point or spot")
+        light = Light(kind=kind, name=src.get("name") if isinstance(src.get("name"), str)
+                      else swhere)
+        light.color = self.numbers(src.get("color"), 3, swhere, "color", (1.0, 1.0, 1.0))
+        light.intensity = self.number(src.get("intensity"), swhere, "intensity", 1.0)
+        if src.get("range") is not None:
+            light.range = self.number(src.get("range"), swhere, "range", 0.0)
+            if light.range <= 0:
+                self.fail(swhere, "range must be > 0")
+        if kind == "spot":
+            spot = src.get("spot")
+            if not isinstance(spot, dict):
+                self.fail(swhere, "a spot light needs a spot object")
+            light.inner_cone = self.number(spot.get("innerConeAngle"), swhere,
+                                           "spot.innerConeAngle", 0.0)
+            light.outer_cone = self.number(spot.get("outerConeAngle"), swhere,
+                                           "spot.outerConeAngle", math.pi / 4)
+            if not 0.0 <= light.inner_cone < light.outer_cone <= math.pi / 2:
+                self.fail(swhere, "spot cone angles need 0 <= inner < outer <= pi/2")
+        light.position = tuple(map(float, world[:3, 3]))
+        direction = world[:3, :3] @ [0.0, 0.0, -1.0]
+        if not np.all(np.isfinite(direction)) or np.linalg.norm(direction) < 1e-12:
+            self.fail(where, "transform is degenerate: the light has no direction")
+        light.direction = tuple(map(float, normalize(direction[None])[0]))
+        self.scene.lights.append(light)

@@ -1,0 +1,169 @@
+"""The scene as renderers see it: flat arrays ready for upload, world-space instances.
+
+Loaders (glTF, OBJ/PLY through trimesh, the built-in courtyard) all produce a ``Scene``;
+backends never see a file format.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Texture:
+    """An RGBA8 image, row-major, top row first."""
+
+    name: str
+    pixels: np.ndarray  # (H, W, 4) uint8
+    srgb: bool = True  # base color and emissive are sRGB; normal, metal-rough, occlusion linear
+    # sampler, in WebGPU terms
+    mag_filter: str = "linear"  # linear | nearest
+    min_filter: str = "linear"
+    mipmap_filter: str = "linear"
+    address_u: str = "repeat"  # repeat | mirror-repeat | clamp-to-edge
+    address_v: str = "repeat"
+
+
+@dataclass
+class Material:
+    """glTF 2.0 metallic-roughness material; texture fields index ``Scene.textures``."""
+
+    name: str = "default"
+    base_color: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)  # linear
+    metallic: float = 0.0
+    roughness: float = 1.0
+    emissive: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base_color_texture: int | None = None
+    metallic_roughness_texture: int | None = None  # G: roughness, B: metallic
+    normal_texture: int | None = None
+    normal_scale: float = 1.0
+    occlusion_texture: int | None = None  # R
+    occlusion_strength: float = 1.0
+    emissive_texture: int | None = None
+    alpha_mode: str = "OPAQUE"  # OPAQUE | MASK | BLEND
+    alpha_cutoff: float = 0.5
+    double_sided: bool = False
+
+
+@dataclass
+class Mesh:
+    """One primitive: triangles with one material. Arrays are contiguous."""
+
+    name: str
+    positions: np.ndarray  # (V, 3) float32
+    normals: np.ndarray  # (V, 3) float32, unit length
+    uvs: np.ndarray  # (V, 2) float32 (zeros when the source has none)
+    tangents: np.ndarray  # (V, 4) float32, xyz + handedness w
+    indices: np.ndarray  # (T*3,) uint32
+    material: int = 0  # index into Scene.materials
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.indices) // 3
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.positions.min(axis=0), self.positions.max(axis=0)
+
+
+@dataclass
+class Instance:
+    """A mesh placed in the world."""
+
+    mesh: int  # index into Scene.meshes
+    transform: np.ndarray  # (4, 4) float32, column vectors: world = T @ local
+    name: str = ""
+
+
+@dataclass
+class Light:
+    kind: str  # directional | point | spot
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)  # linear
+    intensity: float = 1.0  # lux for directional, candela for point and spot (KHR_lights)
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    direction: tuple[float, float, float] = (0.0, -1.0, 0.0)  # where the light travels
+    range: float | None = None
+    inner_cone: float = 0.0
+    outer_cone: float = np.pi / 4
+    name: str = ""
+
+
+@dataclass
+class Camera:
+    """A perspective camera looking down its local -Z with +Y up."""
+
+    position: tuple[float, float, float] = (0.0, 1.0, 5.0)
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    yfov: float = np.radians(60.0)
+    znear: float = 0.05
+    zfar: float = 500.0
+    name: str = ""
+
+    def view(self) -> np.ndarray:
+        eye, at, up = (np.asarray(v, np.float64) for v in (self.position, self.target, self.up))
+        f = at - eye
+        f /= np.linalg.norm(f)
+        s = np.cross(f, up)
+        s /= np.linalg.norm(s)
+        u = np.cross(s, f)
+        m = np.identity(4)
+        m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+        m[:3, 3] = -m[:3, :3] @ eye
+        return m.astype(np.float32)
+
+    def projection(self, aspect: float) -> np.ndarray:
+        """Reverse-free, right-handed, depth 0..1 (WebGPU and Vulkan clip space)."""
+        f = 1.0 / np.tan(self.yfov / 2)
+        n, z = self.znear, self.zfar
+        m = np.zeros((4, 4))
+        m[0, 0] = f / aspect
+        m[1, 1] = f
+        m[2, 2] = z / (n - z)
+        m[2, 3] = n * z / (n - z)
+        m[3, 2] = -1.0
+        return m.astype(np.float32)
+
+
+@dataclass
+class Scene:
+    name: str
+    meshes: list[Mesh] = field(default_factory=list)
+    materials: list[Material] = field(default_factory=lambda: [Material()])
+    textures: list[Texture] = field(default_factory=list)
+    instances: list[Instance] = field(default_factory=list)
+    lights: list[Light] = field(default_factory=list)
+    cameras: list[Camera] = field(default_factory=list)
+    source: str | None = None
+
+    @property
+    def triangle_count(self) -> int:
+        return sum(self.meshes[i.mesh].triangle_count for i in self.instances)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space axis-aligned bounds of all instances."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for inst in self.instances:
+            a, b = self.meshes[inst.mesh].bounds()
+            corners = np.array([[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1])
+                                for z in (a[2], b[2])])
+            world = corners @ inst.transform.T
+            lo = np.minimum(lo, world[:, :3].min(axis=0))
+            hi = np.maximum(hi, world[:, :3].max(axis=0))
+        return lo, hi
+
+    def default_camera(self) -> Camera:
+        """The scene's first camera, else one framing its bounds."""
+        if self.cameras:
+            return self.cameras[0]
+        lo, hi = self.bounds()
+        center = (lo + hi) / 2
+        radius = float(np.linalg.norm(hi - lo)) / 2 or 1.0
+        eye = center + np.array([0.6, 0.5, 1.0]) / np.linalg.norm([0.6, 0.5, 1.0]) * radius * 2.0
+        return Camera(tuple(eye), tuple(center), zfar=radius * 10, znear=radius * 0.01)
+
+
+class SceneError(ValueError):
+    """A scene that cannot be loaded: the message names the file and the element."""

@@ -1,0 +1,95 @@
+"""Configs: passes wired into a graph, settings, variants and --set overrides."""
+
+import pytest
+
+from rfw.config import apply_overrides, build, load_config
+from rfw.graph import GraphError, compile
+
+from ..conftest import ROOT
+
+CONFIGS = sorted((ROOT / "configs").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.stem)
+def test_every_config_builds_and_compiles(path):
+    plan = compile(build(load_config(path)).graph)
+    assert plan.order and plan.outputs
+
+
+def test_set_toggles_passes_and_settings():
+    cfg = load_config(ROOT / "configs" / "deferred.toml")
+    assert "shadow" in compile(build(cfg).graph).disabled
+    on = apply_overrides(cfg, ["shadow.enabled=true", "lighting.ambient=0.25",
+                               "size=320x200"])
+    built = build(on)
+    plan = compile(built.graph)
+    assert plan.order == ("shadow", "gbuffer", "lighting", "tonemap")
+    assert built.passes["lighting"].params.ambient == 0.25
+    assert built.slots["lighting"]["shadow"] == "shadow.depth"
+    assert plan.size == (320, 200)
+    off = build(cfg)  # the optional shadow input drops out when its pass is disabled
+    assert "shadow" not in off.slots["lighting"]
+
+
+@pytest.mark.parametrize("sets, message", [
+    (["lighting.ambeint=2"], r"unknown setting 'ambeint' \(did you mean 'ambient'\?\)"),
+    (["lightning.ambient=2"], r"no pass or variant 'lightning' \(did you mean 'lighting'"),
+    (["shadow.enabled=maybe"], r"'shadow.enabled' must be true or false"),
+    (["size=12"], r"--set size=12: expected WxH"),
+    (["novalue"], r"expected key=value"),
+])
+def test_bad_overrides_are_one_clear_line(sets, message):
+    cfg = load_config(ROOT / "configs" / "deferred.toml")
+    with pytest.raises(GraphError, match=message) as e:
+        build(apply_overrides(cfg, sets))
+    assert "deferred.toml" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_variants_switch_and_undo(tmp_path):
+    path = tmp_path / "v.toml"
+    path.write_text("""
+name = "v"
+outputs = ["tonemap.ldr"]
+[[pass]]
+name = "shadow"
+use = "shadow_map"
+[[pass]]
+name = "gbuffer"
+[[pass]]
+name = "lighting"
+use = "deferred_lighting"
+inputs = { albedo = "gbuffer.albedo", normal = "gbuffer.normal", material = "gbuffer.material", emissive = "gbuffer.emissive", depth = "gbuffer.depth", shadow = "shadow.depth" }
+[[pass]]
+name = "tonemap"
+inputs = { hdr = "lighting.hdr" }
+[variants.shadows]
+default = "on"
+on = {}
+off = { "shadow.enabled" = false }
+[variants.look]
+default = "normal"
+normal = {}
+bright = { "tonemap.exposure" = 2.0 }
+""")
+    cfg = load_config(path)
+    assert cfg.chosen == {"shadows": "on", "look": "normal"}
+    off = apply_overrides(cfg, ["shadows=off", "look=bright"])
+    assert "shadow" in compile(build(off).graph).disabled
+    assert build(off).passes["tonemap"].params.exposure == 2.0
+    back = apply_overrides(off, ["shadows=on", "look=normal"])
+    assert compile(build(back).graph).disabled == ()
+    assert build(back).passes["tonemap"].params.exposure == 1.0
+    with pytest.raises(GraphError, match=r"variant 'shadows' has no option 'of' \(did you mean "
+                                         r"'off'"):
+        apply_overrides(cfg, ["shadows=of"])
+
+
+def test_unconnected_required_input_is_an_error(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[[pass]]\nname = "tonemap"\n')
+    with pytest.raises(GraphError, match=r"pass 'tonemap' \(tonemap\): input 'hdr' is not "
+                                         r"connected"):
+        build(load_config(path))
+    path.write_text('[[pass]]\nname = "tonemap"\ninputs = { hrd = "x.y" }\n')
+    with pytest.raises(GraphError, match=r"no input slot 'hrd' \(did you mean 'hdr'"):
+        build(load_config(path))

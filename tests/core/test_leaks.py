@@ -1,0 +1,30 @@
+"""Build, render and drop a graph many times: live GPU objects return to baseline."""
+
+import gc
+
+import wgpu
+
+from rfw.config import apply_overrides, load_config
+from rfw.render import render
+
+from ..conftest import ROOT
+
+
+def live() -> dict[str, int]:
+    gc.collect()
+    counts = wgpu.diagnostics.object_counts.get_dict()
+    return {k: v["count"] for k, v in counts.items() if k != "total"}
+
+
+def test_render_and_drop_returns_to_baseline(device, scene):
+    cfg = apply_overrides(load_config(ROOT / "configs" / "deferred.toml"),
+                          ["size=64x48", "shadow.enabled=true", "shadow.resolution=256"])
+    render(cfg, scene=scene, device=device)  # warm up: the device's own objects exist now
+    before = live()
+    for _ in range(6):
+        result = render(cfg, scene=scene, device=device)
+        del result
+    after = live()
+    grown = {k: (before[k], after[k]) for k in before if after[k] > before[k]}
+    assert not grown, f"objects still alive after dropping the renders: {grown}"
+    assert after["Texture"] >= 0 and after["Device"] == before["Device"]

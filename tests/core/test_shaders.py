@@ -1,0 +1,80 @@
+"""WGSL preprocessing, reflection, and errors that point at the user's file and line."""
+
+from pathlib import Path
+
+import pytest
+
+from rfw.shaders import ShaderError, explain, preprocess, reflect
+
+
+def write(tmp: Path, name: str, text: str) -> Path:
+    p = tmp / name
+    p.write_text(text)
+    return p
+
+
+def test_includes_defines_and_line_map(tmp_path):
+    write(tmp_path, "common.wgsl", "const K: f32 = SCALE;\n")
+    main = write(tmp_path, "main.wgsl", '#include "common.wgsl"\n#define SCALE 2.0\n'
+                 "#ifdef FAST\nfn f() -> f32 { return K; }\n#else\nfn f() -> f32 { return 0.0; }\n"
+                 "#endif\n")
+    slow = preprocess(main)
+    assert "return 0.0" in slow.text and "return K" not in slow.text
+    # the include came before the define: the host define wins everywhere
+    fast = preprocess(main, {"FAST": 1, "SCALE": "3.0"})
+    assert "const K: f32 = 3.0;" in fast.text and "return K" in fast.text
+    assert fast.where(1) == f"{tmp_path / 'common.wgsl'}:1"
+    assert fast.where(2) == f"{main}:4"
+    assert fast.hash != slow.hash
+
+
+@pytest.mark.parametrize("text, message", [
+    ('#include "nope.wgsl"\n', "include 'nope.wgsl' not found"),
+    ("#ifdef A\n", "#ifdef without #endif"),
+    ("#endif\n", "#endif without #ifdef"),
+])
+def test_preprocess_errors_name_file_and_line(tmp_path, text, message):
+    with pytest.raises(ShaderError, match=message):
+        preprocess(write(tmp_path, "bad.wgsl", text))
+
+
+def test_includes_are_once_only_so_cycles_cannot_loop(tmp_path):
+    write(tmp_path, "a.wgsl", '#include "b.wgsl"\nconst A: i32 = 1;\n')
+    write(tmp_path, "b.wgsl", '#include "a.wgsl"\nconst B: i32 = 2;\n')
+    text = preprocess(tmp_path / "a.wgsl").text
+    assert text.count("const A") == 1 and text.count("const B") == 1
+    assert text.index("const B") < text.index("const A")
+
+
+def test_reflect_bindings(tmp_path):
+    src = preprocess(write(tmp_path, "r.wgsl", """
+@group(0) @binding(0) var t_hdr: texture_2d<f32>;
+@group(0) @binding(1) var o_ldr: texture_storage_2d<rgba8unorm, write>;
+@group(0) @binding(2) var<uniform> u_params: Params;
+@group(1) @binding(0) var<storage, read_write> counts: array<u32>;
+@group(1) @binding(1) var<storage> items: array<f32>;
+@group(2) @binding(3) var s: sampler_comparison;
+// @group(3) @binding(0) var commented: texture_2d<f32>;
+"""))
+    b = reflect(src)
+    assert set(b) == {"t_hdr", "o_ldr", "u_params", "counts", "items", "s"}
+    assert (b["o_ldr"].kind, b["o_ldr"].access) == ("storage-texture", "write")
+    assert b["counts"].kind == "storage" and b["items"].kind == "read-only-storage"
+    assert (b["s"].group, b["s"].binding, b["s"].kind) == (2, 3, "sampler")
+
+
+def test_compile_errors_point_at_the_original_file(tmp_path, device):
+    from rfw.backends.wgpu_backend import ShaderCache
+
+    write(tmp_path, "inc.wgsl", "fn helper() -> f32 { return 1.0; }\n")
+    bad = write(tmp_path, "bad.comp.wgsl", '#include "inc.wgsl"\n\n@compute @workgroup_size(1)\n'
+                "fn main() {\n    let x: f32 = undefined_thing;\n}\n")
+    with pytest.raises(ShaderError) as e:
+        ShaderCache(device).program(bad, {}, "compute", {})
+    assert f"{bad}:5" in str(e.value)
+    assert "undefined_thing" in str(e.value)
+
+
+def test_explain_maps_lines(tmp_path):
+    src = preprocess(write(tmp_path, "m.wgsl", "a\nb\n"))
+    assert explain(src, "error at wgsl:2:3 oops").startswith(f"{tmp_path / 'm.wgsl'}:2: ")

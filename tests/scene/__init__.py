@@ -1,0 +1,1 @@
+"""Scene loaders and the courtyard."""
