@@ -81,6 +81,20 @@ def wgpu_format(name: str) -> str:
     return info.wgpu
 
 
+_BUFFER_USAGE = {"storage": wgpu.BufferUsage.STORAGE, "uniform": wgpu.BufferUsage.UNIFORM,
+                 "indirect": wgpu.BufferUsage.INDIRECT, "vertex": wgpu.BufferUsage.VERTEX,
+                 "index": wgpu.BufferUsage.INDEX, "transfer_src": wgpu.BufferUsage.COPY_SRC,
+                 "transfer_dst": wgpu.BufferUsage.COPY_DST}
+
+
+def buffer_usage(r: ResourcePlan) -> int:
+    # copies both ways so buffers can be cleared, filled and read back
+    usage = wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST
+    for u in r.usages:
+        usage |= _BUFFER_USAGE.get(u, 0)
+    return usage
+
+
 def texture_usage(r: ResourcePlan, readback: bool) -> int:
     usage = 0
     for u in r.usages:
@@ -253,6 +267,10 @@ class PassContext:
 
     sampled = view
     storage = view
+
+    def buffer(self, slot: str) -> Any:
+        """The GPU buffer behind a buffer slot (bind it as ``{"buffer": ...}`` or directly)."""
+        return self.executor.buffer(self.resource(slot))
 
     def format(self, slot: str) -> str:
         return wgpu_format(self.executor.plan.resource(self.resource(slot)).format)
@@ -443,9 +461,17 @@ class Executor:
                 wgpu.TextureUsage.TEXTURE_BINDING,
                 mip_level_count=r.mips, sample_count=r.samples, label=r.name)
         self.texture_count = len(self._textures)
+        self._buffers: dict[str, Any] = {}
+        for r in self.plan.resources:
+            if r.kind == "buffer" and r.raw_bytes > 0:
+                self._buffers[r.name] = self.device.device.create_buffer(
+                    size=-(-r.raw_bytes // 4) * 4, usage=buffer_usage(r), label=r.name)
 
     def texture(self, resource: str) -> Any:
         return self._textures[self.owner[resource]]
+
+    def buffer(self, resource: str) -> Any:
+        return self._buffers[resource]
 
     def view(self, resource: str) -> Any:
         if resource not in self._views:
@@ -569,6 +595,9 @@ class Executor:
         for t in self._textures.values():
             t.destroy()
         self._textures.clear()
+        for b in self._buffers.values():
+            b.destroy()
+        self._buffers.clear()
         self._views.clear()
         for b in self._uniforms.values():
             b.destroy()

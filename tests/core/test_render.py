@@ -109,3 +109,57 @@ def test_binding_mismatch_names_pass_binding_and_file(device):
     with pytest.raises(ShaderError, match=r"pass '_Mismatch': tonemap.comp.wgsl has no binding "
                                           r"named t_extra"):
         run_pass(_Mismatch, {"hdr": ("rgba16float", hdr)}, device=device)
+
+
+class _Count(ComputePass):
+    """Writes, per pixel, 1 into a storage buffer of counters; tests buffer slots."""
+
+    shader = "count.comp.wgsl"
+    inputs = {"src": Tex2D()}
+
+    def declare(self):
+        from rfw.graph import Buffer
+
+        return dict(self.inputs), {"counts": Buffer(4 * 64, usage={"storage"},
+                                                    desc="one u32 per pixel")}
+
+    def record(self, ctx):
+        ctx.dispatch(threads=ctx.extent("src"), t_src=ctx.sampled("src"),
+                     counts=ctx.buffer("counts"))
+
+
+def test_buffer_slots_are_allocated_with_their_usages(device, tmp_path, monkeypatch):
+    (tmp_path / "count.comp.wgsl").write_text("""
+@group(0) @binding(0) var t_src: texture_2d<f32>;
+@group(0) @binding(1) var<storage, read_write> counts: array<u32>;
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3u) {
+    let size = textureDimensions(t_src);
+    if (id.x >= size.x || id.y >= size.y) { return; }
+    counts[id.y * size.x + id.x] = u32(textureLoad(t_src, vec2i(id.xy), 0).r * 255.0 + 0.5);
+}
+""")
+    monkeypatch.setattr(_Count, "folder", classmethod(lambda cls: tmp_path))
+    img = np.arange(64, dtype=np.uint8).reshape(8, 8, 1).repeat(4, axis=2)
+    from rfw.backends.wgpu_backend import Executor
+    from rfw.graph import GraphBuilder, Texture
+    from rfw.graph.resources import SizeRule
+
+    g = GraphBuilder("b", size=(8, 8))
+    g.external("img", Texture("rgba8unorm", size=SizeRule.fixed(8, 8)))
+    inst = _Count("count")
+    b = g.add_pass("count", "compute")
+    b.input("src", "img")
+    b.output("counts", inst.declare()[1]["counts"])
+    plan = compile(g.output("count.counts").build())
+    ex = Executor(device, plan, {"count": inst}, {"count": {"src": "img",
+                                                            "counts": "count.counts"}})
+    try:
+        ex.upload("img", img)
+        ex.run(1)
+        data = np.frombuffer(device.device.queue.read_buffer(ex.buffer("count.counts")),
+                             np.uint32)
+        assert np.array_equal(data, np.arange(64))
+    finally:
+        ex.destroy()
