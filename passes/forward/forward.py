@@ -3,10 +3,20 @@
 from rfw import RenderPass, Settings, register_pass
 from rfw.graph import Attachment, DepthAttachment, Texture
 
+# fed by depth_prepass.depth when the prepass setting is on: tested, never written
+PREPASS_DEPTH = DepthAttachment(None, read_only=True, desc="scene depth from a depth prepass")
+
 
 @register_pass("forward")
 class ForwardPass(RenderPass):
-    """The deferred pass's lighting model, evaluated per fragment while rasterising."""
+    """The deferred pass's lighting model, evaluated per fragment while rasterising.
+
+    With ``prepass = true`` the pass takes a ``depth`` input (``depth_prepass.depth``), tests
+    against it with ``less-equal`` and writes no depth (the ``depth`` output is gone): only
+    the visible fragment of each pixel is shaded. The prepass leaves alpha-masked materials
+    out, so they are drawn tested but unwritten: masked surfaces that overlap each other, or
+    opaque ones behind them, resolve in draw order.
+    """
 
     shader = "forward.wgsl"
     inputs = {
@@ -20,11 +30,23 @@ class ForwardPass(RenderPass):
     class Params(Settings):
         shadow_bias: float = 0.0015
         ambient: float = 1.0
+        prepass: bool = False  # test against a depth input instead of writing depth
+
+    def declare(self):
+        # a setting, not the wiring, decides the slots: declare() runs before inputs are wired
+        if not self.params.prepass:
+            return dict(self.inputs), dict(self.outputs)
+        outs = {k: v for k, v in self.outputs.items() if k != "depth"}
+        return {**self.inputs, "depth": PREPASS_DEPTH}, outs
 
     def record(self, ctx) -> None:
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}
         extra = {"t_shadow": ctx.sampled("shadow"), "s_shadow": ctx.scene.shadow_sampler} \
             if ctx.has("shadow") else {}
+        # less-equal with or without a prepass: where two surfaces tie in depth the last one
+        # drawn wins either way, so the prepass changes no pixel
+        depth = {"depth": ("depth", None), "depth_write": False} if self.params.prepass \
+            else {"depth": ("depth", 1.0)}
         # alpha 0 marks the background: tonemap paints the sky there, as after deferred
-        ctx.draw_scene(color=[("hdr", (0.0, 0.0, 0.0, 0.0))], depth=("depth", 1.0),
-                       defines=defines, u_params=self.params, **extra)
+        ctx.draw_scene(color=[("hdr", (0.0, 0.0, 0.0, 0.0))], defines=defines,
+                       depth_compare="less-equal", u_params=self.params, **depth, **extra)

@@ -5,6 +5,7 @@
 struct Params {
     shadow_bias: f32,
     ambient: f32,
+    prepass: u32,  // host-side switch, here so the struct matches Settings.pack()
 };
 
 @group(0) @binding(0) var<uniform> u_params: Params;
@@ -14,7 +15,9 @@ struct Params {
 #endif
 
 struct VertexOut {
-    @builtin(position) clip: vec4f,
+    // invariant: the same expression as depth_prepass.wgsl, evaluated identically, so
+    // less-equal against the prepass depth passes exactly where this surface is nearest
+    @builtin(position) @invariant clip: vec4f,
     @location(0) world: vec3f,
     @location(1) normal: vec3f,
     @location(2) uv: vec2f,

@@ -1,12 +1,22 @@
 """G-buffer: the scene's materials rasterised into screen-space attributes."""
 
-from rfw import RenderPass, register_pass
+from rfw import RenderPass, Settings, register_pass
 from rfw.graph import Attachment, DepthAttachment
+
+# fed by depth_prepass.depth when the prepass setting is on: tested, never written
+PREPASS_DEPTH = DepthAttachment(None, read_only=True, desc="scene depth from a depth prepass")
 
 
 @register_pass("gbuffer")
 class GBufferPass(RenderPass):
-    """Base color, world normal, occlusion/roughness/metallic, emissive and depth."""
+    """Base color, world normal, occlusion/roughness/metallic, emissive and depth.
+
+    With ``prepass = true`` the pass takes a ``depth`` input (``depth_prepass.depth``), tests
+    against it with ``less-equal`` and writes no depth: the ``depth`` output is gone, so
+    readers of scene depth wire ``depth_prepass.depth`` instead. The prepass leaves
+    alpha-masked materials out, so they are drawn tested but unwritten: masked surfaces that
+    overlap each other, or opaque ones behind them, resolve in draw order.
+    """
 
     shader = "gbuffer.wgsl"
     outputs = {
@@ -17,7 +27,21 @@ class GBufferPass(RenderPass):
         "depth": DepthAttachment("depth32float", desc="0 near, 1 far"),
     }
 
+    class Params(Settings):
+        prepass: bool = False  # test against a depth input instead of writing depth
+
+    def declare(self):
+        # a setting, not the wiring, decides the slots: declare() runs before inputs are wired
+        if not self.params.prepass:
+            return dict(self.inputs), dict(self.outputs)
+        outs = {k: v for k, v in self.outputs.items() if k != "depth"}
+        return {**self.inputs, "depth": PREPASS_DEPTH}, outs
+
     def record(self, ctx) -> None:
         clear = (0.0, 0.0, 0.0, 0.0)
-        ctx.draw_scene(color=[("albedo", clear), ("normal", clear), ("material", clear),
-                              ("emissive", clear)], depth=("depth", 1.0))
+        color = [("albedo", clear), ("normal", clear), ("material", clear), ("emissive", clear)]
+        # less-equal with or without a prepass: where two surfaces tie in depth the last one
+        # drawn wins either way, so the prepass changes no pixel
+        depth = {"depth": ("depth", None), "depth_write": False} if self.params.prepass \
+            else {"depth": ("depth", 1.0)}
+        ctx.draw_scene(color=color, depth_compare="less-equal", **depth)

@@ -1,7 +1,9 @@
 #include "mesh.wgsl"
 
 struct VertexOut {
-    @builtin(position) clip: vec4f,
+    // invariant: the same expression as depth_prepass.wgsl, evaluated identically, so
+    // less-equal against the prepass depth passes exactly where this surface is nearest
+    @builtin(position) @invariant clip: vec4f,
     @location(0) normal: vec3f,
     @location(1) uv: vec2f,
     @location(2) tangent: vec4f,
