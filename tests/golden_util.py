@@ -22,12 +22,18 @@ DIFF_BOOST = 16  # diff.png shows |actual - expected| times this
 
 
 def adapter_key(device: Any) -> str:
-    """``<device>-<driver>-<major.minor>`` in [a-z0-9.-], e.g. ``llvmpipe-mesa-25.0``.
+    """``<device>-<driver>-<major.minor>`` in [a-z0-9.-], e.g.
+    ``llvmpipe-llvm15-256bit-mesa-25.0``.
 
-    The device name loses its parenthesised details (LLVM version, SIMD width); the driver
-    keeps its name and major.minor version, where rendering changes are expected.
+    The device name keeps llvmpipe's LLVM major version and SIMD width (both change its
+    arithmetic) and drops other parenthesised details; the driver keeps its name and
+    major.minor version, where rendering changes are expected.
     """
+    # llvmpipe's code generation depends on its LLVM and SIMD width: keep both in the key
+    simd = re.search(r"LLVM (\d+)[^,)]*,\s*(\d+) bits", device.name)
     name = re.sub(r"\(.*?\)", "", device.name)
+    if simd:
+        name += f"-llvm{simd[1]}-{simd[2]}bit"
     driver = re.match(r"\s*([A-Za-z][\w ]*?)\s*v?(\d+)\.(\d+)", device.driver or "")
     parts = [name]
     if driver:
