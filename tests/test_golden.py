@@ -2,7 +2,7 @@
 
 Each render is compared with ``tests/golden/<adapter>/<config>__<scene>.png``, where
 ``<adapter>`` names the device and driver (``golden_util.adapter_key``, for example
-``llvmpipe-mesa-25.0``): at most 1 level apart per 8-bit channel, and no pixel over that.
+``llvmpipe-llvm15-256bit-mesa-25.0``): at most 1 level apart per 8-bit channel, and no pixel over that.
 Lavapipe renders these bit for bit the same from run to run, so the 1 level is headroom,
 not noise. On an adapter without goldens the configs still render and the comparison
 skips. A mismatch writes ``actual.png``, ``expected.png`` and ``diff.png`` (x16) under
@@ -80,7 +80,7 @@ def test_golden(name, scene, renders, device, tmp_path):
 
 
 def test_forward_and_deferred_agree_on_the_courtyard(renders):
-    # measured on lavapipe (llvmpipe-mesa-25.0), 192x108: max 2 levels, 99.9th percentile of
+    # measured on lavapipe (llvmpipe-llvm15-256bit-mesa-25.0), 192x108: max 2 levels, 99.9th percentile of
     # the per-pixel max 2, 99th 1; 8240 pixels (40%) differ by 1 and 128 (0.6%) by 2; mean
     # |difference| 0.18, mean signed -0.04. The g-buffer's quantisation explains it, not the
     # interpolation: stored as rgba16float the albedo leaves 5 pixels at 2 and 1115 at 1, and
