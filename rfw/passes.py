@@ -174,6 +174,21 @@ class Pass:
         raise NotImplementedError(f"{type(self).__name__}.record")
 
 
+class DepthPrepassMixin:
+    """For raster passes with a ``prepass`` setting: the ``depth`` output becomes a
+    read-only ``depth`` input fed by a depth prepass. A setting, not the wiring, decides:
+    ``declare()`` runs before inputs are wired."""
+
+    PREPASS_DEPTH = _slot("depth", None, {"read_only": True,
+                                          "desc": "scene depth from a depth prepass"})
+
+    def declare(self) -> tuple[dict[str, Slot], dict[str, Slot]]:
+        if not self.params.prepass:  # type: ignore[attr-defined]
+            return dict(self.inputs), dict(self.outputs)  # type: ignore[attr-defined]
+        outs = {k: v for k, v in self.outputs.items() if k != "depth"}  # type: ignore
+        return {**self.inputs, "depth": self.PREPASS_DEPTH}, outs  # type: ignore
+
+
 class ComputePass(Pass):
     type = "compute"
 

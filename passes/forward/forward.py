@@ -2,13 +2,13 @@
 
 from rfw import RenderPass, Settings, register_pass
 from rfw.graph import Attachment, DepthAttachment, Texture
+from rfw.passes import DepthPrepassMixin
 
 # fed by depth_prepass.depth when the prepass setting is on: tested, never written
-PREPASS_DEPTH = DepthAttachment(None, read_only=True, desc="scene depth from a depth prepass")
 
 
 @register_pass("forward")
-class ForwardPass(RenderPass):
+class ForwardPass(DepthPrepassMixin, RenderPass):
     """The deferred pass's lighting model, evaluated per fragment while rasterising.
 
     With ``prepass = true`` the pass takes a ``depth`` input (``depth_prepass.depth``), tests
@@ -31,13 +31,6 @@ class ForwardPass(RenderPass):
         shadow_bias: float = 0.0015
         ambient: float = 1.0
         prepass: bool = False  # test against a depth input instead of writing depth
-
-    def declare(self):
-        # a setting, not the wiring, decides the slots: declare() runs before inputs are wired
-        if not self.params.prepass:
-            return dict(self.inputs), dict(self.outputs)
-        outs = {k: v for k, v in self.outputs.items() if k != "depth"}
-        return {**self.inputs, "depth": PREPASS_DEPTH}, outs
 
     def record(self, ctx) -> None:
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}

@@ -2,13 +2,13 @@
 
 from rfw import RenderPass, Settings, register_pass
 from rfw.graph import Attachment, DepthAttachment
+from rfw.passes import DepthPrepassMixin
 
 # fed by depth_prepass.depth when the prepass setting is on: tested, never written
-PREPASS_DEPTH = DepthAttachment(None, read_only=True, desc="scene depth from a depth prepass")
 
 
 @register_pass("gbuffer")
-class GBufferPass(RenderPass):
+class GBufferPass(DepthPrepassMixin, RenderPass):
     """Base color, world normal, occlusion/roughness/metallic, emissive and depth.
 
     With ``prepass = true`` the pass takes a ``depth`` input (``depth_prepass.depth``), tests
@@ -29,13 +29,6 @@ class GBufferPass(RenderPass):
 
     class Params(Settings):
         prepass: bool = False  # test against a depth input instead of writing depth
-
-    def declare(self):
-        # a setting, not the wiring, decides the slots: declare() runs before inputs are wired
-        if not self.params.prepass:
-            return dict(self.inputs), dict(self.outputs)
-        outs = {k: v for k, v in self.outputs.items() if k != "depth"}
-        return {**self.inputs, "depth": PREPASS_DEPTH}, outs
 
     def record(self, ctx) -> None:
         clear = (0.0, 0.0, 0.0, 0.0)

@@ -1,5 +1,6 @@
 """Pass discovery: built-ins by folder, third-party passes through the entry-point group."""
 
+import shutil
 import subprocess
 import sys
 
@@ -31,10 +32,12 @@ def test_unknown_pass_suggests():
 
 def test_third_party_pass_installed_as_a_package(tmp_path, monkeypatch, device):
     # a real install of tests/data/plugin_demo into a private folder, then discovery
+    # build from a copy: an in-tree build would leave build/ in the repository
+    source = tmp_path / "plugin_demo"
+    shutil.copytree(ROOT / "tests" / "data" / "plugin_demo", source)
     target = tmp_path / "site"
     done = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
-                           "--no-build-isolation", "--target", str(target),
-                           str(ROOT / "tests" / "data" / "plugin_demo")],
+                           "--no-build-isolation", "--target", str(target), str(source)],
                           capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     monkeypatch.syspath_prepend(str(target))
