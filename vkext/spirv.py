@@ -1,0 +1,319 @@
+"""GLSL to SPIR-V with glslang, cached by content; descriptor layouts reflected from SPIR-V.
+
+Shaders are ``<pass>[_<part>].<stage>.glsl`` beside their pass; ``#include`` (through
+GL_GOOGLE_include_directive, added when missing) searches the pass folder, then
+``shaders/common``. The cache key hashes the source, every file it includes, the defines and
+the glslang version, so an edit anywhere recompiles and nothing stale is ever used.
+Layouts are never hand-written: ``reflect()`` reads them from the SPIR-V binary.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import shutil
+import struct
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rfw.graph.errors import GraphError
+
+COMMON = Path(__file__).resolve().parents[1] / "shaders" / "common"
+STAGES = {"comp": "comp", "vert": "vert", "frag": "frag", "task": "task", "mesh": "mesh",
+          "rgen": "rgen", "rchit": "rchit", "rahit": "rahit", "rmiss": "rmiss",
+          "rint": "rint", "rcall": "rcall"}
+
+
+class ShaderCompileError(GraphError):
+    """glslang refused a shader: the message names the file and line."""
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("RFW_CACHE_SPIRV") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "rfw", "spirv")
+    return Path(root)
+
+
+def stage_of(path: Path) -> str:
+    parts = path.name.split(".")
+    if len(parts) < 3 or parts[-1] != "glsl" or parts[-2] not in STAGES:
+        raise ShaderCompileError(f"{path}: shader files are named <name>.<stage>.glsl with stage "
+                                 f"one of {', '.join(STAGES)}")
+    return STAGES[parts[-2]]
+
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+
+
+def _sources(path: Path, search: list[Path], seen: dict[Path, bytes]) -> None:
+    """The shader and everything it includes (for the cache key)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise ShaderCompileError(f"{path}: cannot read shader: {e.strerror or e}") from None
+    seen[path] = data
+    for name in _INCLUDE.findall(data.decode("utf-8", "replace")):
+        target = next((d / name for d in [path.parent, *search] if (d / name).is_file()), None)
+        if target is not None and target not in seen:
+            _sources(target, search, seen)
+
+
+def _glslang() -> str:
+    exe = shutil.which("glslangValidator")
+    if exe is None:
+        raise ShaderCompileError("glslangValidator not found: run scripts/setup-system.sh "
+                                 "(Debian: glslang-tools)")
+    return exe
+
+
+def _glslang_version(exe: str) -> str:
+    out = subprocess.run([exe, "--version"], capture_output=True, text=True, check=False)
+    return out.stdout.splitlines()[0] if out.stdout else ""
+
+
+@dataclass(frozen=True)
+class Spirv:
+    path: Path
+    stage: str
+    code: bytes
+    key: str
+
+
+def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
+                 search: tuple[Path, ...] = (), target: str = "vulkan1.3") -> Spirv:
+    """Compile one GLSL file to SPIR-V, from the cache when nothing changed."""
+    path = Path(path).resolve()
+    stage = stage_of(path)
+    dirs = [*search, COMMON]
+    seen: dict[Path, bytes] = {}
+    _sources(path, dirs, seen)
+    exe = _glslang()
+    h = hashlib.sha256()
+    h.update(_glslang_version(exe).encode())
+    h.update(target.encode())
+    for k, v in sorted((defines or {}).items()):
+        h.update(f"-D{k}={v}\0".encode())
+    for p in sorted(seen):
+        h.update(str(p).encode() + b"\0" + seen[p] + b"\0")
+    key = h.hexdigest()
+    cached = cache_dir() / f"{key}.spv"
+    if cached.is_file():
+        return Spirv(path, stage, cached.read_bytes(), key)
+    with tempfile.TemporaryDirectory(prefix="rfw-glsl-") as tmp:
+        out = Path(tmp) / "out.spv"
+        source = _with_include_extension(path, Path(tmp))
+        cmd = [exe, "-V", "--target-env", target, "-S", stage, "-o", str(out),
+               *(f"-I{d}" for d in [path.parent, *dirs]),
+               *(f"-D{k}={v}" for k, v in sorted((defines or {}).items())), str(source)]
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if done.returncode != 0 or not out.is_file():
+            raise ShaderCompileError(_first_error(done.stdout + done.stderr, path, source))
+        code = out.read_bytes()
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    tmp_path = cached.with_suffix(f".{os.getpid()}.tmp")
+    tmp_path.write_bytes(code)
+    os.replace(tmp_path, cached)  # atomic: a parallel compile never sees half a file
+    return Spirv(path, stage, code, key)
+
+
+def _with_include_extension(path: Path, tmp: Path) -> Path:
+    # glslang needs GL_GOOGLE_include_directive for #include; add it after #version so
+    # shader files stay plain, and keep line numbers with #line
+    text = path.read_text(encoding="utf-8")
+    if "#include" not in text or "GL_GOOGLE_include_directive" in text:
+        return path
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().startswith("#version"):
+            lines[i + 1:i + 1] = ["#extension GL_GOOGLE_include_directive : require",
+                                  f'#line {i + 2} "{path}"']
+            break
+    out = tmp / path.name
+    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return out
+
+
+def _first_error(text: str, path: Path, source: Path) -> str:
+    errors = [line.strip() for line in text.splitlines() if line.startswith("ERROR:")
+              and "compilation terminated" not in line and "compilation errors" not in line]
+    first = errors[0] if errors else (text.strip().splitlines() or ["glslang failed"])[-1]
+    first = first.removeprefix("ERROR:").strip().replace(str(source), str(path))
+    # glslang writes "file:line: 'x' : message"; lead with the file as rfw errors do
+    m = re.match(r"(.+?):(\d+):\s*(.*)", first)
+    if m and not m.group(1).startswith("/") and not Path(m.group(1)).exists():
+        first = f"{path}:{m.group(2)}: {m.group(3)}"
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return " ".join(first.split()) + more
+
+
+# ---------------------------------------------------------------------------------------------
+# reflection
+
+
+@dataclass(frozen=True)
+class DescriptorInfo:
+    name: str
+    set: int
+    binding: int
+    kind: str  # uniform_buffer | storage_buffer | sampled_image | storage_image |
+    #            combined_image_sampler | sampler | acceleration_structure
+    count: int = 1
+    writable: bool = True
+
+
+@dataclass
+class Reflection:
+    stage: str
+    entry: str = "main"
+    descriptors: dict[str, DescriptorInfo] = field(default_factory=dict)
+    push_constant_size: int = 0
+    local_size: tuple[int, int, int] = (1, 1, 1)
+
+    def sets(self) -> dict[int, list[DescriptorInfo]]:
+        out: dict[int, list[DescriptorInfo]] = {}
+        for d in sorted(self.descriptors.values(), key=lambda d: (d.set, d.binding)):
+            out.setdefault(d.set, []).append(d)
+        return out
+
+
+# SPIR-V opcodes and enums the reflection needs (SPIR-V 1.6 specification)
+_OP_NAME, _OP_MEMBER_NAME, _OP_ENTRY_POINT, _OP_EXECUTION_MODE = 5, 6, 15, 16
+_OP_TYPE_INT, _OP_TYPE_FLOAT, _OP_TYPE_VECTOR, _OP_TYPE_MATRIX = 21, 22, 23, 24
+_OP_TYPE_IMAGE, _OP_TYPE_SAMPLER, _OP_TYPE_SAMPLED_IMAGE = 25, 26, 27
+_OP_TYPE_ARRAY, _OP_TYPE_RUNTIME_ARRAY, _OP_TYPE_STRUCT, _OP_TYPE_POINTER = 28, 29, 30, 32
+_OP_CONSTANT, _OP_VARIABLE, _OP_DECORATE, _OP_MEMBER_DECORATE = 43, 59, 71, 72
+_OP_TYPE_ACCEL = 5341
+_DEC_BLOCK, _DEC_BUFFER_BLOCK, _DEC_OFFSET, _DEC_BINDING, _DEC_SET = 2, 3, 35, 33, 34
+_DEC_NON_WRITABLE = 24
+_SC_UNIFORM_CONSTANT, _SC_UNIFORM, _SC_PUSH_CONSTANT, _SC_STORAGE_BUFFER = 0, 2, 9, 12
+_MODE_LOCAL_SIZE, _MODE_LOCAL_SIZE_ID, _OP_EXECUTION_MODE_ID = 17, 38, 331
+_MODELS = {0: "vert", 4: "frag", 5: "comp", 5267: "task", 5268: "mesh", 5364: "task",
+           5365: "mesh", 5313: "rgen", 5314: "rint", 5315: "rahit", 5316: "rchit",
+           5317: "rmiss", 5318: "rcall"}
+
+
+def _string(words: list[int]) -> str:
+    raw = b"".join(struct.pack("<I", w) for w in words)
+    return raw.split(b"\0", 1)[0].decode("utf-8", "replace")
+
+
+def reflect(code: bytes) -> Reflection:
+    """Descriptor sets and bindings, push-constant size and workgroup size from SPIR-V."""
+    if len(code) < 20 or struct.unpack_from("<I", code)[0] != 0x07230203:
+        raise ShaderCompileError("not a SPIR-V module (bad magic number)")
+    words = list(struct.unpack(f"<{len(code) // 4}I", code))
+    names: dict[int, str] = {}
+    decorations: dict[int, dict[int, int]] = {}
+    member_offsets: dict[int, dict[int, int]] = {}
+    types: dict[int, tuple] = {}
+    constants: dict[int, int] = {}
+    variables: list[tuple[int, int, int]] = []  # (type pointer id, result id, storage class)
+    refl = Reflection("?")
+    size_ids: tuple[int, int, int] | None = None
+    i = 5
+    while i < len(words):
+        count, op = words[i] >> 16, words[i] & 0xFFFF
+        if count == 0:
+            raise ShaderCompileError("malformed SPIR-V: zero-length instruction")
+        args = words[i + 1:i + count]
+        if op == _OP_NAME:
+            names[args[0]] = _string(args[1:])
+        elif op == _OP_ENTRY_POINT:
+            refl.stage = _MODELS.get(args[0], str(args[0]))
+            refl.entry = _string(args[2:])
+        elif op == _OP_EXECUTION_MODE and args[1] == _MODE_LOCAL_SIZE:
+            refl.local_size = (args[2], args[3], args[4])
+        elif op == _OP_EXECUTION_MODE_ID and args[1] == _MODE_LOCAL_SIZE_ID:
+            size_ids = (args[2], args[3], args[4])  # constants: resolved after the walk
+        elif op == _OP_DECORATE:
+            decorations.setdefault(args[0], {})[args[1]] = args[2] if len(args) > 2 else 1
+        elif op == _OP_MEMBER_DECORATE and args[2] == _DEC_OFFSET:
+            member_offsets.setdefault(args[0], {})[args[1]] = args[3]
+        elif op in (_OP_TYPE_INT, _OP_TYPE_FLOAT):
+            types[args[0]] = ("scalar", args[1] // 8)
+        elif op == _OP_TYPE_VECTOR:
+            types[args[0]] = ("vector", args[1], args[2])
+        elif op == _OP_TYPE_MATRIX:
+            types[args[0]] = ("matrix", args[1], args[2])
+        elif op == _OP_TYPE_IMAGE:
+            types[args[0]] = ("image", args[2], args[6])  # dim, sampled (1 yes, 2 storage)
+        elif op == _OP_TYPE_SAMPLER:
+            types[args[0]] = ("sampler",)
+        elif op == _OP_TYPE_SAMPLED_IMAGE:
+            types[args[0]] = ("sampled_image", args[1])
+        elif op == _OP_TYPE_ARRAY:
+            types[args[0]] = ("array", args[1], args[2])
+        elif op == _OP_TYPE_RUNTIME_ARRAY:
+            types[args[0]] = ("runtime_array", args[1])
+        elif op == _OP_TYPE_STRUCT:
+            types[args[0]] = ("struct", tuple(args[1:]))
+        elif op == _OP_TYPE_POINTER:
+            types[args[0]] = ("pointer", args[1], args[2])
+        elif op == _OP_TYPE_ACCEL:
+            types[args[0]] = ("accel",)
+        elif op == _OP_CONSTANT and len(args) >= 3:
+            constants[args[1]] = args[2]
+        elif op == _OP_VARIABLE:
+            variables.append((args[0], args[1], args[2]))
+        i += count
+    if size_ids is not None:
+        refl.local_size = tuple(constants.get(k, 1) for k in size_ids)  # type: ignore[assignment]
+
+    def size_of(t: int) -> int:
+        kind = types.get(t, ("?",))
+        if kind[0] == "scalar":
+            return kind[1]
+        if kind[0] == "vector":
+            return size_of(kind[1]) * kind[2]
+        if kind[0] == "matrix":
+            return size_of(kind[1]) * kind[2]
+        if kind[0] == "array":
+            stride = decorations.get(t, {}).get(6, size_of(kind[1]))  # ArrayStride
+            return stride * constants.get(kind[2], 1)
+        if kind[0] == "struct":
+            offs = member_offsets.get(t, {})
+            return max((offs.get(k, 0) + size_of(m) for k, m in enumerate(kind[1])), default=0)
+        return 0
+
+    for ptr, var, storage in variables:
+        pointee = types.get(ptr, ("?", 0, 0))[2] if types.get(ptr, ("?",))[0] == "pointer" \
+            else None
+        if pointee is None:
+            continue
+        if storage == _SC_PUSH_CONSTANT:
+            refl.push_constant_size = max(refl.push_constant_size, size_of(pointee))
+            continue
+        dec = decorations.get(var, {})
+        if _DEC_BINDING not in dec or storage not in (_SC_UNIFORM_CONSTANT, _SC_UNIFORM,
+                                                      _SC_STORAGE_BUFFER):
+            continue
+        t, count = pointee, 1
+        while types.get(t, ("?",))[0] in ("array", "runtime_array"):
+            kind = types[t]
+            count *= constants.get(kind[2], 1) if kind[0] == "array" else 0
+            t = kind[1]
+        kind = types.get(t, ("?",))
+        tdec = decorations.get(t, {})
+        if storage == _SC_STORAGE_BUFFER or (storage == _SC_UNIFORM and _DEC_BUFFER_BLOCK in
+                                             tdec):
+            what = "storage_buffer"
+        elif storage == _SC_UNIFORM:
+            what = "uniform_buffer"
+        elif kind[0] == "sampled_image":
+            what = "combined_image_sampler"
+        elif kind[0] == "image":
+            what = "storage_image" if kind[2] == 2 else "sampled_image"
+        elif kind[0] == "sampler":
+            what = "sampler"
+        elif kind[0] == "accel":
+            what = "acceleration_structure"
+        else:
+            continue
+        name = names.get(var) or names.get(t) or f"set{dec.get(_DEC_SET, 0)}_b{dec[_DEC_BINDING]}"
+        writable = _DEC_NON_WRITABLE not in dec
+        refl.descriptors[name] = DescriptorInfo(name, dec.get(_DEC_SET, 0), dec[_DEC_BINDING],
+                                                what, count, writable)
+    return refl
