@@ -57,7 +57,8 @@ def _compile_file(args: argparse.Namespace) -> CompiledGraph:
     caps = None if getattr(args, "caps", None) is None else \
         [c for c in args.caps.split(",") if c]
     return compile(graph, args.size, caps, cull_passes=not getattr(args, "no_cull", False),
-                   memory=MemoryOptions(alias=not getattr(args, "no_alias", False)))
+                   memory=MemoryOptions(alias=not getattr(args, "no_alias", False)),
+                   backend=getattr(args, "backend", None))
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -159,6 +160,8 @@ def _graph_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-cull", action="store_true", help="keep passes nothing depends on")
     p.add_argument("--no-alias", action="store_true", help="give every transient its own bytes")
     p.add_argument("--caps", help="comma-separated device capabilities to check passes against")
+    p.add_argument("--backend", choices=["wgpu", "vk"],
+                   help="the backend of unpinned passes; bridges join pinned passes on others")
 
 
 def parser() -> argparse.ArgumentParser:

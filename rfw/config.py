@@ -33,7 +33,7 @@ from .passes import Pass
 from .registry import get_pass
 
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames")
-_PASS_KEYS = ("name", "use", "enabled", "inputs", "settings")
+_PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
 
 
@@ -44,6 +44,7 @@ class PassEntry:
     enabled: bool = True
     inputs: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
+    backend: str | None = None  # pin this pass to "wgpu" or "vk"
 
 
 @dataclass
@@ -100,8 +101,12 @@ def load_config(path: str | Path) -> Config:
                 raise _fail(source, f"{where}: '{key}' must be a table")
         if not isinstance(t.get("enabled", True), bool):
             raise _fail(source, f"{where}: 'enabled' must be true or false")
+        if t.get("backend") not in (None, "wgpu", "vk"):
+            raise _fail(source, f"{where}: unknown backend {t['backend']!r}"
+                        + did_you_mean(str(t["backend"]), ("wgpu", "vk")))
         passes.append(PassEntry(t["name"], t.get("use", t["name"]), t.get("enabled", True),
-                                dict(t.get("inputs", {})), dict(t.get("settings", {}))))
+                                dict(t.get("inputs", {})), dict(t.get("settings", {})),
+                                t.get("backend")))
     if not passes:
         raise _fail(source, "the config has no [[pass]] tables")
     camera = data.get("camera")
@@ -241,7 +246,8 @@ def build(cfg: Config) -> Built:
                                         f"'{key}'" + did_you_mean(key, ins))
         b = g.add_pass(entry.name, cls.type, enabled=entry.enabled,
                        side_effect=cls.side_effect, requires=cls.requires,
-                       settings=inst.params.as_dict(), schema=tuple(inst.params.fields()))
+                       settings=inst.params.as_dict(), schema=tuple(inst.params.fields()),
+                       backend=entry.backend or cls.backend)
         mapping: dict[str, str] = {}
         for slot, spec in ins.items():
             source = entry.inputs.get(slot)

@@ -146,6 +146,7 @@ class Pass:
     outputs: ClassVar[dict[str, Slot]] = {}
     requires: ClassVar[tuple[str, ...]] = ()
     side_effect: ClassVar[bool] = False
+    backend: ClassVar[str | None] = None  # "vk" for passes that need raw Vulkan (vkext)
 
     class Params(Settings):
         pass

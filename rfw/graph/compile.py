@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from .bridges import insert_bridges
 from .errors import GraphError, did_you_mean
 from .formats import UnknownFormatError, canonical, format_info, image_bytes
 from .graph import Graph, PassDecl
@@ -388,6 +389,8 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
 def _usages(p: PassDecl, b: Binding, r: ResourceDecl) -> frozenset[str]:
     """What the slot type means for this pass type and format."""
     spec = b.spec
+    if p.type == "transfer" and spec.usage & {"transfer_src", "transfer_dst"}:
+        return spec.usage & {"transfer_src", "transfer_dst"}  # copies only copy
     if r.kind == "buffer":
         return spec.usage or frozenset({"storage"})
     fmt = format_info(r.format) if r.format else None
@@ -1014,7 +1017,8 @@ def _remember(cache: OrderedDict, key: tuple, value: Any) -> Any:
 
 def compile(graph: Graph, size: tuple[int, int] | None = None,
             caps: Iterable[str] | None = None, *, strict: bool | None = None,
-            cull_passes: bool = True, memory: MemoryOptions = MemoryOptions()) -> CompiledGraph:
+            cull_passes: bool = True, memory: MemoryOptions = MemoryOptions(),
+            backend: str | None = None) -> CompiledGraph:
     """Compile a declared graph for an output size and a device's capabilities.
 
     Pure and deterministic. Results are memoised: compiling an unchanged graph again is a
@@ -1028,7 +1032,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
         raise GraphError(f"output size {size[0]}x{size[1]} is not positive", file=graph.source)
     caps = None if caps is None else frozenset(caps)
     strict = graph.strict if strict is None else strict
-    key = (graph, tuple(size), caps, strict, cull_passes, memory)
+    key = (graph, tuple(size), caps, strict, cull_passes, memory, backend)
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
@@ -1037,6 +1041,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     paused = gc.isenabled()
     gc.disable()
     try:
+        graph = insert_bridges(graph, backend)
         result = _compile(graph, (int(size[0]), int(size[1])), caps, strict, cull_passes,
                           memory)
     except GraphError as e:

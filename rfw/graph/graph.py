@@ -33,6 +33,7 @@ class PassDecl:
     outputs: tuple[Binding, ...] = ()
     enabled: bool = True
     side_effect: bool = False  # never culled (readbacks, UI)
+    backend: str | None = None  # "wgpu" or "vk" to pin the pass; None runs on the run's backend
     requires: tuple[str, ...] = ()  # device capabilities, e.g. "VK_EXT_mesh_shader"
     settings: tuple[tuple[str, Any], ...] = ()
     schema: tuple[str, ...] | None = None  # known setting names, when the pass class says
@@ -41,7 +42,7 @@ class PassDecl:
     @cached_property
     def _hash(self) -> int:
         return hash((self.name, self.type, self.inputs, self.outputs, self.enabled,
-                     self.side_effect, self.requires, self.settings, self.schema))
+                     self.side_effect, self.requires, self.settings, self.schema, self.backend))
 
     def __hash__(self) -> int:
         return self._hash
@@ -156,7 +157,8 @@ class GraphBuilder:
     def add_pass(self, name: str, type: str = "graphics", *, enabled: bool = True,
                  side_effect: bool = False, requires: Iterable[str] = (),
                  settings: Mapping[str, Any] | None = None,
-                 schema: Iterable[str] | None = None, origin: str | None = None) -> PassBuilder:
+                 schema: Iterable[str] | None = None, origin: str | None = None,
+                 backend: str | None = None) -> PassBuilder:
         if type not in PASS_TYPES:
             raise GraphError(f"pass '{name}': unknown pass type '{type}'", file=self.source,
                              suggest=(type, PASS_TYPES))
@@ -164,7 +166,7 @@ class GraphBuilder:
             raise GraphError(f"pass '{name}' is declared twice", file=self.source)
         p = PassBuilder(self, name, type, enabled=enabled, side_effect=side_effect,
                         requires=tuple(requires), settings=settings or {}, schema=schema,
-                        origin=origin)
+                        origin=origin, backend=backend)
         self._passes.append(p)
         return p
 

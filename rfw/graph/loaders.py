@@ -96,7 +96,7 @@ class _Checker:
 
 _GRAPH_KEYS = ("name", "size", "strict", "outputs", "pass", "external")
 _PASS_KEYS = ("name", "type", "enabled", "side_effect", "requires", "settings", "inputs",
-              "outputs")
+              "outputs", "backend")
 _OUT_KEYS = ("type", "format", "size", "scale", "size_of", "mips", "layers", "samples", "bytes",
              "usage", "load", "clear", "external", "read_only", "stages", "desc", "name",
              "target")
@@ -166,11 +166,23 @@ def _toml_pass(g: GraphBuilder, table: Any, i: int, text: str, check: _Checker) 
                                           f"{where}: 'side_effect'"),
                    requires=check.strings(table.get("requires", []), f"{where}: 'requires'"),
                    settings=check.type(table.get("settings", {}), dict, f"{where}: 'settings'"),
-                   origin=origin)
+                   origin=origin, backend=_backend(table.get("backend"), where, check))
     for slot, spec in check.type(table.get("inputs", {}), dict, f"{where}: 'inputs'").items():
         _toml_input(p, slot, spec, f"{where}, input '{slot}'", check)
     for slot, spec in check.type(table.get("outputs", {}), dict, f"{where}: 'outputs'").items():
         _toml_output(p, slot, spec, f"{where}, output '{slot}'", check)
+
+
+BACKENDS = ("wgpu", "vk")
+
+
+def _backend(value: Any, where: str, check: _Checker) -> str | None:
+    if value is None:
+        return None
+    if value not in BACKENDS:
+        check.fail(f"{where}: unknown backend {json.dumps(value)}"
+                   + did_you_mean(str(value), BACKENDS))
+    return value
 
 
 def _toml_input(p: PassBuilder, slot: str, spec: Any, where: str, check: _Checker) -> None:
@@ -287,6 +299,8 @@ def to_toml(graph: Graph) -> str:
             table["side_effect"] = True
         if p.requires:
             table["requires"] = list(p.requires)
+        if p.backend:
+            table["backend"] = p.backend
         if p.settings:
             table["settings"] = _thaw(p.settings)
         ins = {b.slot: {"from": b.resource, **_slot_table(b.spec, out=False)} for b in p.inputs}
