@@ -1,0 +1,72 @@
+// scene geometry: vertex layout, material (set 2) and instance (set 3) (twin of mesh.wgsl)
+//
+// a vertex shader defines MESH_VERTEX_INPUT before including this file to declare the
+// vertex attributes (WGSL's VertexIn): one buffer per attribute, see gpu_scene.VERTEX_BUFFERS
+#ifndef RFW_MESH_GLSL
+#define RFW_MESH_GLSL
+
+#include "scene.glsl"
+
+#ifdef MESH_VERTEX_INPUT
+layout(location = 0) in vec3 v_position;   // float32x3, stride 12
+layout(location = 1) in vec3 v_normal;     // float32x3, stride 12
+layout(location = 2) in vec2 v_uv;         // float32x2, stride 8
+layout(location = 3) in vec4 v_tangent;    // float32x4, stride 16
+#endif
+
+layout(set = 2, binding = 0, std140) uniform MaterialBlock {
+    layout(offset = 0) vec4 base_color;
+    layout(offset = 16) vec4 emissive;     // w: normal scale
+    layout(offset = 32) vec4 params;       // metallic, roughness, occlusion strength, cutoff
+    layout(offset = 48) uvec4 flags;       // x: alpha mode (0 opaque, 1 mask, 2 blend)
+} material;                                // 64 bytes
+layout(set = 2, binding = 1) uniform texture2D base_color_tex;
+layout(set = 2, binding = 2) uniform texture2D metal_rough_tex;
+layout(set = 2, binding = 3) uniform texture2D normal_tex;
+layout(set = 2, binding = 4) uniform texture2D occlusion_tex;
+layout(set = 2, binding = 5) uniform texture2D emissive_tex;
+layout(set = 2, binding = 6) uniform sampler material_sampler;
+
+layout(set = 3, binding = 0, std140) uniform InstanceBlock {
+    layout(offset = 0) mat4 model;
+    layout(offset = 64) mat4 normal;       // inverse transpose of the model matrix
+} instance;                                // 128 bytes
+
+struct Surface {
+    vec4 base_color;
+    vec3 normal;
+    float metallic;
+    float roughness;
+    float occlusion;
+    vec3 emissive;
+};
+
+#ifndef MESH_VERTEX_INPUT
+// the material at a point, with the normal map applied in world space; implicit-lod
+// sampling, so fragment stage only (WGSL leaves it out of vertex entry points by reachability)
+Surface surface(vec2 uv, vec3 n_in, vec4 t_in) {
+    Surface s;
+    s.base_color = material.base_color * texture(sampler2D(base_color_tex, material_sampler), uv);
+    vec4 mr = texture(sampler2D(metal_rough_tex, material_sampler), uv);
+    s.metallic = clamp(material.params.x * mr.b, 0.0, 1.0);
+    s.roughness = clamp(material.params.y * mr.g, 0.045, 1.0);
+    float ao = texture(sampler2D(occlusion_tex, material_sampler), uv).r;
+    s.occlusion = mix(1.0, ao, material.params.z);
+    s.emissive = material.emissive.rgb *
+        texture(sampler2D(emissive_tex, material_sampler), uv).rgb;
+    vec3 n = normalize(n_in);
+    vec3 t = t_in.xyz - n * dot(n, t_in.xyz);
+    if (dot(t, t) < 1e-12) {
+        s.normal = n;
+        return s;
+    }
+    t = normalize(t);
+    vec3 b = cross(n, t) * t_in.w;
+    vec3 m = texture(sampler2D(normal_tex, material_sampler), uv).xyz * 2.0 - 1.0;
+    m = vec3(m.xy * material.emissive.w, m.z);
+    s.normal = normalize(m.x * t + m.y * b + m.z * n);
+    return s;
+}
+#endif
+
+#endif
