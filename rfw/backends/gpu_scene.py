@@ -5,51 +5,20 @@ Layouts follow ``shaders/common/scene.wgsl`` (group 1) and ``mesh.wgsl`` (groups
 
 from __future__ import annotations
 
-import struct
 from typing import Any
 
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Light, Scene
-
-MAX_LIGHTS = 16
-DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
-                    name="rfw default sun")
-_ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
-_FILTER = {"linear": "linear", "nearest": "nearest"}
-
-
-def _mips(pixels: np.ndarray) -> list[np.ndarray]:
-    # a box-filtered chain on the CPU: textures are small and loaded once
-    levels = [pixels]
-    while max(levels[-1].shape[:2]) > 1:
-        p = levels[-1].astype(np.float32)
-        h, w = p.shape[:2]
-        p = p[: h - h % 2 or 1, : w - w % 2 or 1]
-        if p.shape[0] >= 2:
-            p = (p[0::2] + p[1::2]) / 2
-        if p.shape[1] >= 2:
-            p = (p[:, 0::2] + p[:, 1::2]) / 2
-        levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
-    return levels
-
-
-def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
-    """An orthographic light camera that encloses the scene's bounds along ``direction``."""
-    lo, hi = scene.bounds() if scene.instances else (np.zeros(3), np.ones(3))
-    center = (lo + hi) / 2
-    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-    d = direction / np.linalg.norm(direction)
-    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
-    cam = Camera(tuple(center - d * radius * 2), tuple(center), tuple(up))
-    view = cam.view().astype(np.float64)
-    n, f = radius * 0.5, radius * 3.5
-    proj = np.identity(4)
-    proj[0, 0] = proj[1, 1] = 1.0 / radius
-    proj[2, 2] = 1.0 / (n - f)
-    proj[2, 3] = n / (n - f)
-    return (proj @ view).astype(np.float32)
+from ..scene.model import Camera, Scene
+from .scene_data import (
+    instance_bytes,
+    lights_bytes,
+    main_camera_bytes,
+    material_bytes,
+    mip_chain,
+    sun_camera_bytes,
+)
 
 
 class GpuScene:
@@ -61,8 +30,8 @@ class GpuScene:
         self._textures: list[Any] = []
         self._upload_meshes()
         self._upload_textures()
-        self.material_data = [self._material_bytes(m) for m in scene.materials]
-        self.instance_data = [self._instance_bytes(i.transform) for i in scene.instances]
+        self.material_data = [material_bytes(m) for m in scene.materials]
+        self.instance_data = [instance_bytes(i.transform) for i in scene.instances]
         self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
         self.sun_camera_buffer = self._uniform(b"\0" * 352, "scene.sun_camera")
         self.lights_buffer = self._uniform(self._lights_bytes(), "scene.lights")
@@ -105,7 +74,7 @@ class GpuScene:
                 len(m.indices)))
 
     def _texture(self, pixels: np.ndarray, srgb: bool, label: str) -> Any:
-        levels = _mips(pixels)
+        levels = mip_chain(pixels)
         tex = self.device.create_texture(
             size=(pixels.shape[1], pixels.shape[0], 1), mip_level_count=len(levels),
             format="rgba8unorm-srgb" if srgb else "rgba8unorm",
@@ -121,8 +90,8 @@ class GpuScene:
     def _upload_textures(self) -> None:
         self.textures = [self._texture(t.pixels, t.srgb, t.name) for t in self.scene.textures]
         self.samplers = [self.device.create_sampler(
-            mag_filter=_FILTER[t.mag_filter], min_filter=_FILTER[t.min_filter],
-            mipmap_filter=_FILTER[t.mipmap_filter], address_mode_u=t.address_u,
+            mag_filter=t.mag_filter, min_filter=t.min_filter,
+            mipmap_filter=t.mipmap_filter, address_mode_u=t.address_u,
             address_mode_v=t.address_v, max_anisotropy=1) for t in self.scene.textures]
         self.default_sampler = self.device.create_sampler(
             mag_filter="linear", min_filter="linear", mipmap_filter="linear",
@@ -133,61 +102,17 @@ class GpuScene:
         self.white_srgb = self._texture(one, True, "white_srgb")
         self.flat_normal = self._texture(flat, False, "flat_normal")
 
-    @staticmethod
-    def _material_bytes(m: Any) -> bytes:
-        return struct.pack("<4f4f4f4I", *m.base_color, *m.emissive, m.normal_scale,
-                           m.metallic, m.roughness, m.occlusion_strength, m.alpha_cutoff,
-                           _ALPHA.get(m.alpha_mode, 0), int(m.double_sided), 0, 0)
-
-    @staticmethod
-    def _instance_bytes(model: np.ndarray) -> bytes:
-        model = np.asarray(model, np.float64)
-        normal = np.linalg.inv(model).T
-        # WGSL matrices are column-major
-        return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
-
     def _lights_bytes(self) -> bytes:
-        # a scene without lights (most fetched models) gets a sun, so it is not black
-        self.default_light = not self.scene.lights
-        lights = self.scene.lights[:MAX_LIGHTS] or [DEFAULT_SUN]
-        sun = next((i for i, li in enumerate(lights) if li.kind == "directional"), MAX_LIGHTS)
-        direction = np.array(lights[sun].direction if sun < MAX_LIGHTS else (-0.3, -1, -0.2))
-        self.sun_matrix = sun_view_proj(self.scene, direction)
-        out = struct.pack("<4I", len(lights), sun, 0, 0)
-        out += self.sun_matrix.T.tobytes()
-        out += struct.pack("<4f", 0.03, 0.035, 0.045, 0.0)
-        kinds = {"directional": 0, "point": 1, "spot": 2}
-        for li in lights:
-            out += struct.pack("<4f", *li.position, kinds[li.kind])
-            out += struct.pack("<4f", *li.direction, li.range or 0.0)
-            out += struct.pack("<4f", *li.color, li.intensity)
-            out += struct.pack("<4f", np.cos(li.inner_cone), np.cos(li.outer_cone), 0, 0)
-        return out + b"\0" * (64 * (MAX_LIGHTS - len(lights)))
+        data, self.sun_matrix, self.default_light = lights_bytes(self.scene)
+        return data
 
     # per frame ----------------------------------------------------------------------------
     def set_viewport(self, size: tuple[int, int]) -> None:
         self.size = size
-        w, h = size
-        view = self.camera.view()
-        proj = self.camera.projection(w / h)
-        self.device.queue.write_buffer(self.camera_buffer, 0,
-                                       self._camera_bytes(view, proj, self.camera.position,
-                                                          size))
-        # the sun camera: projection only matters, view_proj carries it
-        sun = self.sun_matrix
-        self.device.queue.write_buffer(self.sun_camera_buffer, 0,
-                                       self._camera_bytes(np.identity(4, np.float32), sun,
-                                                          (0, 0, 0), size))
-
-    def _camera_bytes(self, view: np.ndarray, proj: np.ndarray, pos: tuple, size: tuple) -> bytes:
-        vp = (proj.astype(np.float64) @ view.astype(np.float64))
-        inv = np.linalg.inv(vp)
-        mats = [view, proj, vp, inv]
-        out = b"".join(np.asarray(m, np.float32).T.tobytes() for m in mats)
-        out += struct.pack("<4f", *pos, 1.0)
-        out += struct.pack("<4f", size[0], size[1], 1 / size[0], 1 / size[1])
-        out += struct.pack("<4f", self.camera.znear, self.camera.zfar, 0, 0)
-        return out
+        q = self.device.queue
+        q.write_buffer(self.camera_buffer, 0, main_camera_bytes(self.camera, size))
+        q.write_buffer(self.sun_camera_buffer, 0,
+                       sun_camera_bytes(self.camera, self.sun_matrix, size))
 
     def bindings(self) -> dict[str, Any]:
         return {"camera": {"buffer": self.camera_buffer},

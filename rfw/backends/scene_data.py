@@ -1,0 +1,105 @@
+"""The scene's GPU-visible bytes, shared by the wgpu and Vulkan backends.
+
+Layouts follow ``shaders/common/scene.wgsl`` (group 1) and ``mesh.wgsl`` (groups 2 and 3);
+the GLSL twins declare the same offsets.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from ..scene.model import Camera, Light, Material, Scene
+
+MAX_LIGHTS = 16
+DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
+                    name="rfw default sun")
+_ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
+
+
+def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
+    # a box-filtered chain on the CPU: textures are small and loaded once
+    levels = [pixels]
+    while max(levels[-1].shape[:2]) > 1:
+        p = levels[-1].astype(np.float32)
+        h, w = p.shape[:2]
+        p = p[: h - h % 2 or 1, : w - w % 2 or 1]
+        if p.shape[0] >= 2:
+            p = (p[0::2] + p[1::2]) / 2
+        if p.shape[1] >= 2:
+            p = (p[:, 0::2] + p[:, 1::2]) / 2
+        levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
+    return levels
+
+
+def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
+    """An orthographic light camera that encloses the scene's bounds along ``direction``."""
+    lo, hi = scene.bounds() if scene.instances else (np.zeros(3), np.ones(3))
+    center = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    d = direction / np.linalg.norm(direction)
+    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    cam = Camera(tuple(center - d * radius * 2), tuple(center), tuple(up))
+    view = cam.view().astype(np.float64)
+    n, f = radius * 0.5, radius * 3.5
+    proj = np.identity(4)
+    proj[0, 0] = proj[1, 1] = 1.0 / radius
+    proj[2, 2] = 1.0 / (n - f)
+    proj[2, 3] = n / (n - f)
+    return (proj @ view).astype(np.float32)
+
+
+
+
+def material_bytes(m: Material) -> bytes:
+    return struct.pack("<4f4f4f4I", *m.base_color, *m.emissive, m.normal_scale,
+                       m.metallic, m.roughness, m.occlusion_strength, m.alpha_cutoff,
+                       _ALPHA.get(m.alpha_mode, 0), int(m.double_sided), 0, 0)
+
+
+def instance_bytes(model: np.ndarray) -> bytes:
+    model = np.asarray(model, np.float64)
+    normal = np.linalg.inv(model).T
+    # WGSL and GLSL matrices are column-major
+    return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
+
+
+def lights_bytes(scene: Scene) -> tuple[bytes, np.ndarray, bool]:
+    """The lights uniform, the sun's view-projection and whether the default sun was used
+    (a scene without lights, like most fetched models, gets one so it is not black)."""
+    lights = scene.lights[:MAX_LIGHTS] or [DEFAULT_SUN]
+    sun = next((i for i, li in enumerate(lights) if li.kind == "directional"), MAX_LIGHTS)
+    direction = np.array(lights[sun].direction if sun < MAX_LIGHTS else (-0.3, -1, -0.2))
+    matrix = sun_view_proj(scene, direction)
+    out = struct.pack("<4I", len(lights), sun, 0, 0)
+    out += matrix.T.tobytes()
+    out += struct.pack("<4f", 0.03, 0.035, 0.045, 0.0)
+    kinds = {"directional": 0, "point": 1, "spot": 2}
+    for li in lights:
+        out += struct.pack("<4f", *li.position, kinds[li.kind])
+        out += struct.pack("<4f", *li.direction, li.range or 0.0)
+        out += struct.pack("<4f", *li.color, li.intensity)
+        out += struct.pack("<4f", np.cos(li.inner_cone), np.cos(li.outer_cone), 0, 0)
+    return out + b"\0" * (64 * (MAX_LIGHTS - len(lights))), matrix, not scene.lights
+
+
+def camera_bytes(camera: Camera, view: np.ndarray, proj: np.ndarray, pos: tuple,
+                 size: tuple[int, int]) -> bytes:
+    vp = proj.astype(np.float64) @ view.astype(np.float64)
+    inv = np.linalg.inv(vp)
+    out = b"".join(np.asarray(m, np.float32).T.tobytes() for m in (view, proj, vp, inv))
+    out += struct.pack("<4f", *pos, 1.0)
+    out += struct.pack("<4f", size[0], size[1], 1 / size[0], 1 / size[1])
+    out += struct.pack("<4f", camera.znear, camera.zfar, 0, 0)
+    return out
+
+
+def main_camera_bytes(camera: Camera, size: tuple[int, int]) -> bytes:
+    return camera_bytes(camera, camera.view(), camera.projection(size[0] / size[1]),
+                        camera.position, size)
+
+
+def sun_camera_bytes(camera: Camera, sun: np.ndarray, size: tuple[int, int]) -> bytes:
+    # the sun camera: view_proj carries everything the shadow pass needs
+    return camera_bytes(camera, np.identity(4, np.float32), sun, (0, 0, 0), size)
