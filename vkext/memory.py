@@ -644,20 +644,18 @@ def requirements(plan: CompiledGraph, device: VkDevice, *,
 def memory_options(plan: CompiledGraph, device: VkDevice, *,
                    base: MemoryOptions | None = None, readback: bool = False) -> MemoryOptions:
     """Placement rules that fit this device: per kind, the largest alignment the driver asks
-    for, doubled until every resource's texel bytes rounded up to it cover the driver's size.
+    for, and each resource's exact size from the driver (rows and tiles padded).
     Compile again with these to get a plan ``plan_heaps`` accepts without waste."""
     base = base or MemoryOptions()
     reqs = requirements(plan, device, readback=readback)
     chosen = {"image": base.image_alignment, "buffer": base.buffer_alignment}
     for kind in chosen:
-        items = [(r.raw_bytes, *reqs[r.name]) for r in _transients(plan) if r.kind == kind]
-        if not items:
-            continue
-        a = max(align for _, _, align in items)
-        while any(_align(raw, a) < size for raw, size, _ in items):
-            a *= 2
-        chosen[kind] = a
-    return replace(base, image_alignment=chosen["image"], buffer_alignment=chosen["buffer"])
+        aligns = [reqs[r.name][1] for r in _transients(plan) if r.kind == kind]
+        if aligns:
+            chosen[kind] = max(aligns)
+    sizes = tuple(sorted((name, size) for name, (size, _) in reqs.items()))
+    return replace(base, image_alignment=chosen["image"], buffer_alignment=chosen["buffer"],
+                   sizes=sizes)
 
 
 class TransientMemory:

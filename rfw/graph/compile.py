@@ -38,6 +38,9 @@ class MemoryOptions:
     alias: bool = True
     image_alignment: int = 64 * 1024
     buffer_alignment: int = 256
+    # (resource, bytes) a device reports for a resource, replacing the texel-count estimate:
+    # drivers pad rows and tiles, and a plan must hold what the driver will bind
+    sizes: tuple[tuple[str, int], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -1129,12 +1132,13 @@ def _memory_items(declared: Declared, resolved: dict[str, Resolved],
     """Aligned sizes grouped by heap: images and buffers live in separate heaps."""
     groups: dict[str, list[Item]] = {"image": [], "buffer": []}
     align: dict[str, int] = {}
+    device_sizes = dict(memory.sizes)
     for name in resolved:
         if name not in transient:
             continue
         r = resolved[name]
         a = memory.image_alignment if r.kind == "image" else memory.buffer_alignment
-        align[name] = -(-r.raw_bytes // a) * a
+        align[name] = -(-max(r.raw_bytes, device_sizes.get(name, 0)) // a) * a
         groups[r.kind].append(Item(name, align[name], *spans[name]))
     kinds = [k for k in ("image", "buffer") if groups[k]]
     heap_of = {it.name: h for h, k in enumerate(kinds) for it in groups[k]}

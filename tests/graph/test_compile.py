@@ -496,3 +496,16 @@ def test_reads_after_an_in_place_write_get_a_barrier():
     c = compile(g.output("use.out").build())
     use = _barriers(c)[("use", "make.buf")]
     assert use.src.access == {"SHADER_STORAGE_WRITE"} and use.src.stages == {"COMPUTE_SHADER"}
+
+
+def test_device_sizes_replace_the_texel_estimate():
+    # a driver that pads an odd-sized image: the plan holds what it will really bind
+    g = chain("a", "b", size=(1281, 721), fmt="rgba16float")
+    plain = compile(g.build())
+    padded = compile(g.build(), memory=MemoryOptions(image_alignment=64,
+                                                     sizes=(("a.out", 7_460_096),)))
+    assert plain.resource("a.out").raw_bytes == 1281 * 721 * 8
+    assert padded.resource("a.out").bytes == 7_460_096
+    texels = 1281 * 721 * 8  # 7,388,808, rounded up to 64-byte alignment below
+    assert padded.resource("b.out").bytes == -(-texels // 64) * 64 == 7_388_864
+    assert padded.transient_bytes == 7_460_096 + 7_388_864
