@@ -109,13 +109,26 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     cfg = apply_overrides(cfg, sets)
-    if args.backend != "wgpu":
-        raise GraphError(f"backend '{args.backend}' is not available yet (wgpu is)")
-    result = render(cfg, frames=args.frames)
+    if args.backend != "vk" and (args.validate or args.no_alias):
+        raise GraphError("--validate and --no-alias need --backend vk")
+    result = render(cfg, frames=args.frames, backend=args.backend, validation=args.validate,
+                    alias=not args.no_alias)
     formats = {r.name: r.format for r in result.executor.plan.resources}
     written = write_outputs(result, Path(args.out), formats)
     print(table(result.timings))
+    memory = result.timings.get("memory")
+    if memory:
+        print(f"  transient memory: {memory['transient_allocated_bytes']:,} B allocated "
+              f"({'aliased' if memory['alias'] else 'not aliased'}; plan "
+              f"{memory['plan_transient_bytes']:,} B, unaliased {memory['unaliased_bytes']:,} B)"
+              + (f"\n  note: {memory['reason']}" if memory.get("recompiled") else ""))
     print("wrote " + ", ".join(str(p) for p in written))
+    checked = result.timings.get("validation")
+    if checked is not None:
+        for text in checked["texts"]:
+            print(f"rfw: validation: {text}", file=sys.stderr)
+        print(f"validation: {checked['messages']} message(s)")
+        return 1 if checked["messages"] else 0
     return 0
 
 
@@ -174,6 +187,10 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--size", type=_size, help="output size WxH")
     run.add_argument("--frames", type=int, help="frames to time (after one warm-up)")
     run.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
+    run.add_argument("--validate", action="store_true",
+                     help="vk: run under the validation layer; any message exits 1")
+    run.add_argument("--no-alias", action="store_true",
+                     help="vk: give every transient its own allocation (no aliasing)")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a setting, toggle a pass or pick a variant (repeatable)")
     run.add_argument("--out", default="out", help="output folder (default: out)")

@@ -47,8 +47,19 @@ def camera_for(cfg: Config, scene: Any) -> Any:
 
 
 def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
-           device: Any = None) -> Result:
-    """Build, compile and run ``cfg``; returns images and timings (GPU ms from timestamps)."""
+           device: Any = None, backend: str = "wgpu", validation: bool = False,
+           alias: bool = True) -> Result:
+    """Build, compile and run ``cfg``; returns images and timings (GPU ms from timestamps).
+
+    ``backend="vk"`` runs it on raw Vulkan (``vkext.backend.render_vk``: ``validation`` turns
+    the validation layer on, ``alias=False`` gives every transient its own allocation)."""
+    if backend == "vk":
+        from vkext.backend import render_vk
+
+        return render_vk(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
+                         validation=validation, alias=alias)
+    if backend != "wgpu":
+        raise ValueError(f"unknown backend '{backend}' (wgpu or vk)")
     from .backends.gpu_scene import GpuScene
     from .backends.wgpu_backend import Device, Executor
 

@@ -1,0 +1,73 @@
+"""``render_vk``: ``rfw.render.render`` on raw Vulkan, with the same ``Result``."""
+
+from __future__ import annotations
+
+import statistics
+from typing import Any
+
+from rfw.config import Config, build
+from rfw.render import Result, camera_for, load_scene_for
+
+from .device import VkDevice
+from .executor import VkExecutor, check_passes, fit_plan
+from .scene import VkScene
+
+
+def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
+              device: VkDevice | None = None, validation: bool = False, alias: bool = True,
+              warmup: int = 1) -> Result:
+    """Build, compile (fitted to the device's memory requirements) and run ``cfg`` on
+    Vulkan; returns images of the graph outputs and timings.json's fields (GPU ms from
+    timestamps) plus ``memory``: transient bytes allocated against the plan's numbers.
+
+    ``alias=False`` gives every transient its own allocation (``--no-alias``). Without a
+    ``device`` one is made (with the validation layer when ``validation``) and destroyed
+    here; ``timings["validation"]`` then counts the messages, leak reports included.
+    """
+    built = build(cfg)
+    own = device is None
+    if own:
+        device = VkDevice(validation=validation)
+    validation = validation or device.validation
+    try:
+        plan, info = fit_plan(built.graph, device, alias=alias, readback=True)
+        check_passes(plan, built.passes)  # a missing GLSL twin fails before any upload
+        scene = load_scene_for(cfg, scene)
+        vscene = VkScene(device, scene, camera_for(cfg, scene))
+        outputs = tuple(plan.outputs)
+        ex = None
+        try:
+            vscene.set_viewport(cfg.size)
+            ex = VkExecutor(device, plan, built.passes, built.slots, vscene, readback=outputs,
+                            alias=alias, memory_info=info)
+            ex.run(warmup)
+            for t in ex.timings.values():
+                t.gpu_ms.clear()
+                t.cpu_ms.clear()
+            n = frames or cfg.frames
+            ex.run(n)
+            images = {name: ex.read(name) for name in outputs}
+            memory = ex.memory()
+        finally:
+            if ex is not None:
+                ex.destroy()
+            vscene.destroy()
+    finally:
+        if own:
+            device.destroy()  # leak reports arrive here, so count messages after it
+    passes = [{"name": name, "gpu_ms": _median(ex.timings[name].gpu_ms),
+               "cpu_ms": _median(ex.timings[name].cpu_ms)} for name in plan.order]
+    timings: dict[str, Any] = {
+        **device.describe(), "config": cfg.name, "variants": cfg.chosen,
+        "size": list(cfg.size), "frames": n, "scene": scene.name,
+        "triangles": scene.triangle_count, "default_light": vscene.default_light,
+        "timestamps": "timestamp" in device.caps, "passes": passes,
+        "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes), "memory": memory}
+    if validation:
+        timings["validation"] = {"messages": len(device.messages),
+                                 "texts": [m.text for m in device.messages[:20]]}
+    return Result(cfg, images, timings, ex)
+
+
+def _median(values: list[float]) -> float | None:
+    return statistics.median(values) if values else None

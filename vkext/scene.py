@@ -1,0 +1,546 @@
+"""``VkScene``: a :class:`rfw.scene.Scene` on a :class:`VkDevice`, the twin of ``GpuScene``.
+
+Vertex and index buffers, mipmapped textures (with 1x1 white and flat-normal defaults), one
+sampler per texture, and the descriptor sets the GLSL twins declare: set 1 camera + lights
+(one set for the main camera, one for the sun), set 2 per material (uniform, five texture
+views, sampler), set 3 per instance. Bytes come from :mod:`rfw.backends.scene_data`, so both
+backends upload the same scene. Persistent memory comes from a :class:`BlockAllocator`.
+
+Also holds the small wrappers the executor shares: samplers, descriptor set layouts, pools
+and descriptor writes. Every wrapper registers with the device, so ``live_objects()`` counts
+it and ``VkDevice.destroy()`` reaches anything left behind.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rfw.backends.scene_data import (
+    instance_bytes,
+    lights_bytes,
+    main_camera_bytes,
+    material_bytes,
+    mip_chain,
+    sun_camera_bytes,
+)
+from rfw.graph.sync import State
+from rfw.scene.model import Camera, Scene
+
+from .commands import TRANSFER_DST, ImageBarrier, barrier, one_time
+from .consts import const, ffi, lib, vk
+from .device import VkDevice
+from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
+
+MiB = 1 << 20
+
+# descriptor kinds as vkext.spirv.reflect names them
+DESCRIPTOR_TYPES = {
+    "uniform_buffer": "VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER",
+    "storage_buffer": "VK_DESCRIPTOR_TYPE_STORAGE_BUFFER",
+    "sampled_image": "VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE",
+    "storage_image": "VK_DESCRIPTOR_TYPE_STORAGE_IMAGE",
+    "combined_image_sampler": "VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER",
+    "sampler": "VK_DESCRIPTOR_TYPE_SAMPLER",
+}
+
+# the scene's sets as shaders/common/scene.glsl and mesh.glsl declare them: (name, binding, kind)
+SCENE_SETS: dict[int, tuple[tuple[str, int, str], ...]] = {
+    1: (("camera", 0, "uniform_buffer"), ("lights", 1, "uniform_buffer")),
+    2: (("material", 0, "uniform_buffer"), ("base_color_tex", 1, "sampled_image"),
+        ("metal_rough_tex", 2, "sampled_image"), ("normal_tex", 3, "sampled_image"),
+        ("occlusion_tex", 4, "sampled_image"), ("emissive_tex", 5, "sampled_image"),
+        ("material_sampler", 6, "sampler")),
+    3: (("instance", 0, "uniform_buffer"),),
+}
+CAMERA_BYTES = 304  # CameraBlock
+LIGHTS_BYTES = 1120  # LightsBlock
+
+# stage flags of scene set layouts: one layout serves raster and compute pipelines alike
+SHADER_STAGES = ("VK_SHADER_STAGE_VERTEX_BIT", "VK_SHADER_STAGE_FRAGMENT_BIT",
+                 "VK_SHADER_STAGE_COMPUTE_BIT")
+
+_FILTER = {"linear": "VK_FILTER_LINEAR", "nearest": "VK_FILTER_NEAREST"}
+_MIPMAP = {"linear": "VK_SAMPLER_MIPMAP_MODE_LINEAR", "nearest": "VK_SAMPLER_MIPMAP_MODE_NEAREST"}
+_ADDRESS = {"repeat": "VK_SAMPLER_ADDRESS_MODE_REPEAT",
+            "mirror-repeat": "VK_SAMPLER_ADDRESS_MODE_MIRRORED_REPEAT",
+            "clamp-to-edge": "VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE"}
+COMPARE = {"never": "VK_COMPARE_OP_NEVER", "less": "VK_COMPARE_OP_LESS",
+           "equal": "VK_COMPARE_OP_EQUAL", "less-equal": "VK_COMPARE_OP_LESS_OR_EQUAL",
+           "greater": "VK_COMPARE_OP_GREATER", "not-equal": "VK_COMPARE_OP_NOT_EQUAL",
+           "greater-equal": "VK_COMPARE_OP_GREATER_OR_EQUAL", "always": "VK_COMPARE_OP_ALWAYS"}
+
+# what shaders read scene data in: the upload's barrier makes it visible to all of them
+_SCENE_READ = ("VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "VERTEX_SHADER", "FRAGMENT_SHADER",
+               "COMPUTE_SHADER")
+
+
+def _flags(names: Iterable[str]) -> int:
+    out = 0
+    for n in names:
+        out |= const(n)
+    return out
+
+
+def _snake(struct: str) -> str:
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", struct.removeprefix("Vk")).upper()
+
+
+def new(struct: str, count: int | None = None, **fields: Any) -> Any:
+    """``ffi.new`` of a Vulkan struct (or an array of ``count``) with ``sType`` set."""
+    stype = const(f"VK_STRUCTURE_TYPE_{_snake(struct)}")
+    if count is not None:
+        arr = ffi.new(f"{struct}[]", max(1, count))
+        for i in range(count):
+            arr[i].sType = stype
+        return arr
+    p = ffi.new(f"{struct}*")
+    p.sType = stype
+    for k, v in fields.items():
+        setattr(p, k, v)
+    return p
+
+
+# ---------------------------------------------------------------------------------------------
+# owned Vulkan objects
+
+
+class VkObject:
+    """A Vulkan handle this package created: registered with the device, destroyed once."""
+
+    destroy_fn = ""
+    object_type = ""
+
+    def __init__(self, device: VkDevice, handle: Any, label: str = ""):
+        self.device, self.handle, self.label = device, handle, label
+        device.register(self)
+        device.set_name(handle, self.object_type, label)
+
+    def destroy(self) -> None:
+        if self.handle is not None and self.device.alive:
+            getattr(vk, self.destroy_fn)(self.device.device, self.handle, None)
+        self.handle = None
+        self.device.unregister(self)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} '{self.label}'>"
+
+
+class Sampler(VkObject):
+    destroy_fn, object_type = "vkDestroySampler", "SAMPLER"
+
+
+class DescriptorSetLayout(VkObject):
+    destroy_fn, object_type = "vkDestroyDescriptorSetLayout", "DESCRIPTOR_SET_LAYOUT"
+
+    def __init__(self, device: VkDevice, entries: Sequence[tuple[int, str, int]], stages: int,
+                 label: str = ""):
+        """``entries``: (binding, kind, count) with kinds as :data:`DESCRIPTOR_TYPES` keys."""
+        self.entries = tuple(sorted(entries))
+        arr = ffi.new("VkDescriptorSetLayoutBinding[]", max(1, len(self.entries)))
+        for i, (binding, kind, count) in enumerate(self.entries):
+            arr[i].binding = binding
+            arr[i].descriptorType = const(DESCRIPTOR_TYPES[kind])
+            arr[i].descriptorCount = count
+            arr[i].stageFlags = stages
+        info = new("VkDescriptorSetLayoutCreateInfo", bindingCount=len(self.entries),
+                   pBindings=arr)
+        super().__init__(device, vk.vkCreateDescriptorSetLayout(device.device, info, None),
+                         label)
+
+
+class DescriptorPool(VkObject):
+    """A pool sized for ``sets`` sets and ``per_kind`` descriptors of each kind (or the
+    counts given in ``sizes``)."""
+
+    destroy_fn, object_type = "vkDestroyDescriptorPool", "DESCRIPTOR_POOL"
+
+    def __init__(self, device: VkDevice, sets: int, sizes: dict[str, int], label: str = ""):
+        sizes = {k: n for k, n in sizes.items() if n > 0}
+        arr = ffi.new("VkDescriptorPoolSize[]", max(1, len(sizes)))
+        for i, (kind, n) in enumerate(sizes.items()):
+            arr[i].type = const(DESCRIPTOR_TYPES[kind])
+            arr[i].descriptorCount = n
+        info = new("VkDescriptorPoolCreateInfo", maxSets=max(1, sets), poolSizeCount=len(sizes),
+                   pPoolSizes=arr)
+        super().__init__(device, vk.vkCreateDescriptorPool(device.device, info, None), label)
+
+    def allocate(self, layouts: Sequence[Any]) -> Any:
+        """``VkDescriptorSet[n]`` for the layout handles (raises ``vk.VkError`` when full)."""
+        handles = ffi.new("VkDescriptorSetLayout[]", list(layouts))
+        info = new("VkDescriptorSetAllocateInfo", descriptorPool=self.handle,
+                   descriptorSetCount=len(layouts), pSetLayouts=handles)
+        return vk.vkAllocateDescriptorSets(self.device.device, info)
+
+    def reset(self) -> None:
+        vk.vkResetDescriptorPool(self.device.device, self.handle, 0)
+
+
+def make_sampler(device: VkDevice, *, mag: str = "linear", min: str = "linear",
+                 mip: str = "nearest", address_u: str = "clamp-to-edge",
+                 address_v: str = "clamp-to-edge", address_w: str = "clamp-to-edge",
+                 compare: str | None = None, label: str = "") -> Sampler:
+    """A sampler in WebGPU terms (wgpu's defaults: lod clamp 0..32, no anisotropy)."""
+    info = new("VkSamplerCreateInfo")
+    info.magFilter, info.minFilter = const(_FILTER[mag]), const(_FILTER[min])
+    info.mipmapMode = const(_MIPMAP[mip])
+    info.addressModeU = const(_ADDRESS[address_u])
+    info.addressModeV = const(_ADDRESS[address_v])
+    info.addressModeW = const(_ADDRESS[address_w])
+    info.compareEnable = int(compare is not None)
+    info.compareOp = const(COMPARE[compare or "never"])
+    info.minLod, info.maxLod = 0.0, 32.0
+    info.borderColor = const("VK_BORDER_COLOR_FLOAT_TRANSPARENT_BLACK")
+    return Sampler(device, vk.vkCreateSampler(device.device, info, None), label)
+
+
+# ---------------------------------------------------------------------------------------------
+# descriptor writes
+
+
+@dataclass(frozen=True)
+class BufferRange:
+    """A range of a buffer bound as one uniform or storage descriptor."""
+
+    buffer: Any  # VkBuffer handle
+    offset: int
+    size: int
+
+
+def update_descriptors(device: VkDevice, writes: Sequence[tuple[Any, int, str, tuple]]) -> None:
+    """One ``vkUpdateDescriptorSets``. Each write is (set, binding, kind, payload) with
+    payload (buffer, offset, range) for buffers, (view, layout) for images, (sampler,) for
+    samplers and (view, layout, sampler) for combined image samplers."""
+    if not writes:
+        return
+    arr = new("VkWriteDescriptorSet", len(writes))
+    infos = []
+    for i, (dst, binding, kind, payload) in enumerate(writes):
+        w = arr[i]
+        w.dstSet, w.dstBinding, w.dstArrayElement, w.descriptorCount = dst, binding, 0, 1
+        w.descriptorType = const(DESCRIPTOR_TYPES[kind])
+        if kind in ("uniform_buffer", "storage_buffer"):
+            info = ffi.new("VkDescriptorBufferInfo*")
+            info.buffer, info.offset, info.range = payload
+            w.pBufferInfo = info
+        else:
+            info = ffi.new("VkDescriptorImageInfo*")
+            if kind == "sampler":
+                info.sampler = payload[0]
+            else:
+                info.imageView, info.imageLayout = payload[0], payload[1]
+                if kind == "combined_image_sampler":
+                    info.sampler = payload[2]
+            w.pImageInfo = info
+        infos.append(info)
+    vk.vkUpdateDescriptorSets(device.device, len(writes), arr, 0, ffi.NULL)
+
+
+def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
+    return DescriptorSetLayout(device, [(b, kind, 1) for _, b, kind in SCENE_SETS[index]],
+                               _flags(SHADER_STAGES), label=f"scene:set{index}")
+
+
+# ---------------------------------------------------------------------------------------------
+# the scene
+
+
+class _Upload:
+    """Everything the scene uploads, through one staging buffer and one submit."""
+
+    def __init__(self) -> None:
+        self.parts: list[np.ndarray] = []
+        self.size = 0
+        self.buffers: list[tuple[Buffer, int, int]] = []  # (dst, staging offset, bytes)
+        self.images: list[tuple[Image, list[tuple[int, int, int, int]]]] = []
+
+    def _add(self, data: np.ndarray) -> int:
+        raw = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+        pad = -self.size % 16
+        if pad:
+            self.parts.append(np.zeros(pad, np.uint8))
+        offset = self.size + pad
+        self.parts.append(raw)
+        self.size = offset + raw.size
+        return offset
+
+    def buffer(self, dst: Buffer, data: np.ndarray) -> None:
+        self.buffers.append((dst, self._add(data), int(np.asarray(data).nbytes)))
+
+    def image(self, dst: Image, levels: list[np.ndarray]) -> None:
+        regions = []
+        for k, lv in enumerate(levels):
+            h, w = lv.shape[:2]
+            regions.append((self._add(lv), k, w, h))
+        self.images.append((dst, regions))
+
+    def submit(self, device: VkDevice) -> None:
+        if not self.size:
+            return
+        staging = staging_buffer(device, self.size, label="scene:upload")
+        try:
+            staging.write(np.concatenate(self.parts))
+            shader_read = _state("SHADER_READ_ONLY_OPTIMAL", ("FRAGMENT_SHADER", "COMPUTE_SHADER"),
+                                 ("SHADER_SAMPLED_READ",))
+            with one_time(device, label="scene upload") as cmd:
+                barrier(cmd, [ImageBarrier(img, "UNDEFINED", TRANSFER_DST)
+                              for img, _ in self.images])
+                for dst, offset, n in self.buffers:
+                    region = ffi.new("VkBufferCopy*")
+                    region.srcOffset, region.dstOffset, region.size = offset, 0, n
+                    lib.vkCmdCopyBuffer(cmd, staging.handle, dst.handle, 1, region)
+                for img, regions in self.images:
+                    arr = ffi.new("VkBufferImageCopy[]", len(regions))
+                    for i, (offset, mip, w, h) in enumerate(regions):
+                        r = arr[i]
+                        r.bufferOffset = offset
+                        r.imageSubresource.aspectMask = img.aspect
+                        r.imageSubresource.mipLevel = mip
+                        r.imageSubresource.layerCount = 1
+                        r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, h, 1
+                    lib.vkCmdCopyBufferToImage(cmd, staging.handle, img.handle,
+                                               const("VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL"),
+                                               len(regions), arr)
+                copied = _state(None, ("COPY",), ("TRANSFER_WRITE",))
+                read = _state(None, _SCENE_READ, ("VERTEX_ATTRIBUTE_READ", "INDEX_READ",
+                                                  "UNIFORM_READ"))
+                barrier(cmd, [ImageBarrier(img, TRANSFER_DST, shader_read)
+                              for img, _ in self.images], memory_barriers=[(copied, read)])
+        finally:
+            staging.destroy()
+
+
+def _state(layout: str | None, stages: Iterable[str], access: Iterable[str]) -> State:
+    return State(layout, frozenset(stages), frozenset(access))
+
+
+@dataclass
+class _MeshBuffers:
+    vertex: Any  # VkBuffer[4]
+    offsets: Any  # VkDeviceSize[4]
+    index: Any  # VkBuffer
+    count: int
+
+
+class VkScene:
+    """The scene's buffers, textures, samplers and descriptor sets on a device.
+
+    ``shadow_sampler`` (comparison, less-or-equal) and ``linear_sampler`` are what passes
+    bind by name; ``draw()`` records every instance with sets 1 to 3 bound.
+    """
+
+    def __init__(self, device: VkDevice, scene: Scene, camera: Camera | None = None, *,
+                 block_size: int = 32 * MiB):
+        self.device = device
+        self.scene = scene
+        self.camera = camera or scene.default_camera()
+        self.size = (1, 1)
+        self._objects: list[Any] = []
+        self.allocator = BlockAllocator(device, block_size=block_size, label="scene")
+        try:
+            self._build()
+        except BaseException:
+            self.destroy()
+            raise
+
+    # building ------------------------------------------------------------------------------
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def _build(self) -> None:
+        dev, scene = self.device, self.scene
+        align = max(16, int(dev.limits["minUniformBufferOffsetAlignment"]))
+        up = _Upload()
+        self.meshes: list[_MeshBuffers] = []
+        for m in scene.meshes:
+            arrays = [m.positions, m.normals, m.uvs, m.tangents]
+            bufs = []
+            for k, a in enumerate(arrays):
+                a = np.ascontiguousarray(a, np.float32)
+                b = self.allocator.create_buffer(max(16, a.nbytes), ("vertex", "transfer_dst"),
+                                                 label=f"{m.name}.{('pos', 'nor', 'uv', 'tan')[k]}")
+                if a.nbytes:
+                    up.buffer(b, a)
+                bufs.append(b)
+            idx = np.ascontiguousarray(m.indices, np.uint32)
+            ib = self.allocator.create_buffer(max(16, idx.nbytes), ("index", "transfer_dst"),
+                                              label=f"{m.name}.indices")
+            if idx.nbytes:
+                up.buffer(ib, idx)
+            vb = ffi.new("VkBuffer[4]", [b.handle for b in bufs])
+            self.meshes.append(_MeshBuffers(vb, ffi.new("VkDeviceSize[4]"), ib.handle,
+                                            len(idx)))
+
+        # static uniforms: materials then instances, each at an aligned offset
+        mats = [material_bytes(m) for m in scene.materials]
+        insts = [instance_bytes(i.transform) for i in scene.instances]
+        blob = bytearray()
+        self._material_ranges, self._instance_ranges = [], []
+        for data, out in [(d, self._material_ranges) for d in mats] + \
+                         [(d, self._instance_ranges) for d in insts]:
+            blob += b"\0" * (-len(blob) % align)
+            out.append((len(blob), len(data)))
+            blob += data
+        self.static_uniforms = self.allocator.create_buffer(
+            max(16, len(blob)), ("uniform", "transfer_dst"), label="scene:uniforms")
+        if blob:
+            up.buffer(self.static_uniforms, np.frombuffer(bytes(blob), np.uint8))
+
+        # camera (main, sun) and lights: host-visible, written by set_viewport
+        lights, self.sun_matrix, self.default_light = lights_bytes(scene)
+        self._cam_offsets = (0, _align(CAMERA_BYTES, align))
+        self._lights_offset = _align(self._cam_offsets[1] + CAMERA_BYTES, align)
+        self.dynamic_uniforms = self.allocator.create_buffer(
+            self._lights_offset + LIGHTS_BYTES, ("uniform",), host_visible=True,
+            label="scene:camera+lights")
+        self.dynamic_uniforms.write(np.frombuffer(lights, np.uint8), self._lights_offset)
+        self.dynamic_uniforms.write(np.zeros(self._lights_offset, np.uint8), 0)
+
+        # textures, their samplers and the defaults
+        self.textures = [self._texture(up, t.pixels, t.srgb, t.name) for t in scene.textures]
+        self.samplers = [self._own(make_sampler(
+            dev, mag=t.mag_filter, min=t.min_filter, mip=t.mipmap_filter, address_u=t.address_u,
+            address_v=t.address_v, label=f"{t.name}:sampler")) for t in scene.textures]
+        one = np.full((1, 1, 4), 255, np.uint8)
+        flat = np.array([[[128, 128, 255, 255]]], np.uint8)
+        self.white = self._texture(up, one, False, "white")
+        self.white_srgb = self._texture(up, one, True, "white_srgb")
+        self.flat_normal = self._texture(up, flat, False, "flat_normal")
+        up.submit(dev)
+
+        self.default_sampler = self._own(make_sampler(
+            dev, mag="linear", min="linear", mip="linear", address_u="repeat",
+            address_v="repeat", label="scene.default"))
+        self.linear_sampler = self._own(make_sampler(
+            dev, mag="linear", min="linear", mip="linear", label="scene.linear"))
+        self.shadow_sampler = self._own(make_sampler(
+            dev, mag="linear", min="linear", compare="less-equal", label="scene.shadow"))
+
+        self._descriptor_sets()
+
+    def _texture(self, up: _Upload, pixels: np.ndarray, srgb: bool, label: str) -> ImageView:
+        levels = mip_chain(np.ascontiguousarray(pixels, np.uint8))
+        img = self.allocator.create_image(pixels.shape[1], pixels.shape[0],
+                                          "rgba8unorm-srgb" if srgb else "rgba8unorm",
+                                          ("sampled", "transfer_dst"), mips=len(levels),
+                                          label=label)
+        up.image(img, levels)
+        return image_view(img, label=f"{label}:view")
+
+    def _descriptor_sets(self) -> None:
+        dev, scene = self.device, self.scene
+        self.layouts = {i: self._own(scene_set_layout(dev, i)) for i in SCENE_SETS}
+        n_mat, n_inst = len(scene.materials), len(scene.instances)
+        self.pool = self._own(DescriptorPool(
+            dev, 2 + n_mat + n_inst, {"uniform_buffer": 4 + n_mat + n_inst,
+                                      "sampled_image": 5 * n_mat, "sampler": n_mat},
+            label="scene:descriptors"))
+        layouts = [self.layouts[1].handle] * 2 + [self.layouts[2].handle] * n_mat + \
+            [self.layouts[3].handle] * n_inst
+        self._sets = self.pool.allocate(layouts)  # keeps the VkDescriptorSet[] alive
+        self.camera_sets = {"main": ffi.addressof(self._sets, 0),
+                            "sun": ffi.addressof(self._sets, 1)}
+        self.material_sets = [ffi.addressof(self._sets, 2 + k) for k in range(n_mat)]
+        self.instance_sets = [ffi.addressof(self._sets, 2 + n_mat + k) for k in range(n_inst)]
+
+        dyn, static = self.dynamic_uniforms.handle, self.static_uniforms.handle
+        writes: list[tuple[Any, int, str, tuple]] = []
+        for name, k in (("main", 0), ("sun", 1)):
+            s = self.camera_sets[name][0]
+            writes.append((s, 0, "uniform_buffer", (dyn, self._cam_offsets[k], CAMERA_BYTES)))
+            writes.append((s, 1, "uniform_buffer", (dyn, self._lights_offset, LIGHTS_BYTES)))
+        read_only = const("VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL")
+        for k, m in enumerate(scene.materials):
+            s = self.material_sets[k][0]
+
+            def tex(index: int | None, fallback: ImageView) -> Any:
+                return (self.textures[index] if index is not None else fallback).handle
+
+            sampler = self.samplers[m.base_color_texture] if m.base_color_texture is not None \
+                else self.default_sampler
+            off, n = self._material_ranges[k]
+            writes += [
+                (s, 0, "uniform_buffer", (static, off, n)),
+                (s, 1, "sampled_image", (tex(m.base_color_texture, self.white_srgb), read_only)),
+                (s, 2, "sampled_image", (tex(m.metallic_roughness_texture, self.white),
+                                         read_only)),
+                (s, 3, "sampled_image", (tex(m.normal_texture, self.flat_normal), read_only)),
+                (s, 4, "sampled_image", (tex(m.occlusion_texture, self.white), read_only)),
+                (s, 5, "sampled_image", (tex(m.emissive_texture, self.white_srgb), read_only)),
+                (s, 6, "sampler", (sampler.handle,)),
+            ]
+        for k in range(n_inst):
+            off, n = self._instance_ranges[k]
+            writes.append((self.instance_sets[k][0], 0, "uniform_buffer", (static, off, n)))
+        update_descriptors(dev, writes)
+
+    # per frame -----------------------------------------------------------------------------
+    def set_viewport(self, size: tuple[int, int]) -> None:
+        """Write both cameras for an output ``size``; call while no frame is in flight."""
+        self.size = (int(size[0]), int(size[1]))
+        self.dynamic_uniforms.write(np.frombuffer(main_camera_bytes(self.camera, self.size),
+                                                  np.uint8), self._cam_offsets[0])
+        self.dynamic_uniforms.write(np.frombuffer(
+            sun_camera_bytes(self.camera, self.sun_matrix, self.size), np.uint8),
+            self._cam_offsets[1])
+
+    def camera_range(self, camera: str = "main") -> BufferRange:
+        k = 1 if camera == "sun" else 0
+        return BufferRange(self.dynamic_uniforms.handle, self._cam_offsets[k], CAMERA_BYTES)
+
+    @property
+    def lights_range(self) -> BufferRange:
+        return BufferRange(self.dynamic_uniforms.handle, self._lights_offset, LIGHTS_BYTES)
+
+    def bindings(self) -> dict[str, Any]:
+        """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights."""
+        return {"camera": self.camera_range("main"), "lights": self.lights_range}
+
+    def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
+             alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
+        """Record every instance whose material's alpha mode is in ``alpha`` with a bound
+        graphics pipeline whose layout (``layout``) uses the scene's sets 1 to 3."""
+        point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+        lib.vkCmdBindDescriptorSets(cmd, point, layout, 1, 1, self.camera_sets[camera], 0,
+                                    ffi.NULL)
+        index_type = const("VK_INDEX_TYPE_UINT32")
+        draws = 0
+        last_mesh = last_material = None
+        for k, inst in enumerate(self.scene.instances):
+            mesh = self.scene.meshes[inst.mesh]
+            if self.scene.materials[mesh.material].alpha_mode not in alpha:
+                continue
+            buffers = self.meshes[inst.mesh]
+            if buffers.count == 0:
+                continue
+            if mesh.material != last_material:
+                lib.vkCmdBindDescriptorSets(cmd, point, layout, 2, 1,
+                                            self.material_sets[mesh.material], 0, ffi.NULL)
+                last_material = mesh.material
+            lib.vkCmdBindDescriptorSets(cmd, point, layout, 3, 1, self.instance_sets[k], 0,
+                                        ffi.NULL)
+            if inst.mesh != last_mesh:
+                lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
+                lib.vkCmdBindIndexBuffer(cmd, buffers.index, 0, index_type)
+                last_mesh = inst.mesh
+            lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, 0)
+            draws += 1
+        return draws
+
+    def destroy(self) -> None:
+        """Destroy every object of the scene (safe to call twice)."""
+        for obj in reversed(self._objects):
+            obj.destroy()
+        self._objects.clear()
+        if self.allocator is not None:
+            self.allocator.destroy()  # buffers, images (and their views), blocks
+            self.allocator = None
+
+
+def _align(x: int, a: int) -> int:
+    return -(-x // a) * a
