@@ -52,14 +52,26 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     """Build, compile and run ``cfg``; returns images and timings (GPU ms from timestamps).
 
     ``backend="vk"`` runs it on raw Vulkan (``vkext.backend.render_vk``: ``validation`` turns
-    the validation layer on, ``alias=False`` gives every transient its own allocation)."""
+    the validation layer on, ``alias=False`` gives every transient its own allocation).
+
+    A config that pins passes to a backend other than ``backend`` runs on both
+    (``vkext.mixed.render_mixed``): ``backend`` is then the one of unpinned passes, bridges
+    copy resources across through host memory and are timed as passes of their own, and
+    ``device`` may be either backend's (the other one is made and dropped here)."""
+    if backend not in ("wgpu", "vk"):
+        raise ValueError(f"unknown backend '{backend}' (wgpu or vk)")
+    if pinned_elsewhere(cfg, backend):
+        from vkext.device import VkDevice
+        from vkext.mixed import render_mixed
+
+        devices = {"vk_device" if isinstance(device, VkDevice) else "wgpu_device": device}
+        return render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend=backend,
+                            validation=validation, alias=alias, **devices)
     if backend == "vk":
         from vkext.backend import render_vk
 
         return render_vk(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
                          validation=validation, alias=alias)
-    if backend != "wgpu":
-        raise ValueError(f"unknown backend '{backend}' (wgpu or vk)")
     from .backends.gpu_scene import GpuScene
     from .backends.wgpu_backend import Device, Executor
 
@@ -90,6 +102,15 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
                "timestamps": "timestamp-query" in device.features, "passes": passes,
                "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes)}
     return Result(cfg, images, timings, ex)
+
+
+def pinned_elsewhere(cfg: Config, backend: str) -> bool:
+    """Whether an enabled pass of ``cfg`` is pinned (in the config or by its class) to a
+    backend other than ``backend``: its frame then mixes backends."""
+    from .registry import get_pass
+
+    return any(e.enabled and (e.backend or get_pass(e.use).backend) not in (None, backend)
+               for e in cfg.passes)
 
 
 def _median(values: list[float]) -> float | None:
@@ -150,9 +171,13 @@ def table(timings: dict[str, Any]) -> str:
     rows = [f"{timings['config']} on {timings['device']} ({timings['driver']}), "
             f"{timings['size'][0]}x{timings['size'][1]}, {timings['frames']} frames, "
             f"{timings['triangles']:,} triangles"]
-    rows.append(f"  {'pass':<24} {'gpu ms':>9} {'cpu ms':>9}")
+    w = max(24, *(len(p["name"]) for p in timings["passes"]))  # bridge names run long
+    rows.append(f"  {'pass':<{w}} {'gpu ms':>9} {'cpu ms':>9}")
     for p in timings["passes"]:
         gpu = "-" if p["gpu_ms"] is None else f"{p['gpu_ms']:.3f}"
-        rows.append(f"  {p['name']:<24} {gpu:>9} {p['cpu_ms']:>9.3f}")
-    rows.append(f"  {'total':<24} {timings['gpu_ms_total']:>9.3f}")
+        rows.append(f"  {p['name']:<{w}} {gpu:>9} {p['cpu_ms']:>9.3f}")
+    rows.append(f"  {'total':<{w}} {timings['gpu_ms_total']:>9.3f}")
+    if "bridge_ms_total" in timings:  # mixed backends: host copies, wall time
+        rows.append(f"  {'bridges (host copies)':<{w}} {'-':>9} "
+                    f"{timings['bridge_ms_total']:>9.3f}")
     return "\n".join(rows)

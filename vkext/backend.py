@@ -6,7 +6,7 @@ import statistics
 from typing import Any
 
 from rfw.config import Config, build
-from rfw.render import Result, camera_for, load_scene_for
+from rfw.render import Result, camera_for, load_scene_for, pinned_elsewhere
 
 from .device import VkDevice
 from .executor import VkExecutor, check_passes, fit_plan
@@ -23,7 +23,15 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
     ``alias=False`` gives every transient its own allocation (``--no-alias``). Without a
     ``device`` one is made (with the validation layer when ``validation``) and destroyed
     here; ``timings["validation"]`` then counts the messages, leak reports included.
+
+    A config that pins passes to wgpu runs as a mixed frame (``vkext.mixed.render_mixed``,
+    unpinned passes on Vulkan).
     """
+    if pinned_elsewhere(cfg, "vk"):
+        from .mixed import render_mixed
+
+        return render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend="vk",
+                            vk_device=device, validation=validation, alias=alias)
     built = build(cfg)
     own = device is None
     if own:

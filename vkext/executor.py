@@ -117,14 +117,23 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
     for p in graph.passes:
         if p.enabled and p.backend not in (None, "vk"):
             raise ShaderError(f"pass '{p.name}' is pinned to backend '{p.backend}': the vk "
-                              "backend runs every pass on Vulkan (mixed-backend frames are "
-                              "not supported by render_vk)", file=graph.source)
+                              "backend runs every pass on Vulkan (frames that mix backends "
+                              "run through rfw.render.render or vkext.mixed.render_mixed)",
+                              file=graph.source)
+    return fit_graph(graph, device, alias=alias, readback=readback)
+
+
+def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
+              readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
+    """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
+    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
     base = MemoryOptions(alias=alias)
-    plan = compile(graph, backend="vk", memory=base)
+    # the device's capabilities: a pass needing a feature it lacks is refused here, by name
+    plan = compile(graph, caps=device.caps, backend="vk", memory=base)
     opts = memory_options(plan, device, base=base, readback=readback)
     info: dict[str, Any] = {"recompiled": False, "image_alignment": base.image_alignment,
                             "buffer_alignment": base.buffer_alignment, "default_fits": True}
-    fitted = compile(graph, backend="vk", memory=opts)
+    fitted = compile(graph, caps=device.caps, backend="vk", memory=opts)
     placement = [(r.name, r.bytes, r.offset) for r in plan.resources if r.transient]
     if placement != [(r.name, r.bytes, r.offset) for r in fitted.resources if r.transient]:
         fits = plan_fits(plan, device, readback=readback)
@@ -189,10 +198,22 @@ def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
     for name in plan.order:
         p = passes.get(name)
         if p is None:
-            raise ShaderError(f"pass '{name}' has no pass instance (bridge passes between "
-                              "backends are not run by the vk executor)")
+            if is_bridge(plan, name) and len(plan.accesses[name]) > 1:
+                raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
+                                  "them, and runs through vkext.mixed (each backend gets its "
+                                  "part of it)")
+            if is_bridge(plan, name):
+                continue  # its barriers are recorded; vkext.mixed copies through the host
+            raise ShaderError(f"pass '{name}' has no pass instance")
         if p.shader:
             twin_paths(p, None, "compute" if p.type == "compute" else "render")
+
+
+def is_bridge(plan: CompiledGraph, name: str) -> bool:
+    """Whether ``name`` is a bridge pass (``rfw.graph.bridges``): named ``bridge.*`` and
+    touching its resources only as a transfer source or destination."""
+    return name.startswith("bridge.") and all(
+        a.usages <= {"transfer_src", "transfer_dst"} for a in plan.accesses.get(name, ()))
 
 
 class ShaderModule(VkObject):
@@ -423,6 +444,17 @@ class Programs:
         self.programs.clear()
         self.layouts.clear()
         self.compiled.clear()
+
+
+def _runs(slots: list[int]) -> list[tuple[int, int]]:
+    """Sorted slot numbers as (first, count) runs of consecutive ones."""
+    out: list[tuple[int, int]] = []
+    for k in slots:
+        if out and out[-1][0] + out[-1][1] == k:
+            out[-1] = (out[-1][0], out[-1][1] + 1)
+        else:
+            out.append((k, 1))
+    return out
 
 
 def _mtime(path: Path) -> int:
@@ -1000,7 +1032,17 @@ class VkExecutor:
 
     def frame(self) -> None:
         """Record, submit and wait for one frame; timings per pass are appended."""
-        dev, cmd, ts = self.device, self.cmd, self.timestamps
+        self.begin_frame()
+        for name in self.plan.order:
+            self.record(name)
+        self.end_frame()
+
+    # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
+    def begin_frame(self) -> None:
+        """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded
+        and wait, ``end_frame`` to finish. Descriptors and uniforms live until the next
+        ``begin_frame``."""
+        dev, ts = self.device, self.timestamps
         if self.frame_index:  # ping-pong: last frame's value is this frame's @prev
             for copy, name in self._history:
                 if copy in self.images and name in self.images:
@@ -1010,40 +1052,79 @@ class VkExecutor:
         self.pool.reset()
         if ts is not None and "host_query_reset" in dev.caps:
             ts.reset()
-        cpu: dict[str, float] = {}
-        vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
-            flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
-        try:
+        self._recording = False
+        self._cpu: dict[str, float] = {}
+        self._gpu: dict[str, float] = {}
+        self._pending: list[int] = []  # timestamp slots written since the last flush
+        self._recorded: list[str] = []
+        self._position = {name: k for k, name in enumerate(self.plan.order)}
+
+    def record(self, name: str) -> None:
+        """Record pass ``name``: its debug label, the plan's barriers for it, a timestamp
+        before and after, and ``record(ctx)``. A pass without an instance (a bridge's side
+        on this device) records its barriers only: the copy itself goes through the host
+        (``vkext.mixed``), between flushes."""
+        dev, cmd, ts = self.device, self.cmd, self.timestamps
+        if not self._recording:
+            vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
+                flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
+            self._recording = True
             if ts is not None and "host_query_reset" not in dev.caps:
                 ts.reset(cmd)
-            for k, name in enumerate(self.plan.order):
-                p = self.passes[name]
-                with label(dev, cmd, name):
-                    record_barriers(cmd, self._barriers[name], self.resources)
-                    if ts is not None:
-                        ts.write(cmd, TIMESTAMP_STAGE, 2 * k)
-                        if self._pin_begin:
-                            ts.write(cmd, TIMESTAMP_STAGE, 2 * len(self.plan.order) + k)
-                    ctx = VkPassContext(self, p, cmd, self.slots[name])
-                    t = time.perf_counter()
-                    p.record(ctx)
-                    cpu[name] = (time.perf_counter() - t) * 1e3
-                    if ts is not None:
-                        ts.write(cmd, TIMESTAMP_STAGE, 2 * k + 1)
+        k = self._position[name]
+        p = self.passes.get(name)
+        try:
+            with label(dev, cmd, name):
+                record_barriers(cmd, self._barriers[name], self.resources)
+                if p is None:
+                    return
+                if ts is not None:
+                    ts.write(cmd, TIMESTAMP_STAGE, 2 * k)
+                    if self._pin_begin:
+                        ts.write(cmd, TIMESTAMP_STAGE, 2 * len(self.plan.order) + k)
+                ctx = VkPassContext(self, p, cmd, self.slots[name])
+                t = time.perf_counter()
+                p.record(ctx)
+                self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
+                if ts is not None:
+                    ts.write(cmd, TIMESTAMP_STAGE, 2 * k + 1)
+                    self._pending.append(k)
+                self._recorded.append(name)
+        except BaseException:
+            self._recording = False
+            self.pool.reset()  # drop the half-recorded commands
+            raise
+
+    def flush(self) -> None:
+        """Submit what was recorded since the last flush, wait for it and collect its
+        timestamps. Nothing recorded: nothing happens."""
+        if not self._recording:
+            return
+        dev, cmd, ts = self.device, self.cmd, self.timestamps
+        self._recording = False
+        try:
             vk.vkEndCommandBuffer(cmd)
         except BaseException:
-            self.pool.reset()  # drop the half-recorded frame
+            self.pool.reset()
             raise
         submit(dev, [cmd])
-        gpu = None
-        if ts is not None:
-            ns = ts.results(0, 2 * len(self.plan.order))
-            gpu = {n: max(0, ns[2 * k + 1] - ns[2 * k]) * 1e-6
-                   for k, n in enumerate(self.plan.order)}
-        for name in self.plan.order:
-            self.timings[name].cpu_ms.append(cpu[name])
-            if gpu is not None:
-                self.timings[name].gpu_ms.append(gpu[name])
+        if ts is not None and self._pending:
+            order = self.plan.order
+            for first, count in _runs(sorted(self._pending)):
+                ns = ts.results(2 * first, 2 * count)
+                for i in range(count):
+                    name = order[first + i]
+                    ms = max(0, ns[2 * i + 1] - ns[2 * i]) * 1e-6
+                    self._gpu[name] = self._gpu.get(name, 0.0) + ms
+        self._pending = []
+
+    def end_frame(self) -> None:
+        """Flush what is left and append the frame's timings of the passes recorded."""
+        self.flush()
+        for name in dict.fromkeys(self._recorded):
+            self.timings[name].cpu_ms.append(self._cpu[name])
+            if self.timestamps is not None:
+                self.timings[name].gpu_ms.append(self._gpu[name])
         self.frame_index += 1
 
     def upload(self, resource: str, array: np.ndarray) -> None:

@@ -424,6 +424,16 @@ class Executor:
         self.shaders = ShaderCache(device)
         self.frame_index = 0
         self.timings = {name: PassTiming(name) for name in plan.order}
+        # a bridge's side on this backend (vkext.mixed): the host copies, nothing is recorded
+        self._bridges = tuple(name for name in plan.order if name not in passes and
+                              name.startswith("bridge.") and all(
+                                  a.usages <= {"transfer_src", "transfer_dst"}
+                                  for a in plan.accesses.get(name, ())))
+        for name in self._bridges:
+            if len(plan.accesses[name]) > 1:
+                raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
+                                  "them, and runs through rfw.render.render (vkext.mixed "
+                                  "gives each backend its part of it)")
         self._textures: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
@@ -522,28 +532,71 @@ class Executor:
             self.frame()
 
     def frame(self) -> None:
-        dev = self.device.device
-        encoder = dev.create_command_encoder(label=f"rfw:frame{self.frame_index}")
+        """Record, submit and wait for one frame; timings per pass are appended."""
+        self.begin_frame()
+        for name in self.plan.order:
+            self.record(name)
+        self.end_frame()
+
+    # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
+    def begin_frame(self) -> None:
+        """Start a frame; ``record`` passes into it, ``flush`` to run what was recorded."""
+        self._encoder: Any = None
         self._next_query = 0
         self._query_owner: list[str] = []
-        cpu: dict[str, float] = {}
-        for name in self.plan.order:
-            p = self.passes[name]
-            ctx = PassContext(self, p, encoder, self.slots[name])
-            encoder.push_debug_group(name)
-            t = time.perf_counter()
-            p.record(ctx)
-            cpu[name] = (time.perf_counter() - t) * 1e3
-            encoder.pop_debug_group()
+        self._cpu: dict[str, float] = {}
+        self._gpu: dict[str, float] | None = None
+        self._recorded: list[str] = []
+        self._segment = 0
+
+    def record(self, name: str) -> None:
+        """Record pass ``name`` into the frame's open command encoder (made on first use).
+
+        A bridge's side of the plan (``vkext.mixed``: the copy goes through the host between
+        flushes, and WebGPU tracks the usage itself) records nothing."""
+        if name in self._bridges:
+            return
+        p = self.passes[name]
+        if self._encoder is None:
+            suffix = f".{self._segment}" if self._segment else ""
+            self._encoder = self.device.device.create_command_encoder(
+                label=f"rfw:frame{self.frame_index}{suffix}")
+        encoder = self._encoder
+        ctx = PassContext(self, p, encoder, self.slots[name])
+        encoder.push_debug_group(name)
+        t = time.perf_counter()
+        p.record(ctx)
+        self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
+        encoder.pop_debug_group()
+        self._recorded.append(name)
+
+    def flush(self) -> None:
+        """Submit what was recorded since the last flush, wait for it and collect its
+        timestamps. Nothing recorded: nothing happens."""
+        encoder = self._encoder
+        if encoder is None:
+            return
+        self._encoder = None
+        self._segment += 1
         if self._timestamp_enabled and self._next_query:
             encoder.resolve_query_set(self._query_set, 0, self._next_query,
                                       self._query_buffer, 0)
-        dev.queue.submit([encoder.finish()])
-        gpu = self._read_timestamps()  # also waits for the frame to finish
-        for name in self.plan.order:
-            self.timings[name].cpu_ms.append(cpu[name])
-            if gpu is not None:
-                self.timings[name].gpu_ms.append(gpu.get(name, 0.0))
+        self.device.device.queue.submit([encoder.finish()])
+        gpu = self._read_timestamps()  # also waits for the work to finish
+        if gpu is not None:
+            self._gpu = self._gpu or {}
+            for name, ms in gpu.items():
+                self._gpu[name] = self._gpu.get(name, 0.0) + ms
+        self._next_query = 0
+        self._query_owner = []
+
+    def end_frame(self) -> None:
+        """Flush what is left and append the frame's timings of the passes recorded."""
+        self.flush()
+        for name in dict.fromkeys(self._recorded):
+            self.timings[name].cpu_ms.append(self._cpu[name])
+            if self._gpu is not None:
+                self.timings[name].gpu_ms.append(self._gpu.get(name, 0.0))
         self.frame_index += 1
 
     def _read_timestamps(self) -> dict[str, float] | None:

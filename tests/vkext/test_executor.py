@@ -269,3 +269,15 @@ def test_history_images_start_in_the_planned_layout(vk_device, tmp_path, monkeyp
     finally:
         ex.destroy()
     assert np.all(out == 5 * 0.125)  # cleared, then one step per frame through the swap
+
+
+def test_a_pass_needing_a_missing_feature_is_refused_by_name(vk_device):
+    from rfw.graph import Attachment, GraphBuilder, GraphError
+    from vkext.executor import fit_graph
+
+    g = GraphBuilder("needs", size=(8, 8))
+    g.add_pass("cull", "compute", requires=["VK_NV_imaginary_feature"]) \
+        .output("o", Attachment("rgba8unorm"))
+    with pytest.raises(GraphError, match=r"pass 'cull' needs VK_NV_imaginary_feature, which "
+                                         r"the device lacks"):
+        fit_graph(g.output("cull.o").build(), vk_device)
