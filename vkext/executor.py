@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from rfw.backends.base import FrameExecutor
 from rfw.graph import CompiledGraph
 from rfw.graph.compile import MemoryOptions, compile
 from rfw.graph.formats import format_info
@@ -863,7 +864,7 @@ class VkPassContext:
 # the executor
 
 
-class VkExecutor:
+class VkExecutor(FrameExecutor):
     """Owns the images and buffers of one compiled graph on one device and records frames."""
 
     def __init__(self, device: VkDevice, plan: CompiledGraph, passes: dict[str, Pass],
@@ -1026,17 +1027,6 @@ class VkExecutor:
         return out
 
     # frames -------------------------------------------------------------------------------
-    def run(self, frames: int = 1) -> None:
-        for _ in range(frames):
-            self.frame()
-
-    def frame(self) -> None:
-        """Record, submit and wait for one frame; timings per pass are appended."""
-        self.begin_frame()
-        for name in self.plan.order:
-            self.record(name)
-        self.end_frame()
-
     # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
     def begin_frame(self) -> None:
         """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded

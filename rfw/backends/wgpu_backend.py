@@ -22,6 +22,7 @@ from ..graph.compile import ResourcePlan
 from ..graph.formats import format_info
 from ..passes import Pass, Settings
 from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, reflect
+from .base import FrameExecutor
 
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
@@ -408,7 +409,7 @@ class PassContext:
 # the executor
 
 
-class Executor:
+class Executor(FrameExecutor):
     """Owns the textures of one compiled graph on one device and records its frames."""
 
     def __init__(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
@@ -526,17 +527,6 @@ class Executor:
         self._query_owner.append(pass_name)
         return {"query_set": self._query_set, "beginning_of_pass_write_index": k,
                 "end_of_pass_write_index": k + 1}
-
-    def run(self, frames: int = 1) -> None:
-        for _ in range(frames):
-            self.frame()
-
-    def frame(self) -> None:
-        """Record, submit and wait for one frame; timings per pass are appended."""
-        self.begin_frame()
-        for name in self.plan.order:
-            self.record(name)
-        self.end_frame()
 
     # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
     def begin_frame(self) -> None:

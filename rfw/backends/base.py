@@ -1,0 +1,31 @@
+"""The backend interface both executors implement (wgpu here, raw Vulkan in vkext)."""
+
+from __future__ import annotations
+
+
+class FrameExecutor:
+    """Runs a compiled graph frame by frame; a frame can also be driven pass by pass
+    (``begin_frame``, ``record``, ``flush``, ``end_frame``), as mixed-backend frames do."""
+
+    def begin_frame(self) -> None:
+        raise NotImplementedError
+
+    def record(self, name: str) -> None:
+        raise NotImplementedError
+
+    def flush(self) -> None:
+        raise NotImplementedError
+
+    def end_frame(self) -> None:
+        raise NotImplementedError
+
+    def frame(self) -> None:
+        """Record, submit and wait for one frame; timings per pass are appended."""
+        self.begin_frame()
+        for name in self.plan.order:  # type: ignore[attr-defined]
+            self.record(name)
+        self.end_frame()
+
+    def run(self, frames: int = 1) -> None:
+        for _ in range(frames):
+            self.frame()
