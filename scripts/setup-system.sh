@@ -13,7 +13,7 @@ backports_file=/etc/apt/sources.list.d/bookworm-backports.sources
 keyring=/usr/share/keyrings/debian-archive-keyring.gpg
 # base packages come from the normal suite; mesa comes from bookworm-backports.
 # xauth is needed by xvfb-run (only a recommends of xvfb, and recommends are skipped).
-base_pkgs=(libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools spirv-tools
+base_pkgs=(libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools spirv-tools g++ python3-dev
   libglfw3 xvfb xauth python3-venv python3-pip graphviz)
 # mesa's gl/egl/gbm libraries come from backports too, so every mesa library is one version.
 mesa_pkgs=(mesa-vulkan-drivers libgl1-mesa-dri libglx-mesa0 libegl-mesa0 libgbm1)
