@@ -71,10 +71,25 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
         "triangles": scene.triangle_count, "default_light": vscene.default_light,
         "timestamps": "timestamp" in device.caps, "passes": passes,
         "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes), "memory": memory}
+    culling = _culling(ex)
+    if culling is not None:
+        timings["culling"] = culling
     if validation:
         timings["validation"] = {"messages": len(device.messages),
                                  "texts": [m.text for m in device.messages[:20]]}
     return Result(cfg, images, timings, ex)
+
+
+def _culling(ex: Any) -> dict[str, int | None] | None:
+    """The last frame's GPU culling counters of a meshlet pass, in timings.json's names."""
+    for p in ex.passes.values():
+        last = getattr(getattr(p, "meshlets", None), "last", None)
+        if last:
+            # occlusion culling and a triangle counter are not implemented yet: say so
+            return {"meshlets_total": last["meshlets_total"], "meshlets_drawn": last["drawn"],
+                    "culled_cone": last["cone_culled"], "culled_frustum": last["frustum_culled"],
+                    "culled_occlusion": None, "triangles_drawn": None}
+    return None
 
 
 def _median(values: list[float]) -> float | None:
