@@ -150,6 +150,12 @@ def cmd_scenes(args: argparse.Namespace) -> int:
     return run(args)
 
 
+def cmd_meshlets(args: argparse.Namespace) -> int:
+    from .meshlet_view import cmd_show
+
+    return cmd_show(args)
+
+
 def cmd_new_pass(args: argparse.Namespace) -> int:
     from .templates import new_pass
 
@@ -215,6 +221,20 @@ def parser() -> argparse.ArgumentParser:
                        help="list the scenes, their sources and licenses, and what is cached")
     fetch.add_argument("--force", action="store_true", help="fetch even what is up to date")
     fetch.set_defaults(func=cmd_scenes)
+    meshlets = sub.add_parser("meshlets", help="inspect a mesh's meshlets")
+    msub = meshlets.add_subparsers(dest="meshlets_command", required=True)
+    show = msub.add_parser("show", help="meshlets in colour, bounding spheres and normal cones "
+                           "in a pyvista window (or --screenshot PNG)")
+    show.add_argument("mesh", help="mesh or scene file (.gltf .glb .obj .ply ...), 'default' "
+                      "(the courtyard's fountain) or 'default:NAME' (e.g. default:column)")
+    show.add_argument("--max-vertices", type=int, default=64, help="per meshlet (default 64)")
+    show.add_argument("--max-triangles", type=int, default=124,
+                      help="per meshlet, a multiple of 4 (default 124)")
+    show.add_argument("--cone-weight", type=float, default=0.25,
+                      help="0: compact clusters, towards 1: tighter normal cones (default 0.25)")
+    show.add_argument("--screenshot", metavar="PNG", help="render off screen to PNG and exit")
+    show.add_argument("--size", type=_size, default=(1024, 768), help="window size WxH")
+    show.set_defaults(func=cmd_meshlets)
     new = sub.add_parser("new-pass", help="write a working pass folder, shader and test")
     new.add_argument("name", help="snake_case pass id")
     kind = new.add_mutually_exclusive_group()
