@@ -263,7 +263,8 @@ def build(cfg: Config) -> Built:
                                             f"'{slot}' {why}")
                 continue
             b.input(slot, source, spec)
-            mapping[slot] = source
+            # a history slot reads last frame's value: the plan's "<resource>@prev" copy
+            mapping[slot] = f"{source}@prev" if spec.type == "history" else source
         for slot, spec in outs.items():
             if spec.size is not None and spec.size.mode == "relative" and spec.size.of in mapping:
                 spec = spec.with_(size=SizeRule.like(mapping[spec.size.of], *spec.size.scale))

@@ -85,10 +85,12 @@ def _culling(ex: Any) -> dict[str, int | None] | None:
     for p in ex.passes.values():
         last = getattr(getattr(p, "meshlets", None), "last", None)
         if last:
-            # occlusion culling and a triangle counter are not implemented yet: say so
+            # occlusion: None where the pass does not run the test; no triangle counter yet
+            occlusion = getattr(getattr(p, "params", None), "occlusion", False)
             return {"meshlets_total": last["meshlets_total"], "meshlets_drawn": last["drawn"],
                     "culled_cone": last["cone_culled"], "culled_frustum": last["frustum_culled"],
-                    "culled_occlusion": None, "triangles_drawn": None}
+                    "culled_occlusion": last["occlusion_culled"] if occlusion else None,
+                    "triangles_drawn": None}
     return None
 
 

@@ -617,9 +617,10 @@ class VkPassContext:
         r = self.executor.plan.resource(self.resource(slot))
         return r.width, r.height
 
-    def view(self, slot: str) -> ImageBinding:
+    def view(self, slot: str, *, mip: int | None = None) -> ImageBinding:
+        """The slot's image view; ``mip``: a view of that one mip level only."""
         name = self.resource(slot)
-        return ImageBinding(name, self.executor.image(name), self.executor.view(name))
+        return ImageBinding(name, self.executor.image(name), self.executor.view(name, mip=mip))
 
     def sampled(self, slot: str) -> ImageBinding:
         name = self.resource(slot)
@@ -899,7 +900,7 @@ class VkExecutor(FrameExecutor):
         self._history = [(copy, name) for copy, name in
                          ((r.name, r.name.removesuffix("@prev")) for r in plan.resources
                           if r.history and r.name.endswith("@prev"))]
-        self._views: dict[tuple[int, bool], ImageView] = {}
+        self._views: dict[tuple[int, bool, int | None], ImageView] = {}
         self.transients = None
         self.allocator: BlockAllocator | None = None
         self.programs = self.descriptors = self.ring = None
@@ -994,15 +995,18 @@ class VkExecutor(FrameExecutor):
         except KeyError:
             raise ShaderError(f"'{resource}' is not a buffer of the plan") from None
 
-    def view(self, resource: str, *, sampled: bool = False) -> ImageView:
-        """The image's view; ``sampled`` views of depth(-stencil) images see depth only."""
+    def view(self, resource: str, *, sampled: bool = False, mip: int | None = None) -> ImageView:
+        """The image's view; ``sampled`` views of depth(-stencil) images see depth only;
+        ``mip``: a view of that one mip level (per-level storage views of a mip chain)."""
         img = self.image(resource)
         depth = sampled and bool(img.info.depth)
-        key = (id(img), depth)
+        key = (id(img), depth, mip)
         v = self._views.get(key)
         if v is None or v.handle is None:
+            name = ("depth" if depth else "view") + ("" if mip is None else f":mip{mip}")
             v = self._views[key] = image_view(img, aspect="depth" if depth else None,
-                                              label=f"{resource}:{'depth' if depth else 'view'}")
+                                              mips=None if mip is None else (mip, 1),
+                                              label=f"{resource}:{name}")
         return v
 
     @property

@@ -40,7 +40,7 @@ from rfw.graph.sync import State
 from rfw.meshlets import cached_meshlets, pack_for_gpu
 from rfw.shaders import ShaderError
 
-from .commands import barrier, upload_buffer
+from .commands import barrier, image_layout, upload_buffer
 from .consts import const, ffi, lib, vk
 from .scene import COMPARE, DescriptorPool, DescriptorSetLayout, VkScene, new, update_descriptors
 from .spirv import compile_glsl, reflect
@@ -50,8 +50,8 @@ SHADERS = ROOT / "passes" / "meshlet_gbuffer"
 FRAGMENT = ROOT / "passes" / "gbuffer" / "gbuffer.frag.glsl"  # reused unchanged
 TASK_GROUP = 32  # meshlets per task workgroup (meshlet.glsl's TASK_GROUP)
 MAX_VERTICES, MAX_TRIANGLES = 64, 124
-CONE, FRUSTUM = 1, 2  # culling flag bits
-COUNTERS = ("considered", "cone_culled", "frustum_culled", "drawn")
+CONE, FRUSTUM, OCCLUSION = 1, 2, 4  # culling flag bits
+COUNTERS = ("considered", "cone_culled", "frustum_culled", "drawn", "occlusion_culled")
 
 _TASK_MESH = ("VK_SHADER_STAGE_TASK_BIT_EXT", "VK_SHADER_STAGE_MESH_BIT_EXT")
 _STAGES = {"task": "VK_SHADER_STAGE_TASK_BIT_EXT", "mesh": "VK_SHADER_STAGE_MESH_BIT_EXT",
@@ -153,8 +153,9 @@ class MeshletScene:
         inst = b"".join(_instance_rows(i.transform) for i in scene.instances) or bytes(144)
         self._upload("instances", np.frombuffer(inst, np.uint8))
         self.buffers["counters"] = alloc.create_buffer(
-            16, ("storage", "transfer_dst"), host_visible=True, label="meshlets.counters")
-        self.buffers["counters"].write(np.zeros(4, np.uint32))
+            4 * len(COUNTERS), ("storage", "transfer_dst"), host_visible=True,
+            label="meshlets.counters")
+        self.buffers["counters"].write(np.zeros(len(COUNTERS), np.uint32))
         self.last: dict[str, int] | None = None
 
         # set 0: this module's layout (task + mesh stages); sets 1-3 are the scene's
@@ -165,7 +166,10 @@ class MeshletScene:
                                               label="meshlets:set0")
         self.pool = DescriptorPool(dev, 2, {"uniform_buffer": 2, "storage_buffer": 24},
                                    label="meshlets:descriptors")
-        self.objects += [self.set_layout, self.pool]
+        # set 4 (occlusion variant only): the previous frame's depth pyramid, allocated per frame
+        self.pyramid_layout = DescriptorSetLayout(dev, [(0, "sampled_image", 1)],
+                                                  _flags(_TASK_MESH), label="meshlets:set4")
+        self.objects += [self.set_layout, self.pool, self.pyramid_layout]
         self.sets = {}
         for cam in ("main", "sun"):
             s = self.pool.allocate([self.set_layout.handle])
@@ -177,17 +181,20 @@ class MeshletScene:
             self.sets[cam] = s
         self.modules = {}
         push = 0
-        for stage, path in (("task", SHADERS / "meshlet_gbuffer.task.glsl"),
-                            ("mesh", SHADERS / "meshlet_gbuffer.mesh.glsl"),
-                            ("frag", FRAGMENT)):
-            spv = compile_glsl(path, {})
+        for stage, path, defines in (
+                ("task", SHADERS / "meshlet_gbuffer.task.glsl", {}),
+                ("task_occlusion", SHADERS / "meshlet_gbuffer.task.glsl", {"OCCLUSION": 1}),
+                ("mesh", SHADERS / "meshlet_gbuffer.mesh.glsl", {}),
+                ("frag", FRAGMENT, {})):
+            spv = compile_glsl(path, defines)
             push = max(push, reflect(spv.code).push_constant_size)
             words_ = ffi.new("uint32_t[]", len(spv.code) // 4)
             ffi.memmove(words_, spv.code, len(spv.code))
             info = new("VkShaderModuleCreateInfo", codeSize=len(spv.code), pCode=words_)
             self.modules[stage] = self._own(vk.vkCreateShaderModule(dev.device, info, None),
                                             "vkDestroyShaderModule")
-        layouts = [self.set_layout.handle] + [vscene.layouts[i].handle for i in (1, 2, 3)]
+        layouts = [self.set_layout.handle] + [vscene.layouts[i].handle for i in (1, 2, 3)] + \
+            [self.pyramid_layout.handle]
         handles = ffi.new("VkDescriptorSetLayout[]", layouts)
         rng = ffi.new("VkPushConstantRange*")
         rng.stageFlags, rng.offset, rng.size = _flags(_TASK_MESH), 0, push
@@ -211,15 +218,17 @@ class MeshletScene:
         self.buffers[name] = buf
 
     def pipeline(self, colors: Sequence[int], depth: int | None, depth_compare: str,
-                 cull: str) -> Any:
-        key = (tuple(colors), depth, depth_compare, cull)
+                 cull: str, occlusion: bool = False) -> Any:
+        key = (tuple(colors), depth, depth_compare, cull, occlusion)
         pipe = self.pipelines.get(key)
         if pipe is not None:
             return pipe
         stages = new("VkPipelineShaderStageCreateInfo", 3)
         entry = ffi.new("char[]", b"main")
-        for i, (stage, module) in enumerate(self.modules.items()):
-            stages[i].stage, stages[i].module, stages[i].pName = const(_STAGES[stage]), module, entry
+        task = "task_occlusion" if occlusion else "task"
+        for i, stage in enumerate((task, "mesh", "frag")):
+            module = self.modules[stage]
+            stages[i].stage, stages[i].module, stages[i].pName = const(_STAGES[stage.split("_")[0]]), module, entry
         viewport = new("VkPipelineViewportStateCreateInfo", viewportCount=1, scissorCount=1)
         cull_bits = {"none": "VK_CULL_MODE_NONE", "back": "VK_CULL_MODE_BACK_BIT",
                      "front": "VK_CULL_MODE_FRONT_BIT"}[cull]
@@ -254,7 +263,7 @@ class MeshletScene:
     def counters(self) -> dict[str, int]:
         """The last frame's counters (call after the frame was waited for), with
         ``meshlets_total``: the sum over drawn instances of their meshes' meshlets."""
-        values = self.buffers["counters"].read(np.uint32, 4)
+        values = self.buffers["counters"].read(np.uint32, len(COUNTERS))
         out = dict(zip(COUNTERS, (int(v) for v in values), strict=True))
         out["meshlets_total"] = self.instance_meshlets()
         return out
@@ -292,11 +301,19 @@ def meshlet_scene(vscene: VkScene) -> MeshletScene:
 def draw_meshlets(ctx: Any, *, color: Sequence[tuple[str, Any]], depth: tuple[str, Any] | None,
                   cone: bool = True, frustum: bool = True, depth_compare: str = "less-equal",
                   cull: str = "back", camera: str = "main",
-                  alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
+                  alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
+                  pyramid: Any = None) -> int:
     """Draw the scene's instances through the task + mesh shaders into ``color`` (and
     ``depth``) with dynamic rendering; returns the draws. Cone culling needs ``cull="back"``
     (it removes meshlets with back faces only) and the perspective main camera; otherwise it
-    is left off."""
+    is left off.
+
+    ``pyramid`` (an ``ImageBinding`` of the previous frame's max-depth pyramid, sampled in the
+    task stage; ``passes/depth_pyramid``) turns on occlusion culling of the meshlets that
+    survive the other tests: the bounding sphere's screen rectangle against the pyramid level
+    where it covers at most 2x2 texels. Single phase: it is conservative while the previous
+    frame's depth is no nearer than this frame's (a still camera and scene); main camera
+    only."""
     if ctx.scene is None:
         raise ShaderError(f"pass '{ctx.pass_.name}' draws the scene, but none is loaded")
     if "VK_EXT_mesh_shader" not in ctx.device.caps:
@@ -307,15 +324,17 @@ def draw_meshlets(ctx: Any, *, color: Sequence[tuple[str, Any]], depth: tuple[st
     targets = [ex.image(r) for r, _ in colors]
     dimage = ex.image(ctx.resource(depth[0])) if depth is not None else None
     first = (targets or [dimage])[0]
+    occlusion = pyramid is not None and camera == "main"
     pipe = ms.pipeline([t.vk_format for t in targets],
-                       dimage.vk_format if dimage is not None else None, depth_compare, cull)
+                       dimage.vk_format if dimage is not None else None, depth_compare, cull,
+                       occlusion)
     # the cone test is the perspective one (apex to camera position): main camera only
     flags = (CONE if cone and cull == "back" and camera == "main" else 0) | \
-        (FRUSTUM if frustum else 0)
+        (FRUSTUM if frustum else 0) | (OCCLUSION if occlusion else 0)
     counters = ms.buffers["counters"]
     # zero the counters after the last frame's task shader, before this frame's
     barrier(cmd, memory_barriers=[(_TASK_RW, _FILL)])
-    vk.vkCmdFillBuffer(cmd, counters.handle, 0, 16, 0)
+    vk.vkCmdFillBuffer(cmd, counters.handle, 0, counters.bytes, 0)
     barrier(cmd, memory_barriers=[(_FILL, _TASK_RW)])
     point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
     draws = 0
@@ -331,6 +350,13 @@ def draw_meshlets(ctx: Any, *, color: Sequence[tuple[str, Any]], depth: tuple[st
         lib.vkCmdBindDescriptorSets(cmd, point, ms.layout, 0, 1, ms.sets[camera], 0, ffi.NULL)
         lib.vkCmdBindDescriptorSets(cmd, point, ms.layout, 1, 1, ctx.scene.camera_sets[camera],
                                     0, ffi.NULL)
+        if occlusion:
+            layout = ctx.executor.state_in(ctx.pass_.name, pyramid.resource).layout
+            pset = ctx.executor.descriptors.allocate(ms.pyramid_layout.handle,
+                                                     [(0, "sampled_image", 1)])
+            update_descriptors(ctx.device, [(pset[0], 0, "sampled_image",
+                                             (pyramid.view.handle, image_layout(layout)))])
+            lib.vkCmdBindDescriptorSets(cmd, point, ms.layout, 4, 1, pset, 0, ffi.NULL)
         stage_flags = _flags(_TASK_MESH)
         last_material = None
         for k, inst in enumerate(scene.instances):

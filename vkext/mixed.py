@@ -164,7 +164,8 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
     for name, mapping in built.slots.items():
         if name not in decls:
             continue
-        rewired = {b.slot: b.resource for b in decls[name].inputs}
+        # bridges rewire reads to copies; history slots keep their "@prev" resource
+        rewired = {b.slot: b.resource for b in decls[name].inputs if b.spec.type != "history"}
         slots[name] = {slot: rewired.get(slot, res) for slot, res in mapping.items()}
     return MixedPlan(plan, backend, side, bridges, graphs, slots, owner)
 

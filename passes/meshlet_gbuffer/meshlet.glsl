@@ -34,7 +34,7 @@ layout(push_constant) uniform MDraw {
     uint instance;        // index into m_instances
     uint first_meshlet;   // the mesh's first row of m_meshlets
     uint meshlet_count;
-    uint flags;           // bit 0: cone culling, bit 1: frustum culling
+    uint flags;           // bit 0: cone, bit 1: frustum, bit 2: occlusion culling
 } m_draw;
 
 struct MPayload {

@@ -93,3 +93,11 @@ def test_unconnected_required_input_is_an_error(tmp_path):
     path.write_text('[[pass]]\nname = "tonemap"\ninputs = { hrd = "x.y" }\n')
     with pytest.raises(GraphError, match=r"no input slot 'hrd' \(did you mean 'hdr'"):
         build(load_config(path))
+
+
+def test_history_slots_map_to_last_frames_copy():
+    built = build(load_config(ROOT / "configs" / "deferred_meshlet_occlusion.toml"))
+    pyramid = built.slots["gbuffer"]["pyramid"]
+    assert pyramid == "hiz.pyramid@prev"  # the plan's ping-pong copy, not this frame's
+    plan = compile(built.graph)
+    assert {a.resource: a.role for a in plan.accesses["gbuffer"]}[pyramid] == "history"
