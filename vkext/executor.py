@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rfw.backends.base import FrameExecutor
+from rfw.backends.base import FrameExecutor, SlotContext
 from rfw.graph import CompiledGraph
 from rfw.graph.compile import MemoryOptions, compile
 from rfw.graph.formats import format_info
@@ -587,7 +587,7 @@ class ImageBinding:
     view: ImageView
 
 
-class VkPassContext:
+class VkPassContext(SlotContext):
     """What ``Pass.record`` sees on Vulkan: the wgpu ``PassContext``'s interface."""
 
     def __init__(self, executor: VkExecutor, pass_: Pass, cmd: Any, slots: dict[str, str]):
@@ -600,16 +600,6 @@ class VkPassContext:
         self.frame = executor.frame_index
 
     # resources ----------------------------------------------------------------------------
-    def resource(self, slot: str) -> str:
-        try:
-            return self.slots[slot]
-        except KeyError:
-            raise ShaderError(f"pass '{self.pass_.name}' has no slot '{slot}' "
-                              f"(slots: {', '.join(self.slots)})") from None
-
-    def has(self, slot: str) -> bool:
-        return slot in self.slots
-
     def texture(self, slot: str) -> Image:
         return self.executor.image(self.resource(slot))
 

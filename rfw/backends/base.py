@@ -2,6 +2,25 @@
 
 from __future__ import annotations
 
+from ..shaders import ShaderError
+
+
+class SlotContext:
+    """What both pass contexts share: a pass's resources reached by slot name."""
+
+    pass_: object
+    slots: dict[str, str]  # slot -> resource
+
+    def resource(self, slot: str) -> str:
+        try:
+            return self.slots[slot]
+        except KeyError:
+            raise ShaderError(f"pass '{self.pass_.name}' has no slot '{slot}' "  # type: ignore
+                              f"(slots: {', '.join(self.slots)})") from None
+
+    def has(self, slot: str) -> bool:
+        return slot in self.slots
+
 
 class FrameExecutor:
     """Runs a compiled graph frame by frame; a frame can also be driven pass by pass

@@ -22,7 +22,7 @@ from ..graph.compile import ResourcePlan
 from ..graph.formats import format_info
 from ..passes import Pass, Settings
 from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, reflect
-from .base import FrameExecutor
+from .base import FrameExecutor, SlotContext
 
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
@@ -236,7 +236,7 @@ class PassTiming:
     cpu_ms: list[float] = field(default_factory=list)
 
 
-class PassContext:
+class PassContext(SlotContext):
     """What ``Pass.record`` sees: its resources by slot name and ways to record work."""
 
     def __init__(self, executor: Executor, pass_: Pass, encoder: Any, slots: dict[str, str]):
@@ -249,13 +249,6 @@ class PassContext:
         self.frame = executor.frame_index
 
     # resources ----------------------------------------------------------------------------
-    def resource(self, slot: str) -> str:
-        try:
-            return self.slots[slot]
-        except KeyError:
-            raise ShaderError(f"pass '{self.pass_.name}' has no slot '{slot}' "
-                              f"(slots: {', '.join(self.slots)})") from None
-
     def texture(self, slot: str) -> Any:
         return self.executor.texture(self.resource(slot))
 
@@ -275,9 +268,6 @@ class PassContext:
 
     def format(self, slot: str) -> str:
         return wgpu_format(self.executor.plan.resource(self.resource(slot)).format)
-
-    def has(self, slot: str) -> bool:
-        return slot in self.slots
 
     # recording ----------------------------------------------------------------------------
     def _timestamps(self) -> dict | None:
