@@ -27,11 +27,12 @@ import importlib.machinery
 import importlib.metadata
 import importlib.util
 import os
-import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
+
+from .fileio import atomic_write
 
 # the PyPI package bundles the C library 0.22 (MESHOPTIMIZER_VERSION 220 in its src/meshoptimizer.h)
 MESHOPTIMIZER_PIN = "0.2.30a0"
@@ -334,13 +335,5 @@ def cached_meshlets(
     arrays.update(
         {f"bounds.{f.name}": getattr(result.bounds, f.name) for f in fields(MeshletBounds)}
     )
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)  # readers see the old entry or the whole new one
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, lambda f: np.savez(f, **arrays))  # readers see old or whole new
     return result

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import statistics
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -13,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .config import Config, build
+from .fileio import atomic_write
 from .graph import compile
 from .graph.formats import format_info
 
@@ -93,15 +92,26 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     finally:
         ex.destroy()
         gpu_scene.destroy()
-    passes = [{"name": n, "gpu_ms": _median(ex.timings[n].gpu_ms),
-               "cpu_ms": _median(ex.timings[n].cpu_ms)} for n in plan.order]
-    timings = {**device.describe(), "config": cfg.name, "variants": cfg.chosen,
-               "size": list(cfg.size), "frames": frames or cfg.frames,
-               "scene": scene.name, "triangles": scene.triangle_count,
-               "default_light": gpu_scene.default_light,
-               "timestamps": "timestamp-query" in device.features, "passes": passes,
-               "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes)}
+    passes = pass_timings(plan.order, ex.timings)
+    timings = {**device.describe(), **frame_record(
+        cfg, frames or cfg.frames, scene, gpu_scene.default_light, passes,
+        timestamps="timestamp-query" in device.features)}
     return Result(cfg, images, timings, ex)
+
+
+def pass_timings(order: Any, timings: dict[str, Any]) -> list[dict[str, Any]]:
+    """``timings.json``'s per-pass entries: medians over the timed frames."""
+    return [{"name": n, "gpu_ms": median(timings[n].gpu_ms),
+             "cpu_ms": median(timings[n].cpu_ms)} for n in order]
+
+
+def frame_record(cfg: Config, frames: int, scene: Any, default_light: bool,
+                 passes: list[dict[str, Any]], *, timestamps: bool) -> dict[str, Any]:
+    """The fields of ``timings.json`` every backend writes (the device's come first)."""
+    return {"config": cfg.name, "variants": cfg.chosen, "size": list(cfg.size),
+            "frames": frames, "scene": scene.name, "triangles": scene.triangle_count,
+            "default_light": default_light, "timestamps": timestamps, "passes": passes,
+            "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes)}
 
 
 def pinned_elsewhere(cfg: Config, backend: str) -> bool:
@@ -113,7 +123,7 @@ def pinned_elsewhere(cfg: Config, backend: str) -> bool:
                for e in cfg.passes)
 
 
-def _median(values: list[float]) -> float | None:
+def median(values: list[float]) -> float | None:
     return statistics.median(values) if values else None
 
 
@@ -147,24 +157,12 @@ def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -
     for name, image in result.images.items():
         path = out_dir / f"{name}.png"
         rgba = to_png_array(image, plan_formats[name])
-        _atomic(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+        atomic_write(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
         written.append(path)
     path = out_dir / "timings.json"
-    _atomic(path, lambda f: f.write(json.dumps(result.timings, indent=2).encode() + b"\n"))
+    atomic_write(path, lambda f: f.write(json.dumps(result.timings, indent=2).encode() + b"\n"))
     written.append(path)
     return written
-
-
-def _atomic(path: Path, write: Any) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def table(timings: dict[str, Any]) -> str:

@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
-import statistics
 from typing import Any
 
 from rfw.config import Config, build
-from rfw.render import Result, camera_for, load_scene_for, pinned_elsewhere
+from rfw.render import (
+    Result,
+    camera_for,
+    frame_record,
+    load_scene_for,
+    pass_timings,
+    pinned_elsewhere,
+)
 
 from .device import VkDevice
 from .executor import VkExecutor, check_passes, fit_plan
@@ -63,14 +69,11 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
     finally:
         if own:
             device.destroy()  # leak reports arrive here, so count messages after it
-    passes = [{"name": name, "gpu_ms": _median(ex.timings[name].gpu_ms),
-               "cpu_ms": _median(ex.timings[name].cpu_ms)} for name in plan.order]
+    passes = pass_timings(plan.order, ex.timings)
     timings: dict[str, Any] = {
-        **device.describe(), "config": cfg.name, "variants": cfg.chosen,
-        "size": list(cfg.size), "frames": n, "scene": scene.name,
-        "triangles": scene.triangle_count, "default_light": vscene.default_light,
-        "timestamps": "timestamp" in device.caps, "passes": passes,
-        "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes), "memory": memory}
+        **device.describe(), **frame_record(cfg, n, scene, vscene.default_light, passes,
+                                            timestamps="timestamp" in device.caps),
+        "memory": memory}
     culling = _culling(ex)
     if culling is not None:
         timings["culling"] = culling
@@ -94,5 +97,3 @@ def _culling(ex: Any) -> dict[str, int | None] | None:
     return None
 
 
-def _median(values: list[float]) -> float | None:
-    return statistics.median(values) if values else None

@@ -36,7 +36,6 @@ is pinned to a backend other than the run's); ``open_frame`` gives the ``MixedFr
 
 from __future__ import annotations
 
-import statistics
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -48,7 +47,7 @@ from rfw.graph import CompiledGraph, compile
 from rfw.graph.bridges import backend_of, insert_bridges
 from rfw.graph.graph import Graph
 from rfw.graph.resources import Binding, SizeRule
-from rfw.render import Result, camera_for, load_scene_for
+from rfw.render import Result, camera_for, frame_record, load_scene_for, median
 from rfw.shaders import ShaderError
 
 from .commands import read_buffer, read_image, upload_buffer, upload_image
@@ -286,12 +285,12 @@ class MixedFrame:
             side = self.mixed.side[name]
             if name in self.mixed.bridges:
                 t = self.bridge_timings[name]
-                out.append({"name": name, "gpu_ms": None, "cpu_ms": _median(t.cpu_ms),
+                out.append({"name": name, "gpu_ms": None, "cpu_ms": median(t.cpu_ms),
                             "backend": side, "bytes": t.bytes})
             else:
                 t = self.executors[side].timings[name]
-                out.append({"name": name, "gpu_ms": _median(t.gpu_ms),
-                            "cpu_ms": _median(t.cpu_ms), "backend": side})
+                out.append({"name": name, "gpu_ms": median(t.gpu_ms),
+                            "cpu_ms": median(t.cpu_ms), "backend": side})
         return out
 
     def destroy(self) -> None:
@@ -404,11 +403,9 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
     timings: dict[str, Any] = {
         **{k: " + ".join(dict.fromkeys(d[k] for d in described.values()))
            for k in ("device", "driver", "api")},
-        "backend": "+".join(sides), "backends": described, "config": cfg.name,
-        "variants": cfg.chosen, "size": list(cfg.size), "frames": n, "scene": scene.name,
-        "triangles": scene.triangle_count, "default_light": frame.default_light,
-        "timestamps": all(_timestamps(frame.devices[s]) for s in sides), "passes": passes,
-        "gpu_ms_total": sum(p["gpu_ms"] or 0.0 for p in passes),
+        "backend": "+".join(sides), "backends": described,
+        **frame_record(cfg, n, scene, frame.default_light, passes,
+                       timestamps=all(_timestamps(frame.devices[s]) for s in sides)),
         "bridge_ms_total": sum(p["cpu_ms"] or 0.0 for p in passes
                                if p["name"] in frame.mixed.bridges),
         "bridges": [p["name"] for p in passes if p["name"] in frame.mixed.bridges]}
@@ -423,7 +420,3 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
 def _timestamps(device: Any) -> bool:
     # wgpu's Device.caps names WebGPU features, VkDevice.caps vkext's capabilities
     return bool({"timestamp-query", "timestamp"} & set(device.caps))
-
-
-def _median(values: list[float]) -> float | None:
-    return statistics.median(values) if values else None

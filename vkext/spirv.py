@@ -19,6 +19,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rfw.fileio import atomic_write
 from rfw.graph.errors import GraphError
 
 COMMON = Path(__file__).resolve().parents[1] / "shaders" / "common"
@@ -112,10 +113,7 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
         if done.returncode != 0 or not out.is_file():
             raise ShaderCompileError(_first_error(done.stdout + done.stderr, path, source))
         code = out.read_bytes()
-    cached.parent.mkdir(parents=True, exist_ok=True)
-    tmp_path = cached.with_suffix(f".{os.getpid()}.tmp")
-    tmp_path.write_bytes(code)
-    os.replace(tmp_path, cached)  # atomic: a parallel compile never sees half a file
+    atomic_write(cached, lambda f: f.write(code))  # a parallel compile never sees half a file
     return Spirv(path, stage, code, key)
 
 
