@@ -60,6 +60,7 @@ class Config:
     source: str = "<config>"
     chosen: dict[str, str] = field(default_factory=dict)  # variant -> option in force
     base: list[PassEntry] = field(default_factory=list)  # the passes as the file declares
+    explicit: list[tuple[str, Any]] = field(default_factory=list)  # --set pass.key=value
 
     def entry(self, name: str) -> PassEntry:
         for p in self.passes:
@@ -122,6 +123,8 @@ def load_config(path: str | Path) -> Config:
                  int(data.get("frames", 1)), source, base=list(passes))
     for vname, v in variants.items():
         default = v.get("default")
+        if isinstance(default, bool):  # a switch: default = true
+            default = _boolean_option(str(default).lower(), [k for k in v if k != "default"])
         if default is None or default not in v:
             raise _fail(source, f"variants.{vname}: 'default' must name one of its options "
                                 f"({', '.join(k for k in v if k != 'default')})")
@@ -130,24 +133,50 @@ def load_config(path: str | Path) -> Config:
 
 
 def _apply_variant(cfg: Config, vname: str, option: str) -> Config:
+    """Choose ``option`` of variant ``vname`` and recompute the passes: the file's passes,
+    then every variant's chosen overrides in the order the file declares the variants (so a
+    later variant wins where two set one key, whatever the order of ``--set``), then the
+    explicit ``--set pass.key`` overrides in their order."""
     v = cfg.variants[vname]
     options = [k for k in v if k != "default"]
+    option = _boolean_option(option, options)
     if option not in options:
         raise _fail(cfg.source, f"variant '{vname}' has no option '{option}'"
                     + did_you_mean(option, options))
-    # undo what the previous option set, then apply the new one
-    prev = cfg.chosen.get(vname)
-    cfg = replace(cfg, chosen={**cfg.chosen, vname: option})
-    keys = set(v.get(prev, {})) if prev else set()
-    for key in keys - set(v[option]):
-        cfg = _set(cfg, key, None, reset=True)
-    for key, value in v[option].items():
-        cfg = _set(cfg, key, value)
-    return cfg
+    return _recompute(replace(cfg, chosen={**cfg.chosen, vname: option}))
 
 
-def _set(cfg: Config, key: str, value: Any, *, reset: bool = False) -> Config:
-    """Set one pass key; ``reset`` restores what the config file says for it."""
+def _recompute(cfg: Config) -> Config:
+    out = replace(cfg, passes=list(cfg.base))
+    for name, v in cfg.variants.items():
+        if name in cfg.chosen:
+            for key, value in v[cfg.chosen[name]].items():
+                out = _set(out, key, value)
+    for key, value in cfg.explicit:
+        out = _set(out, key, value)
+    return out
+
+
+_TRUE, _FALSE = ("true", "on", "1", "yes"), ("false", "off", "0", "no")
+
+
+def _boolean_option(option: str, options: list[str]) -> str:
+    """A switch variant (options spelled true/false or on/off) takes any boolean spelling:
+    ``--set culling.cone=off`` picks the option ``false``."""
+    if option in options:
+        return option
+    word = str(option).lower()
+    for group in (_TRUE, _FALSE):
+        if word in group:
+            match = [o for o in options if o.lower() in group]
+            if len(match) == 1:
+                return match[0]
+    return option
+
+
+def _set(cfg: Config, key: str, value: Any) -> Config:
+    """Set one pass key: ``<pass>.enabled``, ``<pass>.inputs.<slot>`` or
+    ``<pass>.<setting>``."""
     head, _, tail = key.partition(".")
     if not tail:
         raise _fail(cfg.source, f"cannot set '{key}': use <pass>.<setting>, <pass>.enabled, "
@@ -158,26 +187,11 @@ def _set(cfg: Config, key: str, value: Any, *, reset: bool = False) -> Config:
         if p is not entry:
             passes.append(p)
         elif tail == "enabled":
-            original = next((b.enabled for b in cfg.base if b.name == p.name), True)
-            passes.append(replace(p, enabled=original if reset
-                                  else _bool(value, key, cfg.source)))
+            passes.append(replace(p, enabled=_bool(value, key, cfg.source)))
         elif tail.startswith("inputs."):
-            slot = tail[7:]
-            inputs = dict(p.inputs)
-            original = next((b.inputs.get(slot) for b in cfg.base if b.name == p.name), None)
-            if reset and original is None:
-                inputs.pop(slot, None)
-            else:
-                inputs[slot] = original if reset else value
-            passes.append(replace(p, inputs=inputs))
+            passes.append(replace(p, inputs={**p.inputs, tail[7:]: value}))
         else:
-            settings = dict(p.settings)
-            original = next((b.settings for b in cfg.base if b.name == p.name), {})
-            if reset and tail not in original:
-                settings.pop(tail, None)
-            else:
-                settings[tail] = original[tail] if reset else value
-            passes.append(replace(p, settings=settings))
+            passes.append(replace(p, settings={**p.settings, tail: value}))
     return replace(cfg, passes=passes)
 
 
@@ -216,7 +230,8 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
                                                                              "frames"]
                 raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
                             + did_you_mean(head, known))
-            cfg = _set(cfg, key, value)
+            cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
+            cfg = replace(cfg, explicit=[*cfg.explicit, (key, value)])
     return cfg
 
 

@@ -1,4 +1,6 @@
-"""configs/meshlet.toml: the deferred pipeline on Vulkan with a meshlet/vertex G-buffer variant."""
+"""configs/meshlet.toml: the deferred pipeline on Vulkan with a meshlet/vertex G-buffer
+variant and the culling switches ``culling.cone``, ``culling.frustum``, ``culling.occlusion``
+(two-phase: gbuffer early, hiz, gbuffer_late) and ``culling.triangles``."""
 
 from __future__ import annotations
 
@@ -8,76 +10,92 @@ import numpy as np
 import pytest
 
 from rfw.config import apply_overrides, build, load_config
-from rfw.graph import compile
+from rfw.graph import GraphError, compile
 
 from .conftest import tiny_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "meshlet.toml"
 SLOTS = ("albedo", "normal", "material", "emissive", "depth")
-GBUFFER = {"meshlet": "gbuffer_meshlet", "vertex": "gbuffer_vertex"}
-USE = {"gbuffer_meshlet": "meshlet_gbuffer", "gbuffer_vertex": "gbuffer"}
+MESHLET_ORDER = ("gbuffer", "hiz", "gbuffer_late", "lighting", "tonemap")
 
 
 def _config(*sets: str):
     return apply_overrides(load_config(CONFIG), list(sets))
 
 
-def _check(cfg, geometry: str) -> None:
-    on = GBUFFER[geometry]
-    off = next(v for v in GBUFFER.values() if v != on)
-    assert cfg.chosen["geometry"] == geometry
-    assert cfg.entry(on).enabled and not cfg.entry(off).enabled
-    assert cfg.entry(on).use == USE[on] and cfg.entry(off).use == USE[off]
-    lighting = cfg.entry("lighting")
-    assert {s: lighting.inputs[s] for s in SLOTS} == {s: f"{on}.{s}" for s in SLOTS}
-    assert lighting.inputs["shadow"] == "shadow.depth"
-    built = build(cfg)
-    assert off not in built.passes and on in built.passes
-    assert {s: built.slots["lighting"][s] for s in SLOTS} == {s: f"{on}.{s}" for s in SLOTS}
-    compiled = compile(built.graph, cfg.size, backend="vk")
-    assert compiled.order == (on, "lighting", "tonemap")
-    assert off in compiled.disabled
+def _order(cfg) -> tuple[str, ...]:
+    return compile(build(cfg).graph, cfg.size, backend="vk").order
 
 
-def test_every_pass_is_pinned_to_vk():
+def _params(cfg, name: str) -> dict:
+    return build(cfg).passes[name].params.as_dict()
+
+
+def test_every_pass_is_pinned_to_vk_and_defaults_cull_everything():
     cfg = load_config(CONFIG)
     assert all(p.backend == "vk" for p in cfg.passes)
-    assert cfg.chosen == {"geometry": "meshlet", "cone": "on", "frustum": "on"}
+    assert cfg.chosen == {"culling.cone": "true", "culling.frustum": "true",
+                          "culling.occlusion": "true", "culling.triangles": "false",
+                          "debug": "none", "geometry": "meshlet"}
+    assert _order(cfg) == MESHLET_ORDER
+    assert _params(cfg, "gbuffer")["phase"] == "early"
+    assert _params(cfg, "gbuffer_late")["phase"] == "late"
 
 
-@pytest.mark.parametrize("geometry", ["meshlet", "vertex"])
-def test_builds_and_compiles(geometry):
-    _check(_config(f"geometry={geometry}"), geometry)
-
-
-def test_default_is_meshlet():
-    _check(load_config(CONFIG), "meshlet")
-
-
-def test_geometry_round_trips():
+def test_vertex_geometry_wires_lighting_to_the_vertex_gbuffer():
     cfg = _config("geometry=vertex")
-    _check(cfg, "vertex")
-    back = apply_overrides(cfg, ["geometry=meshlet"])
-    _check(back, "meshlet")
+    built = build(cfg)
+    assert {s: built.slots["lighting"][s] for s in SLOTS} == \
+        {s: f"gbuffer_vertex.{s}" for s in SLOTS}
+    assert _order(cfg) == ("gbuffer_vertex", "lighting", "tonemap")
+
+
+@pytest.mark.parametrize("sets", [
+    ["geometry=vertex", "culling.occlusion=true"],  # geometry wins in any --set order
+    ["culling.occlusion=true", "geometry=vertex"],
+])
+def test_geometry_wins_over_the_culling_switches(sets):
+    assert _order(_config(*sets)) == ("gbuffer_vertex", "lighting", "tonemap")
+
+
+def test_occlusion_off_is_one_pass_without_a_pyramid():
+    cfg = _config("culling.occlusion=false")
+    assert _order(cfg) == ("gbuffer", "lighting", "tonemap")
+    assert _params(cfg, "gbuffer")["phase"] == "single"
+    back = apply_overrides(cfg, ["geometry=vertex", "geometry=meshlet", "culling.occlusion=on"])
     assert back.passes == load_config(CONFIG).passes
-    again = apply_overrides(back, ["geometry=vertex"])
-    assert again.passes == cfg.passes
 
 
-def test_culling_switches():
-    cfg = _config("cone=off")
-    assert cfg.entry("gbuffer_meshlet").settings == {"cone": False, "frustum": True}
-    cfg = apply_overrides(cfg, ["frustum=off", "cone=on"])
-    assert cfg.entry("gbuffer_meshlet").settings == {"cone": True, "frustum": False}
-    assert _culling(cfg) == (True, False)
-    cfg = apply_overrides(cfg, ["gbuffer_meshlet.cone=false"])  # the direct spelling
-    assert _culling(cfg) == (False, False)
+@pytest.mark.parametrize("spelling", ["false", "off", "0", "no", "False"])
+def test_switches_take_any_boolean_spelling(spelling):
+    cfg = _config(f"culling.cone={spelling}", f"culling.frustum={spelling}")
+    for name in ("gbuffer", "gbuffer_late"):
+        p = _params(cfg, name)
+        assert (p["cone"], p["frustum"]) == (False, False)
 
 
-def _culling(cfg) -> tuple[bool, bool]:
-    params = build(cfg).passes["gbuffer_meshlet"].params.as_dict()
-    return params["cone"], params["frustum"]
+def test_triangles_and_debug_colors_reach_both_phases():
+    cfg = _config("culling.triangles=true", "debug=meshlets")
+    for name in ("gbuffer", "gbuffer_late"):
+        p = _params(cfg, name)
+        assert p["triangles"] and p["colors"]
+
+
+def test_explicit_settings_apply_after_the_variants():
+    cfg = _config("gbuffer.cone=false", "culling.cone=true")
+    assert not _params(cfg, "gbuffer")["cone"]  # the explicit --set stays in force
+    assert _params(cfg, "gbuffer_late")["cone"]
+
+
+def test_bad_switch_value_names_the_variant():
+    with pytest.raises(GraphError, match=r"culling.occlusion.*maybe"):
+        _config("culling.occlusion=maybe")
+
+
+def test_bad_phase_names_the_pass():
+    with pytest.raises(GraphError, match=r"gbuffer.*phase"):
+        build(_config("gbuffer.phase=middle"))
 
 
 def test_both_geometries_render_the_same_image():
@@ -95,9 +113,10 @@ def test_both_geometries_render_the_same_image():
         images = {}
         for geometry in ("meshlet", "vertex"):
             r = render_vk(_config(f"geometry={geometry}", "size=96x54"), scene=tiny_scene(),
-                          device=device)
+                          device=device, frames=2)
             assert r.timings["validation"]["messages"] == 0
             images[geometry] = r.images["tonemap.ldr"].astype(np.int16)
+            assert ("culling" in r.timings) == (geometry == "meshlet")
         assert images["vertex"].shape[:2] == (54, 96)
         assert images["vertex"][..., :3].std() > 5  # a real picture, not a cleared target
         assert np.abs(images["meshlet"] - images["vertex"]).max() <= 1

@@ -1,10 +1,23 @@
 #version 460
-// twin of gbuffer.wgsl (fs_main)
+// twin of gbuffer.wgsl (fs_main). MESHLET_COLORS (the meshlet G-buffer's debug view): the
+// albedo is a color per meshlet, from the mesh shader's per-primitive meshlet row.
+#ifdef MESHLET_COLORS
+#extension GL_EXT_mesh_shader : require
+#endif
 #include "mesh.glsl"
 
 layout(location = 0) in vec3 i_normal;
 layout(location = 1) in vec2 i_uv;
 layout(location = 2) in vec4 i_tangent;
+#ifdef MESHLET_COLORS
+layout(location = 3) perprimitiveEXT flat in uint i_meshlet;
+
+vec3 meshlet_color(uint id) {
+    uint h = id * 2654435761u;  // Knuth's multiplicative hash: neighbours get far-apart hues
+    h ^= h >> 15;
+    return vec3(uvec3(h, h >> 8, h >> 16) & 255u) / 255.0 * 0.8 + 0.2;
+}
+#endif
 
 layout(location = 0) out vec4 g_albedo;
 layout(location = 1) out vec4 g_normal;
@@ -16,7 +29,11 @@ void main() {
     if (material.flags.x == 1u && s.base_color.a < material.params.w) {
         discard;
     }
+#ifdef MESHLET_COLORS
+    g_albedo = vec4(meshlet_color(i_meshlet), 1.0);
+#else
     g_albedo = vec4(s.base_color.rgb, 1.0);
+#endif
     g_normal = vec4(s.normal, 1.0);
     g_material = vec4(s.occlusion, s.roughness, s.metallic, 1.0);
     g_emissive = vec4(s.emissive, 1.0);

@@ -2,6 +2,12 @@
 // one meshlet per workgroup: the twin of gbuffer.vert.glsl for the meshlet's vertices (the
 // same expressions, the same y flip, invariant position), and its packed 8-bit triangles.
 // passes/gbuffer/gbuffer.frag.glsl shades the result unchanged.
+//
+// F_TRIANGLES culls back-facing triangles here (gl_CullPrimitiveEXT) before the rasterizer
+// would: only triangles whose three vertices are in front of the eye and whose signed
+// pixel area is negative by more than the rasterizer's snapping could change (1/256 pixel
+// per vertex), so the image cannot change. F_COLORS writes each triangle's meshlet (per
+// primitive) for the debug colors of gbuffer.frag.glsl's MESHLET_COLORS.
 #extension GL_EXT_mesh_shader : require
 #include "meshlet.glsl"
 
@@ -22,6 +28,17 @@ out gl_MeshPerVertexEXT {
 layout(location = 0) out vec3 o_normal[];
 layout(location = 1) out vec2 o_uv[];
 layout(location = 2) out vec4 o_tangent[];
+#ifdef MESHLET_COLORS
+layout(location = 3) perprimitiveEXT flat out uint o_meshlet[];
+#endif
+// only the culling flag of the per-primitive built-ins (the full block would declare the
+// shading-rate capability too)
+perprimitiveEXT out gl_MeshPerPrimitiveEXT {
+    bool gl_CullPrimitiveEXT;
+} gl_MeshPrimitivesEXT[];
+
+shared vec3 s_screen[64];  // pixels (x right, y up) and w of each vertex
+shared uint s_backface;
 
 // WebGPU clip space to Vulkan's (scene.glsl's vk_clip)
 vec4 vk_clip(vec4 clip) {
@@ -33,17 +50,23 @@ void main() {
     uvec4 m = m_meshlets[row];
     uint vcount = m.z, tcount = m.w;
     SetMeshOutputsEXT(vcount, tcount);
-    mat4 model = m_instances[m_draw.instance].model;
-    mat4 normal = m_instances[m_draw.instance].normal;
+    mat4 model = m_instances[payload.instance].model;
+    mat4 normal = m_instances[payload.instance].normal;
+    bool cull_triangles = (m_push.flags & F_TRIANGLES) != 0u;
+    if (gl_LocalInvocationIndex == 0u) {
+        s_backface = 0u;
+    }
     for (uint v = gl_LocalInvocationIndex; v < vcount; v += 32u) {
         uint k = m_vertices[m.x + v];
-        gl_MeshVerticesEXT[v].gl_Position =
-            vk_clip(m_camera.view_proj * (model * vec4(m_positions[k].xyz, 1.0)));
+        vec4 clip = m_camera.view_proj * (model * vec4(m_positions[k].xyz, 1.0));
+        gl_MeshVerticesEXT[v].gl_Position = vk_clip(clip);
         o_normal[v] = (normal * vec4(m_normals[k].xyz, 0.0)).xyz;
         vec4 t = m_tangents[k];
         o_tangent[v] = vec4((model * vec4(t.xyz, 0.0)).xyz, t.w);
         o_uv[v] = m_uvs[k].xy;
+        s_screen[v] = vec3(clip.xy / clip.w * 0.5 * m_push.viewport, clip.w);
     }
+    barrier();
     for (uint t = gl_LocalInvocationIndex; t < tcount; t += 32u) {
         uvec3 idx;
         for (uint c = 0u; c < 3u; ++c) {
@@ -51,5 +74,27 @@ void main() {
             idx[c] = (m_triangles[m.y + (b >> 2u)] >> (8u * (b & 3u))) & 0xffu;
         }
         gl_PrimitiveTriangleIndicesEXT[t] = idx;
+#ifdef MESHLET_COLORS
+        o_meshlet[t] = row;
+#endif
+        bool cull = false;
+        if (cull_triangles) {
+            vec3 a = s_screen[idx.x], b = s_screen[idx.y], c = s_screen[idx.z];
+            if (a.z > 0.0 && b.z > 0.0 && c.z > 0.0) {
+                vec2 e1 = b.xy - a.xy, e2 = c.xy - a.xy;
+                float area2 = e1.x * e2.y - e1.y * e2.x;  // > 0: counter-clockwise, front
+                // a vertex moved by up to 1/256 pixel changes area2 by at most this much
+                float margin = (length(e1) + length(e2) + length(c.xy - b.xy)) / 64.0 + 1e-3;
+                cull = area2 < -margin;
+            }
+            if (cull) {
+                atomicAdd(s_backface, 1u);
+            }
+        }
+        gl_MeshPrimitivesEXT[t].gl_CullPrimitiveEXT = cull;
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && s_backface != 0u) {
+        atomicAdd(m_counters[C_TRIANGLES_BACKFACE], s_backface);
     }
 }

@@ -1,9 +1,19 @@
 #version 460
-// one meshlet per invocation: cone (backface) and frustum culling, the survivors compacted
-// into the payload with a subgroup ballot inside each subgroup and a prefix over subgroups
-// in shared memory, so the indices are dense for any subgroup size (8 on lavapipe, 32/64 on
-// desktop GPUs). Culling is conservative (a meshlet that has a visible front face is kept).
+// one meshlet per invocation: cone (backface), frustum and occlusion culling, the survivors
+// compacted into the payload with a subgroup ballot inside each subgroup and a prefix over
+// subgroups in shared memory, so the indices are dense for any subgroup size (8 on
+// lavapipe, 32 on NVIDIA, 64 elsewhere). Culling is conservative: a meshlet that has a
+// visible front face is kept.
+//
+// The draw is m_draws[m_push.draw_base + gl_DrawIDARB] (one indirect command per instance).
+// Phases (meshlet.glsl): PHASE_SINGLE runs the cone and frustum tests; two-phase occlusion
+// culling runs PHASE_EARLY (the meshlets visible last frame, by m_visibility) and, after
+// the depth pyramid of what it drew is built, PHASE_LATE (every meshlet against that
+// pyramid; records visibility for the next frame; draws what was not drawn early).
+// Counting: every meshlet lands in exactly one of drawn / culled by cone, frustum or
+// occlusion; the single and late phases count the tests, the early phase only what it draws.
 #extension GL_EXT_mesh_shader : require
+#extension GL_ARB_shader_draw_parameters : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #ifdef OCCLUSION
@@ -13,34 +23,20 @@
 
 layout(local_size_x = TASK_GROUP) in;
 
-// meshlets considered, culled by the cone test, culled by the frustum test, drawn, culled by
-// the occlusion test
-layout(set = 0, binding = 8, std430) buffer MCounters { uint m_counters[5]; };
+// one word per (draw, meshlet): 1 if the meshlet was visible at the end of the last frame
+layout(set = 0, binding = 16, std430) buffer MVisibility { uint m_visibility[]; };
 
 #ifdef OCCLUSION
-// the previous frame's max-depth pyramid (passes/depth_pyramid): level 0 at the render size,
-// level L's texel min(p >> L, size_L - 1) holds the farthest depth of level-0 pixel p
+// this frame's max-depth pyramid (passes/depth_pyramid) of what the early phase drew:
+// level 0 at the render size, level L's texel min(p >> L, size_L - 1) holds the farthest
+// depth of level-0 pixel p
 layout(set = 4, binding = 0) uniform texture2D t_pyramid;
 #endif
 
 taskPayloadSharedEXT MPayload payload;
 
 shared uint s_count[TASK_GROUP];   // survivors per subgroup (at most TASK_GROUP subgroups)
-shared uint s_stats[4];            // considered, cone, frustum, occlusion
-
-bool frustum_culled(vec3 c, float r) {
-    // Gribb-Hartmann planes of WebGPU clip space (-w <= x, y <= w, 0 <= z <= w)
-    mat4 m = transpose(m_camera.view_proj);  // rows of view_proj
-    vec4 planes[6] = vec4[6](m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[2],
-                             m[3] - m[2]);
-    for (int k = 0; k < 6; ++k) {
-        vec4 p = planes[k];
-        if (dot(p.xyz, c) + p.w < -r * length(p.xyz)) {
-            return true;
-        }
-    }
-    return false;
-}
+shared uint s_stats[C_COUNT];
 
 bool cone_culled(uint row, MInstance inst) {
     uint packed = m_cones[row];
@@ -53,7 +49,7 @@ bool cone_culled(uint row, MInstance inst) {
     // rotation and uniform scale keep angles: the cone moves with the model matrix
     vec3 apex = (inst.model * vec4(m_cone_apex[row].xyz, 1.0)).xyz;
     vec3 axis_w = mat3(inst.model) * axis / inst.bounds.x;
-    return dot(normalize(apex - m_camera.position.xyz), axis_w) >= float(cutoff_s8) / 127.0;
+    return dot(normalize(apex - m_cull.position.xyz), axis_w) >= float(cutoff_s8) / 127.0;
 }
 
 #ifdef OCCLUSION
@@ -68,9 +64,9 @@ vec2 tangent_bounds(vec2 c, float r) {
 // than the pyramid's farthest depth over the sphere's screen rectangle
 bool occlusion_culled(vec3 c, float r) {
     r = r * 1.01 + 1e-4;  // margin for float error (keeps the test conservative)
-    vec3 v = (m_camera.view * vec4(c, 1.0)).xyz;
+    vec3 v = (m_cull.view * vec4(c, 1.0)).xyz;
     vec3 cv = vec3(v.xy, -v.z);  // right-handed view: the camera looks down -z
-    mat4 P = m_camera.proj;
+    mat4 P = m_cull.proj;
     float znear = cv.z - r;
     if (znear <= 1e-3 * r || r * r >= dot(cv, cv)) {
         return false;  // the sphere reaches the eye plane: don't cull
@@ -102,60 +98,86 @@ bool occlusion_culled(vec3 c, float r) {
 }
 #endif
 
+void count(int counter, uint meshlets, int tri_counter, uint triangles) {
+    atomicAdd(s_stats[counter], meshlets);
+    atomicAdd(s_stats[tri_counter], triangles);
+}
+
 void main() {
-    uint i = gl_GlobalInvocationID.x;
-    if (gl_LocalInvocationIndex < 4u) {
+    if (gl_LocalInvocationIndex < uint(C_COUNT)) {
         s_stats[gl_LocalInvocationIndex] = 0u;
     }
     barrier();
-    bool valid = i < m_draw.meshlet_count;
-    bool visible = valid;
-    uint row = m_draw.first_meshlet + i;
-    if (valid) {
-        MInstance inst = m_instances[m_draw.instance];
-        atomicAdd(s_stats[0], 1u);
-        if ((m_draw.flags & 2u) != 0u) {
-            vec4 s = m_spheres[row];
-            vec3 c = (inst.model * vec4(s.xyz, 1.0)).xyz;
-            if (frustum_culled(c, s.w * inst.bounds.x)) {
-                visible = false;
-                atomicAdd(s_stats[2], 1u);
+    MDraw draw = m_draws[m_push.draw_base + gl_DrawIDARB];
+    uint i = gl_GlobalInvocationID.x;
+    uint phase = m_push.phase, flags = m_push.flags;
+    bool valid = i < draw.ids.z;
+    uint row = draw.ids.y + i;
+    uint triangles = valid ? m_meshlets[row].w : 0u;
+    bool last = valid && phase != PHASE_SINGLE && m_visibility[draw.ids.w + i] != 0u;
+    bool counting = phase != PHASE_EARLY;
+    // the early phase looks only at what was visible last frame
+    bool visible = valid && (phase != PHASE_EARLY || last);
+    if (visible) {
+        MInstance inst = m_instances[draw.ids.x];
+        vec4 s = m_spheres[row];
+        vec3 c = (inst.model * vec4(s.xyz, 1.0)).xyz;
+        float r = s.w * inst.bounds.x;
+        if (counting) {
+            count(C_CONSIDERED, 1u, C_TRIANGLES, triangles);
+        }
+        if ((flags & F_FRUSTUM) != 0u && frustum_culled(c, r)) {
+            visible = false;
+            if (counting) {
+                count(C_FRUSTUM, 1u, C_TRIANGLES_FRUSTUM, triangles);
+            }
+        } else if ((flags & F_CONE) != 0u && cone_culled(row, inst)) {
+            visible = false;
+            if (counting) {
+                count(C_CONE, 1u, C_TRIANGLES_CONE, triangles);
             }
         }
-        if (visible && (m_draw.flags & 1u) != 0u && cone_culled(row, inst)) {
-            visible = false;
-            atomicAdd(s_stats[1], 1u);
-        }
 #ifdef OCCLUSION
-        if (visible && (m_draw.flags & 4u) != 0u) {
-            vec4 s = m_spheres[row];
-            if (occlusion_culled((inst.model * vec4(s.xyz, 1.0)).xyz, s.w * inst.bounds.x)) {
-                visible = false;
-                atomicAdd(s_stats[3], 1u);
+        else if (phase == PHASE_LATE && (flags & F_OCCLUSION) != 0u && occlusion_culled(c, r)) {
+            visible = false;
+            if (!last) {  // one visible last frame was drawn by the early phase
+                count(C_OCCLUSION, 1u, C_TRIANGLES_OCCLUSION, triangles);
             }
         }
 #endif
     }
-    uvec4 ballot = subgroupBallot(visible);
+    // the late phase records visibility for the next frame's early phase; the single phase
+    // records it too (MeshletScene.visibility() reads it back, and an early phase may follow)
+    if (valid && phase != PHASE_EARLY) {
+        m_visibility[draw.ids.w + i] = visible ? 1u : 0u;
+    }
+    // the late phase draws only the newly visible: the early phase drew the rest
+    bool emit = visible && !(phase == PHASE_LATE && last);
+    if (emit) {
+        atomicAdd(s_stats[C_TRIANGLES_DRAWN], triangles);
+    }
+    uvec4 ballot = subgroupBallot(emit);
     uint local = subgroupBallotExclusiveBitCount(ballot);
     if (subgroupElect()) {
         s_count[gl_SubgroupID] = subgroupBallotBitCount(ballot);
     }
     barrier();
     uint base = 0u, total = 0u;
-    for (uint s = 0u; s < gl_NumSubgroups; ++s) {
-        base += s < gl_SubgroupID ? s_count[s] : 0u;
-        total += s_count[s];
+    for (uint k = 0u; k < gl_NumSubgroups; ++k) {
+        base += k < gl_SubgroupID ? s_count[k] : 0u;
+        total += s_count[k];
     }
-    if (visible) {
+    if (emit) {
         payload.meshlets[base + local] = row;
     }
     if (gl_LocalInvocationIndex == 0u) {
-        atomicAdd(m_counters[0], s_stats[0]);
-        atomicAdd(m_counters[1], s_stats[1]);
-        atomicAdd(m_counters[2], s_stats[2]);
-        atomicAdd(m_counters[3], total);
-        atomicAdd(m_counters[4], s_stats[3]);
+        payload.instance = draw.ids.x;
+        s_stats[C_DRAWN] = total;
+        s_stats[C_DRAWN_LATE] = phase == PHASE_LATE ? total : 0u;
+    }
+    barrier();
+    if (gl_LocalInvocationIndex < uint(C_COUNT) && s_stats[gl_LocalInvocationIndex] != 0u) {
+        atomicAdd(m_counters[gl_LocalInvocationIndex], s_stats[gl_LocalInvocationIndex]);
     }
     EmitMeshTasksEXT(total, 1, 1);
 }

@@ -95,9 +95,33 @@ def test_unconnected_required_input_is_an_error(tmp_path):
         build(load_config(path))
 
 
-def test_history_slots_map_to_last_frames_copy():
-    built = build(load_config(ROOT / "configs" / "deferred_meshlet_occlusion.toml"))
-    pyramid = built.slots["gbuffer"]["pyramid"]
+def test_history_slots_map_to_last_frames_copy(tmp_path):
+    from rfw import ComputePass, Tex2D
+    from rfw.graph import History
+    from rfw.registry import register_pass
+
+    @register_pass("test_history_reader")
+    class Reader(ComputePass):
+        inputs = {"depth": Tex2D(), "pyramid": History(stages=("COMPUTE_SHADER",))}
+        outputs = {"out": Tex2D("r32float", size_of="depth")}
+
+    path = tmp_path / "h.toml"
+    path.write_text("""
+outputs = ["reader.out"]
+[[pass]]
+name = "gbuffer"
+[[pass]]
+name = "hiz"
+use = "depth_pyramid"
+inputs = { depth = "gbuffer.depth" }
+[[pass]]
+name = "reader"
+use = "test_history_reader"
+inputs = { depth = "gbuffer.depth", pyramid = "hiz.pyramid" }
+""")
+    built = build(load_config(path))
+    pyramid = built.slots["reader"]["pyramid"]
     assert pyramid == "hiz.pyramid@prev"  # the plan's ping-pong copy, not this frame's
     plan = compile(built.graph)
-    assert {a.resource: a.role for a in plan.accesses["gbuffer"]}[pyramid] == "history"
+    assert {a.resource: a.role for a in plan.accesses["reader"]}[pyramid] == "history"
+
