@@ -17,6 +17,10 @@ default = "on"
 on = {}
 off = { "shadow.enabled" = false }
 ```
+
+An option may instead list other options, best first (``auto = ["ray_query", "shadow_map"]``):
+a device resolves it to the first whose passes it can run (``resolve_auto``); until then it
+stands for its last option, the most portable one.
 """
 
 from __future__ import annotations
@@ -122,6 +126,16 @@ def load_config(path: str | Path) -> Config:
                  str(data.get("scene", "default")), (size[0], size[1]), camera, variants,
                  int(data.get("frames", 1)), source, base=list(passes))
     for vname, v in variants.items():
+        for option, value in v.items():
+            if option == "default":
+                continue
+            if isinstance(value, list) and not (value and all(
+                    isinstance(o, str) and o in v and isinstance(v[o], dict) for o in value)):
+                raise _fail(source, f"variants.{vname}.{option}: a list must name options of "
+                                    f"the variant ({', '.join(k for k in v if k != 'default')})")
+            if not isinstance(value, dict | list):
+                raise _fail(source, f"variants.{vname}.{option}: expected a table of overrides "
+                                    "or a list of options")
         default = v.get("default")
         if isinstance(default, bool):  # a switch: default = true
             default = _boolean_option(str(default).lower(), [k for k in v if k != "default"])
@@ -150,11 +164,62 @@ def _recompute(cfg: Config) -> Config:
     out = replace(cfg, passes=list(cfg.base))
     for name, v in cfg.variants.items():
         if name in cfg.chosen:
-            for key, value in v[cfg.chosen[name]].items():
+            for key, value in _overrides(v, cfg.chosen[name]).items():
                 out = _set(out, key, value)
     for key, value in cfg.explicit:
         out = _set(out, key, value)
     return out
+
+
+def _overrides(v: dict[str, Any], option: str) -> dict[str, Any]:
+    """An option's overrides; an auto option (a list) stands for its last option until a
+    device resolves it."""
+    value = v[option]
+    return v[value[-1]] if isinstance(value, list) else value
+
+
+def missing_caps(cfg: Config, caps: frozenset[str]) -> dict[str, list[str]]:
+    """The capabilities each enabled pass of ``cfg`` needs and ``caps`` lacks (by pass)."""
+    from .graph.compile import IMPLIED_CAPS
+
+    out: dict[str, list[str]] = {}
+    for entry in cfg.passes:
+        if not entry.enabled:
+            continue
+        inst = get_pass(entry.use)(entry.name, **entry.settings)
+        need = [c for c in (*IMPLIED_CAPS.get(inst.type, ()), *inst.requires) if c not in caps]
+        if need:
+            out[entry.name] = need
+    return out
+
+
+def resolve_auto(cfg: Config, caps: Any) -> tuple[Config, dict[str, str]]:
+    """Resolve auto options for a device with capabilities ``caps``: each variant left at
+    an option that lists others takes the first of them whose enabled passes the device can
+    run. Returns the config and, for every variant that has an auto option, the option in
+    force (``{"shadows": "ray_query"}``; explicit choices are reported as they are)."""
+    caps = frozenset(caps)
+    techniques: dict[str, str] = {}
+    for name, v in cfg.variants.items():
+        if not any(isinstance(value, list) for value in v.values()):
+            continue
+        chosen = cfg.chosen.get(name, "")
+        if not isinstance(v.get(chosen), list):
+            techniques[name] = chosen
+            continue
+        why = []
+        for option in v[chosen]:
+            trial = _apply_variant(cfg, name, option)
+            missing = missing_caps(trial, caps)
+            if not missing:
+                cfg, techniques[name] = trial, option
+                break
+            why.append(f"{option} (" + "; ".join(f"pass '{p}' needs {', '.join(c)}"
+                                                  for p, c in missing.items()) + ")")
+        else:
+            raise _fail(cfg.source, f"variant '{name}': the device can run none of its "
+                                    f"'{chosen}' options: " + ", ".join(why))
+    return cfg, techniques
 
 
 _TRUE, _FALSE = ("true", "on", "1", "yes"), ("false", "off", "0", "no")
@@ -259,8 +324,9 @@ def build(cfg: Config) -> Built:
             if key not in ins:
                 raise _fail(cfg.source, f"pass '{entry.name}' ({entry.use}): no input slot "
                                         f"'{key}'" + did_you_mean(key, ins))
-        b = g.add_pass(entry.name, cls.type, enabled=entry.enabled,
-                       side_effect=cls.side_effect, requires=cls.requires,
+        # the instance's type and requirements: a setting may choose them (ray methods)
+        b = g.add_pass(entry.name, inst.type, enabled=entry.enabled,
+                       side_effect=cls.side_effect, requires=inst.requires,
                        settings=inst.params.as_dict(), schema=tuple(inst.params.fields()),
                        backend=entry.backend or cls.backend)
         mapping: dict[str, str] = {}

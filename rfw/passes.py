@@ -194,5 +194,49 @@ class ComputePass(Pass):
     type = "compute"
 
 
+# how a ray-traced pass can trace: its pass type and what the device must have
+RAY_METHODS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "ray_query": ("compute", ("VK_KHR_acceleration_structure", "VK_KHR_ray_query")),
+    "ray_pipeline": ("ray_tracing", ("VK_KHR_acceleration_structure",
+                                     "VK_KHR_ray_tracing_pipeline")),
+}
+
+
+class RayTracedPass(Pass):
+    """A pass that traces rays in one of two ways, chosen by its ``method`` setting:
+    ``"ray_query"`` runs ``shaders["ray_query"]`` (a compute shader with GL_EXT_ray_query),
+    ``"ray_pipeline"`` runs ``shaders["ray_pipeline"]`` (a raygen shader; ``miss`` beside it)
+    through a ray-tracing pipeline. The method sets the pass type (so acceleration structures
+    are read in compute or ray-tracing stages) and the extensions a device must have, which
+    the compiler checks by pass name. Ray tracing needs raw Vulkan: vk only."""
+
+    backend = "vk"
+    shaders: ClassVar[dict[str, str]] = {}
+    miss: ClassVar[str | None] = None  # ray pipeline: the miss shader beside the raygen one
+    closest_hit: ClassVar[str | None] = None  # and its closest-hit shader, if any
+
+    class Params(Settings):
+        method: str = "ray_pipeline"  # ray_query | ray_pipeline
+        max_recursion: int = 1  # ray pipeline: deepest traceRayEXT nesting
+
+    def __init__(self, name: str, params: Settings | None = None, **settings: Any):
+        super().__init__(name, params, **settings)
+        method = self.params.method  # type: ignore[attr-defined]
+        if method not in RAY_METHODS:
+            raise SettingsError(f"pass '{name}': method '{method}' is not one of "
+                                f"{', '.join(RAY_METHODS)}" + did_you_mean(method, RAY_METHODS))
+        self.type, self.requires = RAY_METHODS[method]  # type: ignore[misc]
+        self.shader = self.shaders[method]  # type: ignore[misc]
+
+    def trace(self, ctx: Any, size: tuple[int, int], **bindings: Any) -> None:
+        """One ray-tracing thread or launch per texel of ``size``."""
+        if self.params.method == "ray_query":  # type: ignore[attr-defined]
+            ctx.dispatch(threads=size, **bindings)
+        else:
+            ctx.trace_rays(size=size, miss=self.miss, closest_hit=self.closest_hit,
+                           max_recursion=self.params.max_recursion,  # type: ignore[attr-defined]
+                           **bindings)
+
+
 class RenderPass(Pass):
     type = "graphics"

@@ -59,6 +59,12 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     ``device`` may be either backend's (the other one is made and dropped here)."""
     if backend not in ("wgpu", "vk"):
         raise ValueError(f"unknown backend '{backend}' (wgpu or vk)")
+    if backend == "vk" and not _is_wgpu_device(device):
+        from vkext.backend import render_vk
+
+        # render_vk resolves auto variants for its device, then mixes backends if pinned
+        return render_vk(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
+                         validation=validation, alias=alias)
     if pinned_elsewhere(cfg, backend):
         from vkext.device import VkDevice
         from vkext.mixed import render_mixed
@@ -97,6 +103,10 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         cfg, frames or cfg.frames, scene, gpu_scene.default_light, passes,
         timestamps="timestamp-query" in device.features)}
     return Result(cfg, images, timings, ex)
+
+
+def _is_wgpu_device(device: Any) -> bool:
+    return device is not None and type(device).__module__.startswith("rfw.backends")
 
 
 def pass_timings(order: Any, timings: dict[str, Any]) -> list[dict[str, Any]]:
@@ -175,6 +185,9 @@ def table(timings: dict[str, Any]) -> str:
         gpu = "-" if p["gpu_ms"] is None else f"{p['gpu_ms']:.3f}"
         rows.append(f"  {p['name']:<{w}} {gpu:>9} {p['cpu_ms']:>9.3f}")
     rows.append(f"  {'total':<{w}} {timings['gpu_ms_total']:>9.3f}")
+    if timings.get("techniques"):  # what auto variants chose on this device
+        rows.append("  techniques: " + ", ".join(f"{k}={v}" for k, v in
+                                                 timings["techniques"].items()))
     if "bridge_ms_total" in timings:  # mixed backends: host copies, wall time
         rows.append(f"  {'bridges (host copies)':<{w}} {'-':>9} "
                     f"{timings['bridge_ms_total']:>9.3f}")

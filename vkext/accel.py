@@ -224,6 +224,8 @@ class SceneAccel:
         self._owned: list[Any] = []  # buffers and timers destroyed with the structures
         self._times: dict[str, float] = {}
         self._update_scratch: Buffer | None = None
+        self._frame_scratch: Buffer | None = None  # record_tlas's, made on first use
+        self.frame_builds = {"build": 0, "update": 0}
         self.allocator = BlockAllocator(device, block_size=32 * MiB, label=f"{label}:blocks")
         device.register(self)
         try:
@@ -243,7 +245,7 @@ class SceneAccel:
     def _upload_geometry(self) -> None:
         """All positions in one buffer, all indices in another: the BLAS builds read them
         through device addresses, and shaders may read them later (storage usage)."""
-        pos_parts, idx_parts = [], []
+        pos_parts, idx_parts, uv_parts = [], [], []
         self.mesh_ranges: list[tuple[int, int, int, int]] = []  # (first vertex, V, first index, 3T)
         v0 = i0 = 0
         for k, m in enumerate(self.scene.meshes):
@@ -258,6 +260,8 @@ class SceneAccel:
             self.mesh_ranges.append((v0, len(pos), i0, len(idx)))
             pos_parts.append(pos)
             idx_parts.append(idx.astype(np.uint32))
+            uv = np.ascontiguousarray(m.uvs, np.float32).reshape(-1, 2)
+            uv_parts.append(uv if len(uv) == len(pos) else np.zeros((len(pos), 2), np.float32))
             v0 += len(pos)
             i0 += len(idx)
         usage = ("acceleration_structure_input", "storage", "transfer_dst")
@@ -267,7 +271,12 @@ class SceneAccel:
                                                       label=f"{self.label}.positions")
         self.indices = self.allocator.create_buffer(max(16, indices.nbytes), usage,
                                                     label=f"{self.label}.indices")
-        for buf, data in ((self.positions, positions), (self.indices, indices)):
+        # texture coordinates, for shaders that shade what they hit (never built from)
+        uvs = np.concatenate(uv_parts) if uv_parts else np.zeros((0, 2), np.float32)
+        self.uvs = self.allocator.create_buffer(max(16, uvs.nbytes), ("storage", "transfer_dst"),
+                                                label=f"{self.label}.uvs")
+        for buf, data in ((self.positions, positions), (self.indices, indices),
+                          (self.uvs, uvs)):
             if data.nbytes:
                 upload_buffer(self.device, buf, data, _INPUT_READ)
 
@@ -392,6 +401,7 @@ class SceneAccel:
         n_records = sum(1 for i in self.scene.instances if self.blas[i.mesh] is not None)
         tinfo = self._build_info("top", g, self._tlas_flags)
         tsize, tscratch, tupdate = build_sizes(dev, tinfo, [n_records])
+        self._tlas_scratch_bytes = max(tscratch, tupdate if self.allow_update else 0)
         self.tlas = AccelerationStructure(dev, "top", tsize, allocator=self.allocator,
                                           label=f"{self.label}.tlas")
         if self.allow_update:
@@ -520,6 +530,41 @@ class SceneAccel:
             old.destroy()
             self.blas[m] = c
 
+    # per frame ------------------------------------------------------------------------------
+
+    def record_tlas(self, cmd: Any, *, update: bool = False) -> str:
+        """Record a TLAS build from the current ``transforms`` into ``cmd`` (a frame's
+        command buffer), or with ``update`` (needs ``allow_update``) a refit of it in place.
+        No barrier is recorded: a frame graph plans the TLAS's (build stage write, then
+        reads by tracing passes). The scratch buffer is this object's own; the instance
+        records are written from the host now, so the previous user of the TLAS must be
+        done (frames are waited for). Returns ``"build"`` or ``"update"``."""
+        if update and not self.allow_update:
+            raise ValueError(f"'{self.label}' was built without allow_update=True: it can "
+                             "only be rebuilt")
+        dev = self.device
+        align = int(dev.extension_properties["VK_KHR_acceleration_structure"]
+                    ["minAccelerationStructureScratchOffsetAlignment"])
+        if self._frame_scratch is None:
+            self._frame_scratch = self._scratch(self._tlas_scratch_bytes, align, "frame")
+        records = self._instance_records()
+        if len(records):
+            self.instance_buffer.write(records)
+        rng = ffi.new("VkAccelerationStructureBuildRangeInfoKHR*")
+        rng.primitiveCount = len(records)
+        ranges = ffi.new("VkAccelerationStructureBuildRangeInfoKHR*[1]", [rng])
+        info = self._build_info("top", self._tlas_geometry, self._tlas_flags, update=update)
+        if update:
+            info.srcAccelerationStructure = self.tlas.handle
+        info.dstAccelerationStructure = self.tlas.handle
+        info.scratchData.deviceAddress = _align(self._frame_scratch.address, align)
+        # the scratch is reused frame after frame: the last build's use of it comes first
+        barrier(cmd, memory_barriers=[(_AS_RW, _AS_RW)])
+        dev.fn.vkCmdBuildAccelerationStructuresKHR(cmd, 1, info, ranges)
+        mode = "update" if update else "build"
+        self.frame_builds[mode] += 1
+        return mode
+
     # refit ---------------------------------------------------------------------------------
 
     def update(self, transforms: Mapping[int, Any] | Any) -> None:
@@ -591,6 +636,7 @@ class SceneAccel:
             "build_ms": dict(self._times),
             "timer": self._timer.kind if getattr(self, "_timer", None) else "cpu",
             "prefer": self.prefer, "allow_update": self.allow_update, "compact": self.compact,
+            "frame_builds": dict(self.frame_builds),
         }
 
     def destroy(self) -> None:
@@ -605,9 +651,10 @@ class SceneAccel:
             if b is not None:
                 b.destroy()
         self.blas = []
-        if self._update_scratch is not None:
-            self._update_scratch.destroy()
-            self._update_scratch = None
+        for scratch in (self._update_scratch, self._frame_scratch):
+            if scratch is not None:
+                scratch.destroy()
+        self._update_scratch = self._frame_scratch = None
         for obj in reversed(self._owned):
             obj.destroy()
         self._owned.clear()

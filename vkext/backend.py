@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from rfw.config import Config, build
+from rfw.config import Config, build, resolve_auto
 from rfw.render import (
     Result,
     camera_for,
@@ -32,16 +32,31 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
 
     A config that pins passes to wgpu runs as a mixed frame (``vkext.mixed.render_mixed``,
     unpinned passes on Vulkan).
-    """
-    if pinned_elsewhere(cfg, "vk"):
-        from .mixed import render_mixed
 
-        return render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend="vk",
-                            vk_device=device, validation=validation, alias=alias)
-    built = build(cfg)
+    Variants left at an auto option (``shadows = "auto"``) are resolved for the device
+    first (``rfw.config.resolve_auto``); ``timings["techniques"]`` reports what they chose.
+    """
     own = device is None
     if own:
         device = VkDevice(validation=validation)
+    try:
+        cfg, techniques = resolve_auto(cfg, device.caps)
+    except BaseException:
+        if own:
+            device.destroy()
+        raise
+    if pinned_elsewhere(cfg, "vk"):
+        from .mixed import render_mixed
+
+        if own:  # the mixed frame makes and counts its own
+            device.destroy()
+        result = render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend="vk",
+                              vk_device=None if own else device, validation=validation,
+                              alias=alias)
+        if techniques:
+            result.timings["techniques"] = techniques
+        return result
+    built = build(cfg)
     validation = validation or device.validation
     try:
         plan, info = fit_plan(built.graph, device, alias=alias, readback=True)
@@ -62,6 +77,7 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
             ex.run(n)
             images = {name: ex.read(name) for name in outputs}
             memory = ex.memory()
+            accel = _accel(ex)  # before the scene, which owns the structures, goes
         finally:
             if ex is not None:
                 ex.destroy()
@@ -77,10 +93,24 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
     culling = _culling(ex)
     if culling is not None:
         timings["culling"] = culling
+    if techniques:
+        timings["techniques"] = techniques
+    if accel is not None:
+        timings["accel"] = accel
     if validation:
         timings["validation"] = {"messages": len(device.messages),
                                  "texts": [m.text for m in device.messages[:20]]}
     return Result(cfg, images, timings, ex)
+
+
+def _accel(ex: Any) -> dict[str, Any] | None:
+    """The acceleration structures the frame's builder pass made: counts, bytes before and
+    after compaction, build times and the frame builds (rebuilds or refits)."""
+    for name, p in ex.passes.items():
+        accel = getattr(p, "accel", None)
+        if accel is not None and hasattr(accel, "stats"):
+            return {"pass": name, **accel.stats()}
+    return None
 
 
 def _culling(ex: Any) -> dict[str, Any] | None:

@@ -166,22 +166,35 @@ def barrier(cmd: Any, image_barriers: Iterable[ImageBarrier | tuple] = (),
     vk.vkCmdPipelineBarrier2(cmd, dep)
 
 
+# a plan resource synchronized by memory barriers: acceleration structures (their accesses
+# are acceleration-structure accesses of memory, not of a buffer range the plan owns)
+class _GlobalMemory:
+    def __repr__(self) -> str:
+        return "GLOBAL"
+
+
+GLOBAL = _GlobalMemory()
+
+
 def record_barriers(cmd: Any, barriers: Iterable[Barrier],
                     resources: Mapping[str, Image | Buffer]) -> int:
     """Record a compiled plan's barriers (e.g. those of one pass) as one pipeline barrier.
-    Returns how many were recorded. Every resource must be in ``resources``."""
-    images, buffers = [], []
+    Returns how many were recorded. Every resource must be in ``resources``; one given as
+    :data:`GLOBAL` (acceleration structures) gets a global memory barrier."""
+    images, buffers, memory = [], [], []
     for b in barriers:
         res = resources.get(b.resource)
         if res is None:
             raise KeyError(f"barrier of pass '{b.pass_name}' names '{b.resource}', which is "
                            "not among the resources given (external? pass it in resources)")
-        if isinstance(res, Image):
+        if res is GLOBAL:
+            memory.append((b.src, b.dst))
+        elif isinstance(res, Image):
             images.append(ImageBarrier(res, b.src, b.dst))
         else:
             buffers.append(BufferBarrier(res, b.src, b.dst))
-    barrier(cmd, images, buffers)
-    return len(images) + len(buffers)
+    barrier(cmd, images, buffers, memory)
+    return len(images) + len(buffers) + len(memory)
 
 
 # ---------------------------------------------------------------------------------------------

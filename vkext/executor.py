@@ -16,7 +16,7 @@ import math
 import time
 from collections import defaultdict
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError
 
 from .commands import (
+    GLOBAL,
     CommandPool,
     ImageBarrier,
     TimestampPool,
@@ -76,7 +77,10 @@ MiB = 1 << 20
 TIMESTAMP_STAGE = "ALL_COMMANDS"
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
-               "comp": "VK_SHADER_STAGE_COMPUTE_BIT"}
+               "comp": "VK_SHADER_STAGE_COMPUTE_BIT", "rgen": "VK_SHADER_STAGE_RAYGEN_BIT_KHR",
+               "rmiss": "VK_SHADER_STAGE_MISS_BIT_KHR",
+               "rchit": "VK_SHADER_STAGE_CLOSEST_HIT_BIT_KHR",
+               "rahit": "VK_SHADER_STAGE_ANY_HIT_BIT_KHR"}
 _CULL = {"none": "VK_CULL_MODE_NONE", "front": "VK_CULL_MODE_FRONT_BIT",
          "back": "VK_CULL_MODE_BACK_BIT"}
 _BLEND_FACTOR = {
@@ -234,7 +238,7 @@ class Program:
     """Compiled stages of one shader variant, their reflected layouts and pipelines."""
 
     paths: tuple[Path, ...]
-    kind: str  # compute | render
+    kind: str  # compute | render | ray_tracing
     modules: dict[str, ShaderModule]  # stage -> module
     descriptors: dict[str, DescriptorInfo]
     set_layouts: list[Any]  # VkDescriptorSetLayout per set index
@@ -293,6 +297,9 @@ class Programs:
         where = " + ".join(str(p) for p in paths)
         for path, spv in zip(paths, spirvs, strict=True):
             refl = reflect(spv.code)
+            if spv.stage in modules:
+                raise ShaderError(f"pass '{pass_.name}': {where} has two {spv.stage} shaders "
+                                  "(a program takes one of each stage)")
             stage_flags |= const(_STAGE_BITS[spv.stage])
             push = max(push, refl.push_constant_size)
             if spv.stage == "comp":
@@ -323,7 +330,10 @@ class Programs:
         layouts, scene_sets = [], set()
         for s in range(top + 1):
             mine = by_set.get(s, [])
-            scene_like = self.scene is not None and s in SCENE_SETS and all(
+            # the scene's layouts are for raster and compute stages: ray-tracing programs
+            # get their own layouts (and per-frame sets holding the same buffers)
+            scene_like = kind != "ray_tracing" and self.scene is not None and s in SCENE_SETS \
+                and all(
                 (d.name, d.binding, d.kind) in SCENE_SETS[s] for d in mine)
             if kind == "render" and s in SCENE_SETS and self.scene is not None:
                 if not scene_like:
@@ -370,6 +380,17 @@ class Programs:
             handle = vk.vkCreateComputePipelines(self.device.device, ffi.NULL, 1, info, None)[0]
             pipe = prog.pipelines["compute"] = self._own(
                 Pipeline(self.device, handle, f"{prog.paths[0].name}:compute"))
+        return pipe
+
+    def ray_pipeline(self, prog: Program, *, max_recursion: int = 1) -> RayPipeline:
+        """The ray-tracing pipeline of ``prog`` (raygen, then its miss shader, then a
+        triangle hit group of its closest-hit and any-hit shaders, where it has them) and
+        its shader binding table, made once per ``max_recursion``."""
+        key = ("ray_tracing", max_recursion)
+        pipe = prog.pipelines.get(key)
+        if pipe is None:
+            pipe = prog.pipelines[key] = self._own(RayPipeline(self.device, prog,
+                                                               max_recursion))
         return pipe
 
     def graphics_pipeline(self, prog: Program, *, colors: Sequence[int], depth: int | None,
@@ -447,6 +468,81 @@ class Programs:
         self.compiled.clear()
 
 
+class RayPipeline:
+    """A ray-tracing pipeline made from a :class:`Program`'s modules, with its shader binding
+    table (``vkext.rt.ShaderBindingTable``: raygen, one miss record, one hit record)."""
+
+    def __init__(self, device: VkDevice, prog: Program, max_recursion: int):
+        from .rt import ShaderBindingTable
+
+        device.require("VK_KHR_ray_tracing_pipeline")
+        limit = device.extension_properties["VK_KHR_ray_tracing_pipeline"][
+            "maxRayRecursionDepth"]
+        if not 1 <= max_recursion <= limit:
+            raise ShaderError(f"{prog.name}: max recursion {max_recursion} is outside 1..{limit} "
+                              f"({device.name})")
+        if "rgen" not in prog.modules:
+            raise ShaderError(f"{prog.name}: a ray-tracing program needs a raygen shader")
+        self.device, self.label = device, f"{prog.paths[0].name}:ray_tracing"
+        stages = [s for s in ("rgen", "rmiss", "rchit", "rahit") if s in prog.modules]
+        unused = const("VK_SHADER_UNUSED_KHR")
+        general = const("VK_RAY_TRACING_SHADER_GROUP_TYPE_GENERAL_KHR")
+        groups = [(general, 0, unused, unused)]
+        if "rmiss" in prog.modules:
+            groups.append((general, stages.index("rmiss"), unused, unused))
+        hit = "rchit" in prog.modules or "rahit" in prog.modules
+        if hit:
+            groups.append((const("VK_RAY_TRACING_SHADER_GROUP_TYPE_TRIANGLES_HIT_GROUP_KHR"),
+                           unused, stages.index("rchit") if "rchit" in stages else unused,
+                           stages.index("rahit") if "rahit" in stages else unused))
+        self.counts = {"raygen": 1, "miss": int("rmiss" in prog.modules), "hit": int(hit)}
+        entry = ffi.new("char[]", b"main")
+        info_stages = new("VkPipelineShaderStageCreateInfo", len(stages))
+        for i, st in enumerate(stages):
+            info_stages[i].stage = const(_STAGE_BITS[st])
+            info_stages[i].module = prog.modules[st].handle
+            info_stages[i].pName = entry
+        ginfo = new("VkRayTracingShaderGroupCreateInfoKHR", len(groups))
+        for i, (kind, gen, closest, any_) in enumerate(groups):
+            g = ginfo[i]
+            g.type, g.generalShader, g.closestHitShader = kind, gen, closest
+            g.anyHitShader, g.intersectionShader = any_, unused
+        info = new("VkRayTracingPipelineCreateInfoKHR", stageCount=len(stages),
+                   pStages=info_stages, groupCount=len(groups), pGroups=ginfo,
+                   maxPipelineRayRecursionDepth=max_recursion,
+                   layout=prog.pipeline_layout.handle, basePipelineIndex=-1)
+        handle = device.fn.vkCreateRayTracingPipelinesKHR(device.device, ffi.NULL, ffi.NULL, 1,
+                                                          info, ffi.NULL)[0]
+        self.pipeline = Pipeline(device, handle, self.label)
+        self.group_count = len(groups)
+        self.sbt = None
+        try:
+            self.sbt = ShaderBindingTable(self, label=f"{self.label}:sbt")
+        except BaseException:
+            self.destroy()
+            raise
+
+    @property
+    def handle(self) -> Any:
+        return self.pipeline.handle
+
+    def group_handles(self) -> list[bytes]:
+        size = self.device.extension_properties["VK_KHR_ray_tracing_pipeline"][
+            "shaderGroupHandleSize"]
+        data = ffi.new("char[]", size * self.group_count)
+        self.device.fn.vkGetRayTracingShaderGroupHandlesKHR(
+            self.device.device, self.pipeline.handle, 0, self.group_count,
+            size * self.group_count, data)
+        raw = bytes(ffi.buffer(data))
+        return [raw[i * size:(i + 1) * size] for i in range(self.group_count)]
+
+    def destroy(self) -> None:
+        if self.sbt is not None:
+            self.sbt.destroy()
+            self.sbt = None
+        self.pipeline.destroy()
+
+
 def _runs(slots: list[int]) -> list[tuple[int, int]]:
     """Sorted slot numbers as (first, count) runs of consecutive ones."""
     out: list[tuple[int, int]] = []
@@ -493,7 +589,7 @@ class FrameDescriptors:
 
     SETS, PER_KIND = 64, 256
     KINDS = ("uniform_buffer", "storage_buffer", "sampled_image", "storage_image",
-             "combined_image_sampler", "sampler")
+             "combined_image_sampler", "sampler", "acceleration_structure")
 
     def __init__(self, device: VkDevice):
         self.device = device
@@ -622,6 +718,20 @@ class VkPassContext(SlotContext):
     def buffer(self, slot: str) -> Buffer:
         return self.executor.buffer(self.resource(slot))
 
+    def accel(self, slot: str) -> Any:
+        """The acceleration structures behind an ``AccelStructure`` slot (the
+        ``vkext.accel.SceneAccel`` its builder published), to bind or to read mesh data of."""
+        name = self.resource(slot)
+        acc = self.executor.accels.get(name)
+        if acc is None:
+            raise ShaderError(f"pass '{self.pass_.name}': '{name}' has no acceleration "
+                              "structure yet (its builder publishes one with set_accel)")
+        return acc
+
+    def set_accel(self, slot: str, accel: Any) -> None:
+        """Publish the structures this pass builds for its ``AccelStructure`` output."""
+        self.executor.accels[self.resource(slot)] = accel
+
     def format(self, slot: str) -> str:
         """The format's WebGPU name where it has one (as the wgpu backend answers)."""
         name = self.executor.plan.resource(self.resource(slot)).format
@@ -678,9 +788,21 @@ class VkPassContext(SlotContext):
                 return scene.camera_sets[cam]
         return None
 
-    def _payload(self, prog: Program, d: DescriptorInfo, value: Any) -> tuple:
+    def _payload(self, prog: Program, d: DescriptorInfo, value: Any) -> tuple | list:
         ex, kind = self.executor, d.kind
         what = f"pass '{self.pass_.name}': binding '{d.name}' of {prog.name} is a {kind}"
+        if isinstance(value, list):
+            # an array binding: one payload per element, the last repeated to fill it
+            if not value:
+                raise ShaderError(f"{what} array, but the pass gives no element")
+            items = [self._payload(prog, replace(d, count=1), v) for v in value]
+            return (items + items[-1:] * d.count)[:d.count]
+        if kind == "acceleration_structure":
+            handle = getattr(getattr(value, "tlas", value), "handle", None)
+            if handle is None:
+                raise ShaderError(f"{what}, but the pass gives {type(value).__name__} (give "
+                                  "ctx.accel(slot), a SceneAccel or its tlas)")
+            return (handle,)
         if kind in ("uniform_buffer", "storage_buffer"):
             if kind == "uniform_buffer" and isinstance(value, Settings):
                 r = ex.ring.push(value.pack())
@@ -738,6 +860,27 @@ class VkPassContext(SlotContext):
         t = (*threads, 1, 1)[:3]
         vk.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
                                      for i in range(3)))
+
+    def trace_rays(self, *, size: tuple[int, ...], shader: str | None = None,
+                   miss: str | None = None, closest_hit: str | None = None,
+                   any_hit: str | None = None, defines: dict[str, object] | None = None,
+                   max_recursion: int = 1, push_constants: bytes | None = None,
+                   **bindings: Any) -> None:
+        """``vkCmdTraceRaysKHR`` over ``size`` launches: ``shader`` (default: the pass's) is
+        the raygen shader, ``miss``/``closest_hit``/``any_hit`` the files of the other
+        stages beside it; bindings as for ``dispatch`` (scene camera and lights by name)."""
+        raygen = shader or self.pass_.shader
+        names = [raygen, *(n for n in (miss, closest_hit, any_hit) if n)]
+        paths = [twin_paths(self.pass_, n, "compute")[0] for n in names]
+        prog = self.executor.programs.get(self.pass_, paths, defines or {}, "ray_tracing")
+        self._check_extra(prog, bindings)
+        values = {**self.executor.scene_bindings(), **bindings}
+        pipe = self.executor.programs.ray_pipeline(prog, max_recursion=max_recursion)
+        point = const("VK_PIPELINE_BIND_POINT_RAY_TRACING_KHR")
+        vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+        self.bind(prog, values, point)
+        self._push(prog, push_constants)
+        pipe.sbt.trace(self.cmd, *(*size, 1, 1)[:3])
 
     def _push(self, prog: Program, data: bytes | None) -> None:
         if data is None:
@@ -891,6 +1034,8 @@ class VkExecutor(FrameExecutor):
                          ((r.name, r.name.removesuffix("@prev")) for r in plan.resources
                           if r.history and r.name.endswith("@prev"))]
         self._views: dict[tuple[int, bool, int | None], ImageView] = {}
+        # acceleration structures by plan resource, published by the passes that build them
+        self.accels: dict[str, Any] = {}
         self.transients = None
         self.allocator: BlockAllocator | None = None
         self.programs = self.descriptors = self.ring = None
@@ -1000,8 +1145,11 @@ class VkExecutor(FrameExecutor):
         return v
 
     @property
-    def resources(self) -> dict[str, Image | Buffer]:
-        return {**self.images, **self.buffers}
+    def resources(self) -> dict[str, Any]:
+        """Images and buffers by plan name; acceleration structures map to ``GLOBAL``
+        (their barriers are memory barriers)."""
+        accels = {r.name: GLOBAL for r in self.plan.resources if r.kind == "accel"}
+        return {**self.images, **self.buffers, **accels}
 
     def state_in(self, pass_name: str, resource: str) -> State | None:
         """The state the plan puts ``resource`` in for ``pass_name``."""

@@ -46,6 +46,7 @@ DESCRIPTOR_TYPES = {
     "storage_image": "VK_DESCRIPTOR_TYPE_STORAGE_IMAGE",
     "combined_image_sampler": "VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER",
     "sampler": "VK_DESCRIPTOR_TYPE_SAMPLER",
+    "acceleration_structure": "VK_DESCRIPTOR_TYPE_ACCELERATION_STRUCTURE_KHR",
 }
 
 # the scene's sets as shaders/common/scene.glsl and mesh.glsl declare them: (name, binding, kind)
@@ -214,27 +215,38 @@ class BufferRange:
 def update_descriptors(device: VkDevice, writes: Sequence[tuple[Any, int, str, tuple]]) -> None:
     """One ``vkUpdateDescriptorSets``. Each write is (set, binding, kind, payload) with
     payload (buffer, offset, range) for buffers, (view, layout) for images, (sampler,) for
-    samplers and (view, layout, sampler) for combined image samplers."""
+    samplers, (view, layout, sampler) for combined image samplers and (handle,) for
+    acceleration structures. A list of payloads fills an array binding from element 0."""
     if not writes:
         return
     arr = new("VkWriteDescriptorSet", len(writes))
     infos = []
     for i, (dst, binding, kind, payload) in enumerate(writes):
+        items = payload if isinstance(payload, list) else [payload]
         w = arr[i]
-        w.dstSet, w.dstBinding, w.dstArrayElement, w.descriptorCount = dst, binding, 0, 1
+        w.dstSet, w.dstBinding, w.dstArrayElement = dst, binding, 0
+        w.descriptorCount = len(items)
         w.descriptorType = const(DESCRIPTOR_TYPES[kind])
         if kind in ("uniform_buffer", "storage_buffer"):
-            info = ffi.new("VkDescriptorBufferInfo*")
-            info.buffer, info.offset, info.range = payload
+            info = ffi.new("VkDescriptorBufferInfo[]", len(items))
+            for k, item in enumerate(items):
+                info[k].buffer, info[k].offset, info[k].range = item
             w.pBufferInfo = info
+        elif kind == "acceleration_structure":
+            handles = ffi.new("VkAccelerationStructureKHR[]", [item[0] for item in items])
+            info = new("VkWriteDescriptorSetAccelerationStructureKHR",
+                       accelerationStructureCount=len(items), pAccelerationStructures=handles)
+            w.pNext = info
+            infos.append(handles)
         else:
-            info = ffi.new("VkDescriptorImageInfo*")
-            if kind == "sampler":
-                info.sampler = payload[0]
-            else:
-                info.imageView, info.imageLayout = payload[0], payload[1]
-                if kind == "combined_image_sampler":
-                    info.sampler = payload[2]
+            info = ffi.new("VkDescriptorImageInfo[]", len(items))
+            for k, item in enumerate(items):
+                if kind == "sampler":
+                    info[k].sampler = item[0]
+                else:
+                    info[k].imageView, info[k].imageLayout = item[0], item[1]
+                    if kind == "combined_image_sampler":
+                        info[k].sampler = item[2]
             w.pImageInfo = info
         infos.append(info)
     vk.vkUpdateDescriptorSets(device.device, len(writes), arr, 0, ffi.NULL)
@@ -357,6 +369,9 @@ class VkScene:
         align = max(16, int(dev.limits["minUniformBufferOffsetAlignment"]))
         up = _Upload()
         self.meshes: list[_MeshBuffers] = []
+        # per mesh (positions, normals, uvs, tangents, indices) as Buffers: shaders that read
+        # them through device addresses (buffer references) take their addresses
+        self.mesh_buffers: list[tuple[Buffer, ...]] = []
         for m in scene.meshes:
             arrays = [m.positions, m.normals, m.uvs, m.tangents]
             bufs = []
@@ -372,6 +387,7 @@ class VkScene:
                                               label=f"{m.name}.indices")
             if idx.nbytes:
                 up.buffer(ib, idx)
+            self.mesh_buffers.append((*bufs, ib))
             vb = ffi.new("VkBuffer[4]", [b.handle for b in bufs])
             self.meshes.append(_MeshBuffers(vb, ffi.new("VkDeviceSize[4]"), ib.handle,
                                             len(idx)))
@@ -496,6 +512,19 @@ class VkScene:
     @property
     def lights_range(self) -> BufferRange:
         return BufferRange(self.dynamic_uniforms.handle, self._lights_offset, LIGHTS_BYTES)
+
+    def accel(self, **options: Any) -> Any:
+        """The scene's :class:`vkext.accel.SceneAccel` built with ``options`` (``prefer``,
+        ``allow_update``, ``compact``): made on first use, kept and destroyed with the
+        scene, so every executor and frame on this scene shares its BLAS and TLAS."""
+        from .accel import SceneAccel  # accel imports this module
+
+        cache = self.__dict__.setdefault("_accels", {})
+        key = tuple(sorted(options.items()))
+        if key not in cache:
+            cache[key] = self._own(SceneAccel(self.device, self.scene, label="scene.accel",
+                                              **options))
+        return cache[key]
 
     def bindings(self) -> dict[str, Any]:
         """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights."""

@@ -26,6 +26,10 @@ layout(set = 0, binding = 8) uniform samplerShadow s_shadow;
 layout(set = 0, binding = 9) uniform texture2D t_ao;
 layout(set = 0, binding = 10) uniform sampler s_linear;
 #endif
+#ifdef HAS_VISIBILITY
+// screen-space shadows (rt_shadows): bit i set where light i reaches the pixel
+layout(set = 0, binding = 11) uniform utexture2D t_visibility;
+#endif
 
 void main() {
     uvec2 id = gl_GlobalInvocationID.xy;
@@ -51,9 +55,15 @@ void main() {
     ao *= textureLod(sampler2D(t_ao, s_linear), (vec2(id) + 0.5) / vec2(size), 0.0).r;
 #endif
     vec3 color = emissive + base * lights.ambient.rgb * u_params.ambient * ao;
+#ifdef HAS_VISIBILITY
+    uint visible = texelFetch(t_visibility, px, 0).r;
+#endif
     for (uint i = 0u; i < lights.count.x; i++) {
         vec3 l;
         vec3 e = light_at(i, p, l);
+#ifdef HAS_VISIBILITY
+        e *= float((visible >> i) & 1u);
+#endif
 #ifdef HAS_SHADOW
         if (i == lights.count.y) {
             e *= sun_shadow(t_shadow, s_shadow, p, n, l, u_params.shadow_bias);

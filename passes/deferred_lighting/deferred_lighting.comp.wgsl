@@ -22,6 +22,10 @@ struct Params {
 @group(0) @binding(9) var t_ao: texture_2d<f32>;
 @group(0) @binding(10) var s_linear: sampler;
 #endif
+#ifdef HAS_VISIBILITY
+// screen-space shadows (rt_shadows): bit i set where light i reaches the pixel
+@group(0) @binding(11) var t_visibility: texture_2d<u32>;
+#endif
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3u) {
@@ -47,9 +51,15 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     ao *= textureSampleLevel(t_ao, s_linear, (vec2f(id.xy) + 0.5) / vec2f(size), 0.0).r;
 #endif
     var color = emissive + base * lights.ambient.rgb * u_params.ambient * ao;
+#ifdef HAS_VISIBILITY
+    let visible = textureLoad(t_visibility, px, 0).r;
+#endif
     for (var i = 0u; i < lights.count.x; i++) {
         var l: vec3f;
         var e = light_at(i, p, &l);
+#ifdef HAS_VISIBILITY
+        e *= f32((visible >> i) & 1u);
+#endif
 #ifdef HAS_SHADOW
         if (i == lights.count.y) {
             e *= sun_shadow(t_shadow, s_shadow, p, n, l, u_params.shadow_bias);

@@ -6,7 +6,11 @@ from rfw.graph import Texture
 
 @register_pass("deferred_lighting")
 class DeferredLightingPass(ComputePass):
-    """Directional and point lights with GGX, sun shadows (PCF) and ambient occlusion."""
+    """Directional and point lights with GGX, sun shadows (PCF) and ambient occlusion.
+
+    Shadows come from a sun shadow map (``shadow``), or from a screen-space ``visibility``
+    mask (``rt_shadows``: bit i set where light i reaches the pixel, for all lights), or
+    both."""
 
     shader = "deferred_lighting.comp.wgsl"
     inputs = {
@@ -17,6 +21,8 @@ class DeferredLightingPass(ComputePass):
         "depth": Texture(desc="scene depth"),
         "shadow": Texture(optional=True, desc="sun shadow map"),
         "ao": Texture(optional=True, desc="ambient occlusion (1 = open)"),
+        "visibility": Texture("r32uint", optional=True,
+                              desc="per-light visibility bits (bit i: light i unoccluded)"),
     }
     outputs = {"hdr": Texture("rgba16float", desc="linear scene radiance")}
 
@@ -32,6 +38,9 @@ class DeferredLightingPass(ComputePass):
             defines["HAS_AO"] = 1
             extra["t_ao"] = ctx.sampled("ao")
             extra["s_linear"] = ctx.scene.linear_sampler
+        if ctx.has("visibility"):
+            defines["HAS_VISIBILITY"] = 1
+            extra["t_visibility"] = ctx.sampled("visibility")
         ctx.dispatch(threads=ctx.extent("hdr"), defines=defines,
                      t_albedo=ctx.sampled("albedo"), t_normal=ctx.sampled("normal"),
                      t_material=ctx.sampled("material"), t_emissive=ctx.sampled("emissive"),

@@ -5,6 +5,7 @@ from .errors import GraphError
 from .graph import Graph, GraphBuilder, PassDecl
 from .loaders import load_graph, load_raptor, load_toml, loads_raptor, loads_toml, to_toml
 from .resources import (
+    AccelStructure,
     Attachment,
     Buffer,
     DepthAttachment,
@@ -18,7 +19,7 @@ from .resources import (
 )
 
 __all__ = [
-    "Attachment", "Buffer", "CompiledGraph", "DepthAttachment", "Diagnostic", "Graph",
+    "AccelStructure", "Attachment", "Buffer", "CompiledGraph", "DepthAttachment", "Diagnostic", "Graph",
     "GraphBuilder", "GraphError", "History", "MemoryOptions", "PassDecl", "Reference",
     "ShadingRate", "SizeRule", "Slot", "Storage", "Texture", "compile", "load_graph",
     "load_raptor", "load_toml", "loads_raptor", "loads_toml", "to_toml",

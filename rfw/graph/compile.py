@@ -20,7 +20,7 @@ from .errors import GraphError, did_you_mean
 from .formats import UnknownFormatError, canonical, format_info, image_bytes
 from .graph import Graph, PassDecl
 from .resources import Binding, ResourceDecl, SizeRule, Slot
-from .sync import State, merge_states, state_for
+from .sync import State, is_write, merge_states, state_for
 
 # step executions (cache misses), so tests and benchmarks can see what a recompile redid
 STATS: Counter[str] = Counter()
@@ -72,7 +72,7 @@ class Access:
 @dataclass(frozen=True)
 class ResourcePlan:
     name: str
-    kind: str  # image | buffer
+    kind: str  # image | buffer | accel
     format: str | None
     width: int
     height: int
@@ -285,7 +285,7 @@ def _declare_resources(graph: Graph, passes: list[PassDecl],
 
 def _resource_from(name: str, spec: Slot, p: PassDecl | None, b: Binding | None,
                    problems: _Problems, where: str) -> ResourceDecl:
-    kind = "buffer" if spec.type == "buffer" else "image"
+    kind = {"buffer": "buffer", "accel": "accel"}.get(spec.type, "image")
     external = spec.external
     # an external resource may stay undescribed: the application owns and sizes it
     if kind == "image" and spec.format is None and not external:
@@ -373,9 +373,10 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
                          and not spec.read_only else "read")
     if role == "order":
         return Access(p.name, r.name, role, frozenset(), None, (b.slot,))
-    if (r.kind == "buffer") != (spec.type == "buffer") and spec.type != "reference":
-        problems.error(f"{where}: '{r.name}' is a{'n' * (r.kind == 'image')} {r.kind}, "
-                       f"not usable as {spec.type}")
+    slot_kind = {"buffer": "buffer", "accel": "accel"}.get(spec.type, "image")
+    if r.kind != slot_kind and spec.type != "reference":
+        what = {"image": "an image", "buffer": "a buffer", "accel": "an acceleration structure"}
+        problems.error(f"{where}: '{r.name}' is {what[r.kind]}, not usable as {spec.type}")
         return None
     usages = _usages(p, b, r)
     fmt = format_info(r.format) if r.format else None
@@ -396,6 +397,8 @@ def _usages(p: PassDecl, b: Binding, r: ResourceDecl) -> frozenset[str]:
         return spec.usage & {"transfer_src", "transfer_dst"}  # copies only copy
     if r.kind == "buffer":
         return spec.usage or frozenset({"storage"})
+    if r.kind == "accel":  # built (or refit in place) by writers, traced by readers
+        return frozenset({"accel_build" if b.direction == "out" else "accel_read"})
     fmt = format_info(r.format) if r.format else None
     depth = bool(fmt and fmt.depth)
     raster = p.type in RASTER
@@ -636,6 +639,9 @@ def resolve(declared: Declared, used: Iterable[str], size: tuple[int, int],
         if r.kind == "buffer":
             out[name] = Resolved(name, "buffer", None, 0, 0, 1, 1, 1, r.bytes or 0)
             continue
+        if r.kind == "accel":  # its builder owns its memory: nothing for the heaps
+            out[name] = Resolved(name, "accel", None, 0, 0, 1, 1, 1, 0)
+            continue
         if r.format is None:  # lenient: application-owned image of unknown shape
             out[name] = Resolved(name, "image", None, 0, 0, 1, 1, 1, 0)
             continue
@@ -864,7 +870,7 @@ def plan_barriers(declared: Declared, schedule: list[int], resolved: dict[str, R
 
 
 def _write_access(s: State | None) -> frozenset[str]:
-    return frozenset(x for x in s.access if x.endswith("WRITE")) if s else frozenset()
+    return frozenset(x for x in s.access if is_write(x)) if s else frozenset()
 
 
 def _stages_of(s: State | None) -> frozenset[str]:
@@ -894,7 +900,10 @@ class _Track:
                     and s.access <= self.visible.access:
                 src = None  # read after read in the same layout
             else:  # read after write: make the write visible to these stages
-                src = State(self.layout, _stages_of(self.write), _write_access(self.write))
+                # the stages it was made visible to chain to these: a layout transition
+                # made for earlier readers is ordered only before their stages
+                src = State(self.layout, _stages_of(self.write) | _stages_of(self.visible),
+                            _write_access(self.write))
             self.reads = s if self.reads is None else self.reads.merge(s)
             self.visible = s if self.visible is None else self.visible.merge(s)
             return None if src is None or not (src.stages or src.access) else src

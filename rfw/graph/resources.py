@@ -20,6 +20,7 @@ SLOT_TYPES = (
     "reference",  # ordering only as an input; in-place write as an output
     "history",  # the previous frame's value of a resource
     "shading_rate",  # fragment shading rate attachment
+    "accel",  # acceleration structure: built (output) or traced against (input)
 )
 
 PASS_TYPES = ("graphics", "mesh", "compute", "ray_tracing", "transfer")
@@ -143,6 +144,13 @@ def ShadingRate(**kw: Any) -> Slot:
     return _slot("shading_rate", None, kw)
 
 
+def AccelStructure(**kw: Any) -> Slot:
+    """An acceleration structure (a TLAS). Output: built or refit by the pass (the build
+    stage writes it). Input: traced against by ray queries or ray-tracing pipelines. Its
+    memory belongs to whoever builds it, never to the plan's heaps."""
+    return _slot("accel", None, kw)
+
+
 @dataclass(frozen=True)
 class Binding:
     """A slot of a pass bound to a named resource (the graph edge)."""
@@ -158,7 +166,7 @@ class ResourceDecl:
     """A resource as the graph knows it before compiling (from its producer or an import)."""
 
     name: str
-    kind: str  # "image" | "buffer"
+    kind: str  # "image" | "buffer" | "accel"
     format: str | None
     size: SizeRule | None
     mips: int = 1

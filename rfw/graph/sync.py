@@ -30,7 +30,7 @@ class State:
 
     @property
     def writes(self) -> bool:
-        return any(a.endswith("WRITE") for a in self.access)
+        return any(is_write(a) for a in self.access)
 
     def merge(self, other: State) -> State:
         return State(self.layout, self.stages | other.stages, self.access | other.access)
@@ -41,6 +41,11 @@ class State:
 
 
 UNDEFINED = State("UNDEFINED", NONE, NONE)
+
+
+def is_write(access: str) -> bool:
+    """Whether an access name writes (extension accesses end in _KHR/_EXT)."""
+    return access.removesuffix("_KHR").removesuffix("_EXT").endswith("WRITE")
 
 
 def _depth_layout(depth: bool, stencil: bool, read_only: bool) -> str:
@@ -86,6 +91,13 @@ def state_for(usage: str, *, pass_type: str, write: bool, read: bool = True,
                      frozenset({"VERTEX_ATTRIBUTE_READ"}))
     if usage == "index":
         return State(None, frozenset({"INDEX_INPUT"}), frozenset({"INDEX_READ"}))
+    if usage == "accel_build":
+        # a refit reads the structure it updates; a build only writes it
+        return State(None, frozenset({"ACCELERATION_STRUCTURE_BUILD_KHR"}),
+                     frozenset({"ACCELERATION_STRUCTURE_READ_KHR",
+                                "ACCELERATION_STRUCTURE_WRITE_KHR"}))
+    if usage == "accel_read":  # ray queries in any shader stage, ray-tracing pipelines
+        return State(None, shader, frozenset({"ACCELERATION_STRUCTURE_READ_KHR"}))
     if usage == "transfer_src":
         return State("TRANSFER_SRC_OPTIMAL" if image else None, frozenset({"COPY"}),
                      frozenset({"TRANSFER_READ"}))

@@ -359,7 +359,9 @@ def test_barriers_for_write_read_and_read_read():
     assert raw.dst.layout == "SHADER_READ_ONLY_OPTIMAL" and raw.dst.stages == {"COMPUTE_SHADER"}
     assert ("blur2", "draw.color") not in b  # read after read, same layout and stages
     late = b[("comp", "draw.color")]  # new stages must see the write too
-    assert late.src.stages == {"COLOR_ATTACHMENT_OUTPUT"}
+    # ... and the layout transition made for blur: ordered only before blur's stages, so the
+    # barrier waits for those too (sync validation reports a read-after-write otherwise)
+    assert late.src.stages == {"COLOR_ATTACHMENT_OUTPUT", "COMPUTE_SHADER"}
     assert late.dst.stages == {"VERTEX_SHADER", "FRAGMENT_SHADER"}
 
 

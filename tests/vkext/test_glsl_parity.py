@@ -38,7 +38,8 @@ TARGET = "vulkan1.3"
 VARIANTS = {
     ShadowMapPass: [{}],
     GBufferPass: [{}],  # prepass changes pipeline state only, not the shader
-    DeferredLightingPass: [{}, {"HAS_SHADOW": 1}, {"HAS_AO": 1}, {"HAS_SHADOW": 1, "HAS_AO": 1}],
+    DeferredLightingPass: [{}, {"HAS_SHADOW": 1}, {"HAS_AO": 1}, {"HAS_SHADOW": 1, "HAS_AO": 1},
+                           {"HAS_VISIBILITY": 1, "HAS_AO": 1}],
     TonemapPass: [{}],
 }
 CASES = [pytest.param(cls, d, id=f"{cls.__name__}-{'+'.join(d) or 'base'}")
