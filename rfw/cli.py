@@ -137,6 +137,12 @@ def cmd_meshlets(args: argparse.Namespace) -> int:
     return cmd_show(args)
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench.cli import run
+
+    return run(args)
+
+
 def cmd_new_pass(args: argparse.Namespace) -> int:
     from .templates import new_pass
 
@@ -216,6 +222,12 @@ def parser() -> argparse.ArgumentParser:
     show.add_argument("--screenshot", metavar="PNG", help="render off screen to PNG and exit")
     show.add_argument("--size", type=_size, default=(1024, 768), help="window size WxH")
     show.set_defaults(func=cmd_meshlets)
+    from .bench.cli import add_arguments as bench_arguments
+
+    bench = sub.add_parser("bench", help="benchmark configs and variants: per-pass statistics, "
+                           "images, peers; 'rfw bench compare OLD NEW' flags changes")
+    bench_arguments(bench)
+    bench.set_defaults(func=cmd_bench)
     new = sub.add_parser("new-pass", help="write a working pass folder, shader and test")
     new.add_argument("name", help="snake_case pass id")
     kind = new.add_mutually_exclusive_group()

@@ -49,7 +49,9 @@ def _meshes() -> dict[str, trimesh.Trimesh]:
             "capsule": trimesh.creation.capsule(1.0, 0.4),
             "noisy_sphere": noisy,
             # overlapping, intersecting triangles: the closest of several hits must win
-            "soup": trimesh.creation.random_soup(500)}
+            # (seeded: trimesh's random_soup draws from the unseeded global generator)
+            "soup": trimesh.Trimesh(rng.random((1500, 3)) - 0.5,
+                                    np.arange(1500).reshape(500, 3), process=False)}
 
 
 MESHES = _meshes()

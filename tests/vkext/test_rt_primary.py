@@ -26,7 +26,7 @@ CONFIG = Path(__file__).resolve().parents[2] / "configs" / "rt_primary.toml"
 @pytest.fixture(autouse=True)
 def _needs_ray_tracing(vk_device):
     for cap in ("VK_KHR_acceleration_structure", "VK_KHR_ray_tracing_pipeline",
-                "VK_KHR_ray_query", "buffer_device_address"):
+                "buffer_device_address"):
         if cap not in vk_device.caps:
             pytest.skip(f"no {cap}")
 
@@ -36,6 +36,8 @@ def images(vk_device):
     out = {}
     scene = default_scene()
     for method in ("ray_pipeline", "ray_query"):
+        if method == "ray_query" and "VK_KHR_ray_query" not in vk_device.caps:
+            continue  # the H100 has pipelines only
         cfg = apply_overrides(load_config(CONFIG), ["size=192x108", f"method={method}"])
         cfg = replace(cfg, passes=[*cfg.passes, PassEntry("gbuffer", "gbuffer")],
                       outputs=[*cfg.outputs, "gbuffer.albedo", "gbuffer.depth"])
@@ -71,5 +73,7 @@ def test_albedo_matches_the_raster_gbuffer(images):
 
 
 def test_query_and_pipeline_agree(images):
+    if "ray_query" not in images:
+        pytest.skip("no VK_KHR_ray_query: nothing to compare the pipeline with")
     for name in ("primary.barycentrics", "primary.albedo"):
         np.testing.assert_array_equal(images["ray_pipeline"][name], images["ray_query"][name])

@@ -1,0 +1,116 @@
+"""The ``rfw bench`` arguments and what they run (kept light: argparse only at import).
+
+    rfw bench CONFIG... [options]        run the matrix, write results.jsonl and the reports
+    rfw bench compare OLD NEW [options]  per-pass changes beyond the noise
+    rfw bench report DIR [--reference]   re-write the reports from DIR/results.jsonl
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rfw_raycast")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {w}x{h}")
+    return w, h
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("configs", nargs="+", metavar="CONFIG",
+                   help="config TOMLs or names in configs/ (deferred, forward, ...), "
+                        "CONFIG@vk to pin one config's backend; or 'compare OLD NEW', or "
+                        "'report DIR'")
+    p.add_argument("--scene", action="append", help="scene file or 'default' (repeatable: "
+                   "a matrix axis)")
+    p.add_argument("--size", type=_size, help="output size WxH (default: the first config's)")
+    p.add_argument("--frames", type=int, default=10, help="timed frames per run (default 10)")
+    p.add_argument("--warmup", type=int, default=2, help="untimed frames first (default 2)")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="runs (processes) per variant, interleaved (default 3)")
+    p.add_argument("--backend", action="append", choices=["wgpu", "vk"],
+                   help="repeatable: a matrix axis (default wgpu)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="applied to every run, as in rfw run (repeatable)")
+    p.add_argument("--vary", action="append", metavar="KEY=V1,V2",
+                   help="a matrix axis of --set values, e.g. ao=on,off (repeatable)")
+    p.add_argument("--peers", default="none",
+                   help=f"peers to measure side by side: all, none or a comma list of "
+                        f"{', '.join(PEER_NAMES)} (default none)")
+    p.add_argument("--peer-frames", type=int,
+                   help="timed frames of a peer run (default: --frames)")
+    p.add_argument("--reference", help="variant the images are compared against: index or "
+                   "label (default: the first)")
+    p.add_argument("--order", choices=["rotate", "shuffle"], default="rotate",
+                   help="order of variants within a repeat (default rotate)")
+    p.add_argument("--seed", type=int, default=0, help="seed of --order shuffle")
+    p.add_argument("--timeout", type=float, default=600, help="seconds per run (default 600)")
+    p.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--threshold", type=float, default=0.05,
+                   help="compare: relative change that counts (default 0.05)")
+    p.add_argument("--fail-on-regression", action="store_true",
+                   help="compare: exit 1 when a regression is flagged")
+    p.add_argument("--all", action="store_true", help="compare: list unchanged entries too")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..graph import GraphError
+
+    head, rest = args.configs[0], args.configs[1:]
+    if head == "compare":
+        from .compare import compare
+
+        if len(rest) != 2:
+            raise GraphError("usage: rfw bench compare OLD NEW (folders or results.jsonl)")
+        return compare(Path(rest[0]), Path(rest[1]), threshold=args.threshold,
+                       fail_on_regression=args.fail_on_regression, show_all=args.all)
+    if head == "report":
+        from .report import main_report
+
+        if len(rest) != 1:
+            raise GraphError("usage: rfw bench report DIR")
+        return main_report(rest[0], reference=args.reference)
+    from .report import write_report
+    from .runner import make_plan, run_plan
+
+    peers = _peers(args.peers)
+    plan = make_plan(args.configs, scenes=args.scene, size=args.size, frames=args.frames,
+                     warmup=args.warmup, repeat=args.repeat, backends=args.backend,
+                     sets=args.set, vary=args.vary, peers=peers, order=args.order,
+                     seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)
+    out = Path(args.out)
+    print(f"rfw bench: {len(plan.jobs)} variant(s) x {plan.repeat} repeat(s) at "
+          f"{plan.size[0]}x{plan.size[1]}, {plan.frames} frames (+{plan.warmup} warm-up) "
+          f"-> {out}")
+    for note in plan.notes:
+        print(f"  note: {note}")
+    results = run_plan(plan, out, progress=not args.no_progress)
+    try:
+        md, page = write_report(out, reference=args.reference)
+    except ValueError as e:
+        raise GraphError(str(e)) from None
+    print(f"wrote {results}, {md}, {page}")
+    return 0
+
+
+def _peers(text: str) -> list[str]:
+    from ..graph import GraphError
+    from ..graph.errors import did_you_mean
+
+    if text in ("", "none"):
+        return []
+    if text == "all":
+        return list(PEER_NAMES)
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    for n in names:
+        if n not in PEER_NAMES:
+            raise GraphError(f"--peers: unknown peer '{n}'" + did_you_mean(n, PEER_NAMES))
+    return names

@@ -1,0 +1,88 @@
+"""Image differences for the report: PSNR, FLIP (NVIDIA's perceptual error; SSIM where the
+``flip-evaluator`` package is missing) and magnified difference images."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DIFF_GAIN = 8  # abs diff x8 so a one-step difference of an 8-bit channel shows
+
+
+def _rgb(image: np.ndarray) -> np.ndarray:
+    a = np.asarray(image)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.shape[2] == 1:
+        a = np.repeat(a, 3, axis=2)
+    return a[..., :3]
+
+
+def psnr(reference: np.ndarray, test: np.ndarray, *, peak: float = 255.0) -> float:
+    """Peak signal-to-noise ratio in dB over RGB (alpha ignored); ``inf`` for identical."""
+    a, b = _rgb(reference).astype(np.float64), _rgb(test).astype(np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
+    mse = float(np.mean((a - b) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
+
+
+def diff_image(reference: np.ndarray, test: np.ndarray, *, gain: int = DIFF_GAIN) -> np.ndarray:
+    """8-bit RGB of ``|reference - test| * gain`` (max over channels shown grey)."""
+    a, b = _rgb(reference).astype(np.int16), _rgb(test).astype(np.int16)
+    d = np.abs(a - b).max(axis=2) * gain
+    d = np.clip(d, 0, 255).astype(np.uint8)
+    return np.repeat(d[..., None], 3, axis=2)
+
+
+def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """Mean LDR FLIP error (0 = identical) and its magma error map as 8-bit RGB; None when
+    the ``flip-evaluator`` package is not installed."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    a = _rgb(reference).astype(np.float32) / 255.0
+    b = _rgb(test).astype(np.float32) / 255.0
+    error_map, mean, _ = flip_evaluator.evaluate(a, b, "LDR")
+    rgb = (np.clip(error_map, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+    return float(mean), rgb
+
+
+def ssim(reference: np.ndarray, test: np.ndarray) -> float | None:
+    """Structural similarity (scikit-image) over RGB; None when it is not installed."""
+    try:
+        from skimage.metrics import structural_similarity
+    except ImportError:
+        return None
+    a, b = _rgb(reference), _rgb(test)
+    win = min(7, *a.shape[:2]) // 2 * 2 + 1 if min(a.shape[:2]) >= 3 else 3
+    return float(structural_similarity(a, b, channel_axis=2, win_size=win, data_range=255))
+
+
+def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
+    """PSNR plus FLIP (or SSIM) and the difference images of ``test`` against ``reference``."""
+    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": diff_image(reference, test)}
+    f = flip(reference, test)
+    if f is not None:
+        out["flip"], out["flip_map"] = f
+    else:
+        out["ssim"] = ssim(reference, test)
+    return out
+
+
+def load_png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"))
+
+
+def save_png(path: Path, rgb: np.ndarray) -> None:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.ascontiguousarray(rgb)).save(path, format="PNG")

@@ -1,0 +1,544 @@
+"""``report.md`` and ``report.html`` from a ``results.jsonl``: tables, charts, images, peers.
+
+The two files say the same: a small document model is rendered to Markdown and to HTML.
+Images (outputs, differences, charts) are PNG files beside the reports, linked relatively,
+so the folder is the unit to keep or upload.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .images import compare, load_png, save_png
+from .runner import load_results
+from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
+
+
+@dataclass
+class Img:
+    path: str  # relative to the report
+    alt: str = ""
+    width: int = 240
+
+
+Cell = Any  # str | float | Img | None
+
+
+class Doc:
+    """Headings, paragraphs, tables and image rows; rendered as Markdown and as HTML."""
+
+    def __init__(self) -> None:
+        self.blocks: list[tuple[str, Any]] = []
+
+    def h(self, level: int, text: str) -> None:
+        self.blocks.append(("h", (level, text)))
+
+    def p(self, text: str) -> None:
+        self.blocks.append(("p", text))
+
+    def bullets(self, items: list[str]) -> None:
+        if items:
+            self.blocks.append(("ul", items))
+
+    def table(self, headers: list[str], rows: list[list[Cell]]) -> None:
+        self.blocks.append(("table", (headers, rows)))
+
+    def image(self, img: Img) -> None:
+        self.blocks.append(("img", img))
+
+    def markdown(self) -> str:
+        out: list[str] = []
+        for kind, value in self.blocks:
+            if kind == "h":
+                out.append("#" * value[0] + " " + value[1])
+            elif kind == "p":
+                out.append(value)
+            elif kind == "ul":
+                out.append("\n".join(f"- {i}" for i in value))
+            elif kind == "img":
+                out.append(f"![{value.alt}]({value.path})")
+            else:
+                headers, rows = value
+                lines = ["| " + " | ".join(headers) + " |",
+                         "|" + "|".join(" --- " for _ in headers) + "|"]
+                lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in rows]
+                out.append("\n".join(lines))
+        return "\n\n".join(out) + "\n"
+
+    def html(self, title: str) -> str:
+        out = [f"<!doctype html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
+               f"<style>{CSS}</style></head><body>"]
+        for kind, value in self.blocks:
+            if kind == "h":
+                out.append(f"<h{value[0]}>{_e(value[1])}</h{value[0]}>")
+            elif kind == "p":
+                out.append(f"<p>{_inline(value)}</p>")
+            elif kind == "ul":
+                out.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in value) + "</ul>")
+            elif kind == "img":
+                out.append(f"<p>{_html_img(value, full=True)}</p>")
+            else:
+                headers, rows = value
+                out.append("<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in headers)
+                           + "</tr>" + "".join("<tr>" + "".join(
+                               f"<td>{_html_cell(c)}</td>" for c in r) + "</tr>" for r in rows)
+                           + "</table>")
+        out.append("</body></html>")
+        return "\n".join(out) + "\n"
+
+
+CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1400px}"
+       "table{border-collapse:collapse;margin:0.5em 0 1.5em}"
+       "td,th{border:1px solid #ccc;padding:3px 8px;text-align:right;vertical-align:top}"
+       "th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}"
+       "img{image-rendering:pixelated}code{background:#f3f3f3;padding:0 3px}")
+
+
+def _e(text: str) -> str:
+    return html.escape(str(text))
+
+
+def _inline(text: str) -> str:
+    # the markdown we write inline: `code` and **bold**
+    parts = str(text).split("`")
+    return "".join(_bold(_e(p)) if i % 2 == 0 else f"<code>{_e(p)}</code>"
+                   for i, p in enumerate(parts))
+
+
+def _bold(text: str) -> str:
+    parts = text.split("**")
+    return "".join(p if i % 2 == 0 else f"<b>{p}</b>" for i, p in enumerate(parts))
+
+
+def _md_cell(c: Cell) -> str:
+    if isinstance(c, Img):
+        return f"![{c.alt}]({c.path})"
+    return "-" if c is None else str(c).replace("|", "\\|").replace("\n", " ")
+
+
+def _html_img(img: Img, *, full: bool = False) -> str:
+    style = "max-width:100%" if full else f"width:{img.width}px"
+    return (f"<a href='{_e(img.path)}'><img src='{_e(img.path)}' alt='{_e(img.alt)}' "
+            f"style='{style}'></a>")
+
+
+def _html_cell(c: Cell) -> str:
+    if isinstance(c, Img):
+        return _html_img(c)
+    return "-" if c is None else _inline(str(c))
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers as text
+
+
+def ms(s: dict[str, Any] | None, key: str = "median") -> str:
+    return "-" if not s else f"{s[key]:.3f}"
+
+
+def ci(s: dict[str, Any] | None) -> str:
+    return "-" if not s else f"{s['ci_lo']:.3f}-{s['ci_hi']:.3f}"
+
+
+def spread(s: dict[str, Any] | None) -> str:
+    return "-" if not s else f"{s['p5']:.3f}-{s['p95']:.3f}"
+
+
+def db(v: float | None) -> str:
+    if v is None:
+        return "-"
+    return "∞ (identical)" if math.isinf(v) else f"{v:.2f} dB"
+
+
+# ---------------------------------------------------------------------------------------------
+# the report
+
+
+def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[Path, Path]:
+    """Read ``out_dir/results.jsonl``, write the charts, image comparisons, ``report.md`` and
+    ``report.html`` into ``out_dir``; returns the two report paths."""
+    out_dir = Path(out_dir)
+    records = load_results(out_dir)
+    variants = summarize_results(records)
+    rfw = [v for v in variants if v.kind == "rfw"]
+    peers = [v for v in variants if v.kind == "peer"]
+    doc = Doc()
+    doc.h(1, "rfw benchmark")
+    _environment(doc, records, rfw)
+    _frame_table(doc, rfw)
+    charts = _charts(out_dir, rfw)
+    if charts:
+        doc.h(2, "Charts")
+        for c in charts:
+            doc.image(c)
+    _pass_tables(doc, rfw)
+    _images(doc, out_dir, rfw, reference)
+    _counters(doc, rfw)
+    _peers(doc, rfw, peers)
+    _failures(doc, variants)
+    _method(doc, records)
+    md, page = out_dir / "report.md", out_dir / "report.html"
+    md.write_text(doc.markdown(), encoding="utf-8")
+    page.write_text(doc.html("rfw benchmark"), encoding="utf-8")
+    return md, page
+
+
+def _environment(doc: Doc, records: list[dict[str, Any]], rfw: list[VariantSummary]) -> None:
+    first = records[0] if records else {}
+    devices = sorted({f"{r.get('device')} — {r.get('driver')} ({r.get('backend')})"
+                      for v in rfw for r in v.records})
+    rows = [["rfw commit", f"`{first.get('rfw_commit', '?')}`"],
+            ["device — driver (backend)", "; ".join(devices) or "-"],
+            ["CPU", f"{first.get('cpu', '?')} ({first.get('cpus', '?')} threads)"],
+            ["host / python", f"{first.get('host', '?')} / {first.get('python', '?')} / "
+                              f"{first.get('platform', '?')}"],
+            ["size", "x".join(str(v) for v in first.get("size", []))],
+            ["frames per run / warm-up / per peer run",
+             f"{first.get('frames')} / {first.get('warmup')} / "
+             f"{first.get('peer_frames', first.get('frames'))}"],
+            ["repeats (processes per variant)", str(first.get("repeats"))],
+            ["order", f"{first.get('order')}: each repeat runs every variant once, "
+                      "the order rotated so drift hits every variant alike"],
+            ["scene", ", ".join(sorted({str(r.get('scene')) for v in rfw for r in v.records}))
+             or "-"],
+            ["runs", f"{len(records)} ({sum(1 for r in records if r.get('error'))} failed), "
+                     f"first {records[0].get('time', '?')}, last "
+                     f"{records[-1].get('time', '?')}" if records else "0"]]
+    doc.table(["what", "value"], rows)
+    doc.bullets(list(first.get("notes", [])))
+
+
+def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
+    doc.h(2, "Frame time per variant")
+    doc.p("Medians over all frames of all repeats; `95% CI` is a bootstrap interval of the "
+          "median that resamples runs, then frames in each run (2000 resamples, seeded); "
+          "`p5-p95` is the spread of single frames. GPU ms: the sum of the passes' timestamp "
+          "times; wall ms: one frame's record, submit and wait, measured on the host.")
+    rows = []
+    for v in rfw:
+        if not v.ok:
+            continue
+        m = v.get("memory") or {}
+        gpu, wall, cpu = v.frame.get("gpu_ms"), v.frame.get("wall_ms"), v.frame.get("cpu_ms")
+        alloc = m.get("transient_allocated_bytes", m.get("plan_transient_bytes"))
+        rows.append([v.label, v.get("backend"), ms(gpu), ci(gpu), spread(gpu), ms(wall),
+                     spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
+                     + (" (plan)" if m.get("source") == "plan" else "")])
+    doc.table(["variant", "backend", "GPU ms", "95% CI", "p5-p95", "wall ms", "wall p5-p95",
+               "CPU record ms", "transient MiB aliased / not"], rows)
+
+
+def _pass_tables(doc: Doc, rfw: list[VariantSummary]) -> None:
+    doc.h(2, "Per pass")
+    for v in rfw:
+        if not v.ok:
+            continue
+        doc.h(3, v.label)
+        total = (v.frame.get("gpu_ms") or {}).get("median") or 0.0
+        rows = []
+        for p in v.passes:
+            g, c = p["gpu_ms"], p["cpu_ms"]
+            share = f"{100 * g['median'] / total:.1f}%" if g and total else "-"
+            rows.append([p["name"], ms(g), ci(g), spread(g), share, ms(c), ci(c), spread(c)])
+        doc.table(["pass", "GPU ms", "95% CI", "p5-p95", "share", "CPU record ms", "95% CI",
+                   "p5-p95"], rows)
+
+
+def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
+    done = [v for v in rfw if v.ok]
+    if not done:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    charts = out_dir / "charts"
+    charts.mkdir(exist_ok=True)
+    names: list[str] = []
+    for v in done:
+        names.extend(p["name"] for p in v.passes if p["name"] not in names)
+    cmap = plt.get_cmap("tab20")
+    colors = {n: cmap(i % 20) for i, n in enumerate(names)}
+    labels = [v.label for v in done]
+    height = max(2.5, 0.45 * len(done) + 1.5)
+    fig, axes = plt.subplots(1, 2, figsize=(14, height), sharey=True)
+    for ax, metric, title in ((axes[0], "gpu_ms", "GPU ms per pass (median)"),
+                              (axes[1], "cpu_ms", "CPU record ms per pass (median)")):
+        left = [0.0] * len(done)
+        for n in names:
+            widths = []
+            for v in done:
+                p = next((p for p in v.passes if p["name"] == n), None)
+                s = p and p[metric]
+                widths.append(s["median"] if s else 0.0)
+            ax.barh(labels, widths, left=left, color=colors[n], label=n)
+            left = [a + b for a, b in zip(left, widths, strict=True)]
+        ax.set_title(title)
+        ax.set_xlabel("ms")
+    axes[0].invert_yaxis()  # shared: the first variant on top, as in the tables
+    axes[1].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    fig.tight_layout()
+    passes = charts / "passes.png"
+    fig.savefig(passes, dpi=100)
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 2, figsize=(14, height), sharey=True)
+    for ax, metric, title in ((axes[0], "gpu_ms", "frame GPU ms (all frames, all repeats)"),
+                              (axes[1], "wall_ms", "frame wall ms")):
+        data = [[x for run in v.samples.get(metric, []) for x in run] or [math.nan]
+                for v in done]
+        ax.boxplot(data, orientation="horizontal", tick_labels=labels, whis=(5, 95), showfliers=True,
+                   flierprops={"markersize": 3})
+        ax.set_title(title + " — whiskers p5-p95")
+        ax.set_xlabel("ms")
+    axes[0].invert_yaxis()
+    fig.tight_layout()
+    dist = charts / "distributions.png"
+    fig.savefig(dist, dpi=100)
+    plt.close(fig)
+    return [Img("charts/passes.png", "stacked per-pass medians"),
+            Img("charts/distributions.png", "frame time distributions")]
+
+
+def _pick_reference(rfw: list[VariantSummary], reference: str | int | None) -> VariantSummary:
+    done = [v for v in rfw if v.ok and v.image]
+    if reference is None:
+        return done[0]
+    if isinstance(reference, int) or str(reference).isdigit():
+        i = int(reference)
+        if not 0 <= i < len(rfw):
+            raise ValueError(f"--reference {i}: there are {len(rfw)} variants (0..{len(rfw) - 1})")
+        return rfw[i]
+    for v in rfw:
+        if v.label == reference:
+            return v
+    raise ValueError(f"--reference '{reference}': no such variant "
+                     f"({', '.join(v.label for v in rfw)})")
+
+
+def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
+                      reference: str | int | None = None) -> tuple[VariantSummary | None,
+                                                                   list[dict[str, Any]]]:
+    """Each variant's output against the reference: PSNR, FLIP, difference PNGs (written to
+    ``out_dir/images``). Variants whose image has another shape are compared with nothing."""
+    if not any(v.ok and v.image for v in rfw):
+        return None, []
+    ref = _pick_reference(rfw, reference)
+    if not ref.image:
+        return ref, []
+    ref_img = load_png(out_dir / ref.image)
+    rows = []
+    for v in rfw:
+        if not v.image:
+            continue
+        img = load_png(out_dir / v.image)
+        row: dict[str, Any] = {"variant": v, "image": v.image}
+        if img.shape == ref_img.shape:
+            c = compare(ref_img, img)
+            diff = Path("images") / f"{v.records[0]['variant_id']}.diff.png"
+            save_png(out_dir / diff, c["diff"])
+            row.update(psnr=c["psnr"], diff=str(diff), flip=c.get("flip"), ssim=c.get("ssim"))
+            if "flip_map" in c:
+                fmap = Path("images") / f"{v.records[0]['variant_id']}.flip.png"
+                save_png(out_dir / fmap, c["flip_map"])
+                row["flip_map"] = str(fmap)
+        rows.append(row)
+    return ref, rows
+
+
+def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
+            reference: str | int | None) -> None:
+    ref, rows = image_comparisons(out_dir, rfw, reference)
+    if ref is None:
+        return
+    doc.h(2, "Images")
+    has_flip = any(r.get("flip") is not None for r in rows)
+    doc.p(f"Reference: **{ref.label}**; image differences next to the time differences "
+          "(frame GPU ms, median). Difference: |reference - variant| x 8, max over RGB. "
+          + ("FLIP: NVIDIA's perceptual error (LDR, 67 pixels per degree; 0 = identical), "
+             "magma error map." if has_flip else "SSIM from scikit-image (FLIP is not "
+                                                 "installed)."))
+    headers = ["variant", "image", "difference", *(["FLIP map"] if has_flip else []), "PSNR",
+               "FLIP" if has_flip else "SSIM", "GPU ms", "vs reference"]
+    ref_ms = (ref.frame.get("gpu_ms") or {}).get("median")
+    table = []
+    for r in rows:
+        label = r["variant"].label
+        own_ms = (r["variant"].frame.get("gpu_ms") or {}).get("median")
+        cells: list[Cell] = [label, Img(r["image"], label)]
+        cells.append(Img(r["diff"], "diff") if r.get("diff") else "other size")
+        if has_flip:
+            cells.append(Img(r["flip_map"], "flip") if r.get("flip_map") else "-")
+        cells.append(db(r.get("psnr")))
+        metric = r.get("flip") if has_flip else r.get("ssim")
+        cells.append("-" if metric is None else f"{metric:.4f}")
+        cells.append("-" if own_ms is None else f"{own_ms:.3f}")
+        cells.append("-" if own_ms is None or not ref_ms else f"{own_ms / ref_ms - 1:+.1%}")
+        table.append(cells)
+    doc.table(headers, table)
+
+
+def _counters(doc: Doc, rfw: list[VariantSummary]) -> None:
+    mem = [v for v in rfw if v.ok and v.get("memory")]
+    if mem:
+        doc.h(2, "Memory")
+        doc.p("Transient resources of the compiled graph: bytes allocated with aliasing, the "
+              "plan's bytes and the bytes with every transient in its own allocation. The vk "
+              "backend allocates the plan for real (fitted to the driver); on wgpu the plan's "
+              "numbers are shown (WebGPU allocates each texture itself).")
+        rows = []
+        for v in mem:
+            m = v.get("memory")
+            rows.append([v.label, f"{m.get('transient_allocated_bytes', '-'):,}"
+                         if isinstance(m.get("transient_allocated_bytes"), int) else "-",
+                         f"{m.get('plan_transient_bytes', 0):,}",
+                         f"{m.get('unaliased_bytes', 0):,}",
+                         {True: "yes", False: "no"}.get(m.get("alias"), "plan only")])
+        doc.table(["variant", "allocated B", "plan B", "unaliased B", "aliased"], rows)
+    cull = [v for v in rfw if v.ok and v.get("culling")]
+    if cull:
+        doc.h(2, "Culling counters")
+        keys: list[str] = []
+        for v in cull:
+            keys.extend(k for k in v.get("culling") if k not in keys)
+        doc.table(["variant", *keys], [[v.label, *(_num(v.get("culling").get(k)) for k in keys)]
+                                       for v in cull])
+    rays = [v for v in rfw if v.ok and v.get("rays")]
+    if rays:
+        doc.h(2, "Ray counts")
+        doc.table(["variant", "rays"], [[v.label, str(v.get("rays"))] for v in rays])
+
+
+def _num(x: Any) -> str:
+    return "-" if x is None else f"{x:,}" if isinstance(x, int) else str(x)
+
+
+def _peers(doc: Doc, rfw: list[VariantSummary], peers: list[VariantSummary]) -> None:
+    if not peers:
+        return
+    doc.h(2, "Peers")
+    doc.p("The same scene (all instances baked into one mesh), camera and resolution, each "
+          "peer in its own process, interleaved with rfw's runs. Ratio = rfw ÷ peer (below 1: "
+          "rfw is faster). Where a peer has GPU timer queries the GPU ratio uses rfw's "
+          "timestamp total; wall ratios use rfw's frame wall time (record, submit, wait).")
+    done = [v for v in rfw if v.ok]
+    raster = [p for p in peers if _kind(p) == "raster"]
+    cast = [p for p in peers if _kind(p) == "raycast"]
+    if raster:
+        doc.h(3, "Rasterization")
+        rows = []
+        for p in raster:
+            if not p.ok:
+                rows.append([p.label.removeprefix("peer:"), "-", "-", "-", "-", "-",
+                             p.errors[0] if p.errors else "no runs"])
+                continue
+            f, g = p.frame.get("frame_ms"), p.frame.get("gpu_ms")
+            timing = p.get("timing")
+            if f and g and g["median"] < 0.2 * f["median"]:
+                # e.g. llvmpipe's GL: the query closes before the deferred rasterisation runs
+                timing += "; the GPU query covers under 20% of the wall time: use the wall ratio"
+            rows.append([p.label.removeprefix("peer:"), p.get("device"), ms(f), ci(f), ms(g),
+                         timing, p.get("version")])
+        doc.table(["peer", "device", "wall ms", "95% CI", "GPU ms", "timing", "version"], rows)
+        ok = [p for p in raster if p.ok]
+        if ok and done:
+            headers = ["rfw variant"]
+            for p in ok:
+                name = p.label.removeprefix("peer:")
+                headers.append(f"÷ {name} (wall)")
+                if p.frame.get("gpu_ms"):
+                    headers.append(f"÷ {name} (GPU)")
+            rows = []
+            for v in done:
+                row: list[Cell] = [v.label]
+                for p in ok:
+                    row.append(_ratio(v.frame.get("wall_ms"), p.frame.get("frame_ms")))
+                    if p.frame.get("gpu_ms"):
+                        row.append(_ratio(v.frame.get("gpu_ms"), p.frame.get("gpu_ms")))
+                rows.append(row)
+            doc.table(headers, rows)
+        imgs = [p for p in raster if p.ok and p.image]
+        if imgs:
+            doc.table([p.label.removeprefix("peer:") for p in imgs],
+                      [[Img(p.image, p.label) for p in imgs]])
+    if cast:
+        doc.h(3, "Ray casting (primary rays, closest hit)")
+        own = next((p for p in cast if p.label == "peer:rfw_raycast" and p.ok), None)
+        rows = []
+        for p in cast:
+            name = p.label.removeprefix("peer:")
+            if not p.ok:
+                rows.append([name, "-", "-", "-", "-", "-", "-", p.errors[0] if p.errors
+                             else "no runs"])
+                continue
+            f = p.frame.get("frame_ms")
+            mr = p.frame.get("mrays_per_s")
+            ratio = "-" if own is None or p is own else _ratio(own.frame.get("frame_ms"), f)
+            rows.append([name, p.get("device"), f"{p.get('rays'):,}", ms(f), ci(f),
+                         "-" if mr is None else f"{mr:.2f}", ratio, p.get("timing")])
+        doc.table(["peer", "device", "rays", "ms", "95% CI", "Mrays/s", "rfw ÷ peer",
+                   "timing"], rows)
+        if own is None:
+            cause = next((p.errors[0] for p in cast if p.label == "peer:rfw_raycast"
+                          and p.errors), "rfw_raycast was not in --peers")
+            doc.p(f"No rfw ratio for ray casting: {cause}.")
+        else:
+            hits = {p.label.removeprefix("peer:"): p.get("hits") for p in cast if p.ok}
+            doc.p("Hits per peer (same rays, so they should agree up to edge cases): "
+                  + ", ".join(f"{k} {v:,}" for k, v in hits.items() if v is not None) + ".")
+        imgs = [p for p in cast if p.ok and p.image]
+        if imgs:
+            doc.table([p.label.removeprefix("peer:") + " (hit distance)" for p in imgs],
+                      [[Img(p.image, p.label) for p in imgs]])
+
+
+def _kind(p: VariantSummary) -> str:
+    """"raster" or "raycast": from a run's record, else from the peer's name."""
+    for r in [*p.records, *p.failed]:
+        if r.get("peer_kind"):
+            return r["peer_kind"]
+    return "raycast" if p.label.removeprefix("peer:") in RAYCAST_PEERS else "raster"
+
+
+def _ratio(a: dict[str, Any] | None, b: dict[str, Any] | None) -> str:
+    if not a or not b or not b["median"]:
+        return "-"
+    return f"{a['median'] / b['median']:.2f}x"
+
+
+def _failures(doc: Doc, variants: list[VariantSummary]) -> None:
+    bad = [v for v in variants if v.errors]
+    if not bad:
+        return
+    doc.h(2, "Failed and unavailable")
+    doc.table(["variant", "runs failed", "reason"],
+              [[v.label, f"{len(v.errors)} of {len(v.errors) + len(v.records)}",
+                "; ".join(dict.fromkeys(v.errors))] for v in bad])
+
+
+def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
+    doc.h(2, "How this was measured")
+    doc.bullets([
+        "Every run is its own process (`python -m rfw.bench.worker`): load the config, build "
+        "the scene, render warm-up frames, then the timed frames; nothing is shared between "
+        "runs but the shader cache on disk.",
+        "GPU ms are timestamp queries around each pass (wgpu timestamp queries; "
+        "`vkCmdWriteTimestamp2` on vk); CPU record ms is the host time of the pass's "
+        "`record()`; wall ms is a whole frame, submit and wait included.",
+        "Statistics: median, p5 and p95 over single frames; the 95% CI of the median is a "
+        "two-level bootstrap (runs, then frames; 2000 resamples, fixed seed).",
+        "Results: `results.jsonl` (one line per run, every frame's numbers); re-run the report "
+        "with `rfw bench report DIR`, compare two result sets with "
+        "`rfw bench compare OLD NEW`.",
+        "Timings are never asserted by the tests; on lavapipe the 'GPU' is the CPU.",
+    ])
+
+
+def main_report(out_dir: str, reference: str | None = None) -> int:
+    md, page = write_report(Path(out_dir), reference=reference)
+    print(f"wrote {md}, {page}")
+    return 0

@@ -1,0 +1,330 @@
+"""Run a benchmark matrix: every run in its own process, repeats interleaved across variants.
+
+Order: for each repeat, every job (rfw variants, then peers) once, the order rotated by one
+each repeat, so slow drift of the machine (thermal, other load) lands on all jobs alike and no
+job always runs first after a cold start.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import platform
+import random
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..graph import GraphError
+from .stats import summarize
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIGS = ROOT / "configs"
+PEERS_RUN = ROOT / "benchmarks" / "peers" / "run.py"
+
+
+@dataclass(frozen=True)
+class Job:
+    """One thing to measure repeatedly: an rfw variant or a peer."""
+
+    kind: str  # "rfw" | "peer"
+    label: str
+    id: str  # file-system safe
+    config: str = ""  # rfw: config path
+    sets: tuple[str, ...] = ()  # rfw: every --set of the variant (fixed and varied)
+    varied: tuple[str, ...] = ()  # rfw: the --vary choices that name this variant
+    scene: str | None = None
+    backend: str = "wgpu"
+    peer: str = ""
+
+
+@dataclass
+class Plan:
+    jobs: list[Job]
+    size: tuple[int, int]
+    frames: int
+    warmup: int
+    repeat: int
+    order: str = "rotate"
+    seed: int = 0
+    timeout: float = 600.0
+    notes: list[str] = field(default_factory=list)
+    peer_frames: int | None = None  # frames of a peer run (default: frames)
+
+    def schedule(self) -> list[tuple[int, int, Job]]:
+        """``(repeat, position, job)`` in run order."""
+        out = []
+        rng = random.Random(self.seed)
+        n = len(self.jobs)
+        for r in range(self.repeat):
+            if self.order == "shuffle":
+                jobs = list(self.jobs)
+                rng.shuffle(jobs)
+            else:
+                k = r % n if n else 0
+                jobs = self.jobs[k:] + self.jobs[:k]
+            out.extend((r, i, j) for i, j in enumerate(jobs))
+        return out
+
+
+def resolve_config(name: str) -> Path:
+    """A config path, or a bare name of ``configs/<name>.toml``."""
+    p = Path(name)
+    if p.exists() or p.suffix:
+        return p
+    candidate = CONFIGS / f"{name}.toml"
+    return candidate if candidate.exists() else p
+
+
+def _slug(text: str) -> str:
+    keep = "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+    return keep.strip("_")[:80] or "job"
+
+
+def _parse_vary(items: list[str]) -> list[tuple[str, list[str]]]:
+    axes = []
+    for item in items:
+        key, eq, values = item.partition("=")
+        options = [v.strip() for v in values.split(",") if v.strip()]
+        if not eq or not key.strip() or not options:
+            raise GraphError(f"--vary '{item}': expected KEY=V1,V2,...")
+        axes.append((key.strip(), options))
+    return axes
+
+
+def _check(path: Path, sets: list[str]) -> Any:
+    """Load ``path`` and apply ``sets`` as a worker will; bad input fails here, naming the
+    file, before any process starts."""
+    from ..config import apply_overrides, build, load_config
+
+    cfg = apply_overrides(load_config(path), sets)
+    build(cfg)
+    return cfg
+
+
+def _accepts(path: Path, key: str, value: str) -> bool:
+    try:
+        _check(path, [f"{key}={value}"])
+    except GraphError:
+        return False
+    return True
+
+
+def make_plan(configs: list[str], *, scenes: list[str] | None = None,
+              size: tuple[int, int] | None = None, frames: int = 10, warmup: int = 2,
+              repeat: int = 3, backends: list[str] | None = None, sets: list[str] | None = None,
+              vary: list[str] | None = None, peers: list[str] | None = None,
+              order: str = "rotate", seed: int = 0, timeout: float = 600.0,
+              peer_frames: int | None = None) -> Plan:
+    """The jobs of a matrix: configs x scenes x backends x the ``--vary`` axes, then peers.
+
+    ``CONFIG@BACKEND`` (e.g. ``meshlet@vk``) runs that config on that backend only, whatever
+    ``backends`` says (a config may name several: ``deferred@wgpu deferred@vk``).
+
+    A ``--vary`` axis applies to the configs that know its key (``ao=on,off`` to configs with
+    an ``ao`` variant); an axis no config knows is an error."""
+    if not configs:
+        raise GraphError("rfw bench: name at least one config")
+    if frames < 1 or repeat < 1 or warmup < 0:
+        raise GraphError("rfw bench: --frames and --repeat must be >= 1, --warmup >= 0")
+    scenes = scenes or [None]  # type: ignore[list-item]
+    backends = backends or ["wgpu"]
+    sets = list(sets or [])
+    axes = _parse_vary(list(vary or []))
+    # per config the union of its mentions: CONFIG on every --backend, CONFIG@BACKEND on one
+    on: dict[Path, list[str]] = {}
+    for c in configs:
+        name, at, backend = c.rpartition("@") if "@" in c else (c, "", "")
+        if at and backend not in ("wgpu", "vk"):
+            raise GraphError(f"'{c}': expected CONFIG@wgpu or CONFIG@vk")
+        mine = on.setdefault(resolve_config(name), [])
+        mine.extend(b for b in ([backend] if at else backends) if b not in mine)
+    paths = list(on)
+    base = {p: _check(p, sets) for p in paths}  # file errors name the file
+    if size is None:
+        size = tuple(base[paths[0]].size)  # type: ignore[assignment]
+    notes = []
+    used = {key: [p for p in paths if _accepts(p, key, opts[0])] for key, opts in axes}
+    for key, opts in axes:
+        if not used[key]:
+            # fail the way --set would, naming the first config's file
+            _check(paths[0], [*sets, f"{key}={opts[0]}"])
+            raise GraphError(f"--vary {key}: no config knows '{key}'")
+        skipped = [p.stem for p in paths if p not in used[key]]
+        if skipped:
+            notes.append(f"--vary {key} applies to {', '.join(p.stem for p in used[key])} "
+                         f"only ({', '.join(skipped)} have no '{key}')")
+    jobs: list[Job] = []
+    multi_scene = len(scenes) > 1
+    for path in paths:
+        mine = [(k, opts) for k, opts in axes if path in used[k]]
+        for scene, backend in itertools.product(scenes, on[path]):
+            for combo in itertools.product(*[[f"{k}={o}" for o in opts] for k, opts in mine]):
+                run_sets = [*sets, *combo]
+                if combo:
+                    _check(path, run_sets)
+                label = path.stem + (f"[{','.join(combo)}]" if combo else "") + f"@{backend}"
+                if multi_scene:
+                    label += f" {Path(scene).stem if scene else 'default'}"
+                jobs.append(Job("rfw", label, _slug(label), str(path), tuple(run_sets),
+                                tuple(combo), scene, backend))
+    for peer in peers or []:
+        jobs.append(Job("peer", f"peer:{peer}", _slug(f"peer_{peer}"), peer=peer,
+                        scene=scenes[0]))
+    ids = [j.id for j in jobs]
+    if len(set(ids)) != len(ids):
+        raise GraphError("rfw bench: two jobs of the matrix are the same (repeated config?)")
+    return Plan(jobs, size, frames, warmup, repeat, order, seed, timeout,  # type: ignore[arg-type]
+                notes, peer_frames)
+
+
+def environment() -> dict[str, Any]:
+    """The rfw commit (with a ``+dirty`` mark) and the host; the device comes per run."""
+    def git(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
+                                  check=False, timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    commit = git("rev-parse", "HEAD")
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    return {"rfw_commit": commit + ("+dirty" if commit and dirty else "") or "unknown",
+            "host": platform.node(), "machine": platform.machine(),
+            "cpu": _cpu_name(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform()}
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _command(job: Job, plan: Plan, out: Path) -> list[str]:
+    w, h = plan.size
+    if job.kind == "peer":
+        return [sys.executable, str(PEERS_RUN), job.peer, "--scene", job.scene or "default",
+                "--size", f"{w}x{h}", "--frames", str(plan.peer_frames or plan.frames),
+                "--warmup", str(plan.warmup), "--out", str(out)]
+    cmd = [sys.executable, "-m", "rfw.bench.worker", "--config", job.config, "--size",
+           f"{w}x{h}", "--frames", str(plan.frames), "--warmup", str(max(1, plan.warmup)),
+           "--backend", job.backend, "--out", str(out)]
+    if job.scene:
+        cmd += ["--scene", job.scene]
+    for s in job.sets:
+        cmd += ["--set", s]
+    return cmd
+
+
+def run_one(job: Job, plan: Plan, out: Path) -> dict[str, Any]:
+    """Run one job in a fresh process; its record (``error`` set when it failed)."""
+    out.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
+    try:
+        done = subprocess.run(_command(job, plan, out), capture_output=True, text=True,
+                              timeout=plan.timeout, check=False, env=env, cwd=ROOT)
+    except subprocess.TimeoutExpired:
+        return {"error": f"timed out after {plan.timeout:.0f} s",
+                "elapsed_s": time.perf_counter() - t}
+    elapsed = time.perf_counter() - t
+    path = out / "record.json"
+    if path.exists():
+        record = json.loads(path.read_text())
+    else:
+        tail = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        record = {"error": f"exit {done.returncode}: {tail}"}
+    (out / "log.txt").write_text(done.stdout + done.stderr)
+    record["elapsed_s"] = elapsed
+    return record
+
+
+def pass_stats(record: dict[str, Any]) -> None:
+    """Add per-pass and per-frame summaries of this one run to ``record`` (in place)."""
+    for p in record.get("passes", []):
+        p["stats"] = {"gpu_ms": summarize(p["gpu_ms"]), "cpu_ms": summarize(p["cpu_ms"])}
+    frame = record.get("frame")
+    if frame:
+        record["frame_stats"] = {k: summarize(v) for k, v in frame.items()}
+    if "frame_ms" in record:  # peers
+        record["frame_stats"] = {"frame_ms": summarize(record["frame_ms"])}
+        if record.get("gpu_ms"):
+            record["frame_stats"]["gpu_ms"] = summarize(record["gpu_ms"])
+
+
+def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True) -> Path:
+    """Run every job of ``plan``; appends one JSON line per run to ``out_dir/results.jsonl``
+    (written afresh) and returns its path."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results = out_dir / "results.jsonl"
+    env = environment()
+    meta = {"size": list(plan.size), "frames": plan.frames, "warmup": plan.warmup,
+            "peer_frames": plan.peer_frames or plan.frames,
+            "repeats": plan.repeat, "order": plan.order, "notes": plan.notes}
+    schedule = plan.schedule()
+    bar = None
+    if progress and sys.stderr.isatty():  # a log (CI) gets one line per run instead
+        try:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(schedule), unit="run", desc="rfw bench", file=sys.stderr,
+                       dynamic_ncols=True)
+        except ImportError:
+            bar = None
+    with results.open("w", encoding="utf-8") as f:
+        for seq, (r, pos, job) in enumerate(schedule):
+            if bar is not None:
+                bar.set_postfix_str(f"{job.label} #{r + 1}", refresh=True)
+            run_dir = out_dir / "runs" / job.id / f"r{r}"
+            record = run_one(job, plan, run_dir)
+            pass_stats(record)
+            if job.kind == "peer":
+                record["peer_kind"] = record.get("kind")
+            image = run_dir / "image.png"
+            record.update({
+                "kind": job.kind, "variant": job.label, "variant_id": job.id, "repeat": r,
+                "sequence": seq, "position": pos, **env, **meta,
+                "config_path": job.config or None, "settings": list(job.sets),
+                "varied": list(job.varied), "requested_backend": job.backend
+                if job.kind == "rfw" else None,
+                "image": str(image.relative_to(out_dir)) if image.exists() else None,
+                "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+            if job.kind == "peer":
+                record["peer"] = job.peer
+            f.write(json.dumps(record) + "\n")
+            f.flush()
+            if bar is not None:
+                bar.update(1)
+            elif progress:
+                print(f"[{seq + 1}/{len(schedule)}] {job.label} #{r + 1}: "
+                      f"{record.get('error') or 'ok'}", file=sys.stderr)
+    if bar is not None:
+        bar.close()
+    return results
+
+
+def load_results(path: Path) -> list[dict[str, Any]]:
+    """The records of a ``results.jsonl`` (or of the one in a folder)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "results.jsonl"
+    if not path.exists():
+        raise GraphError("no results.jsonl here (run rfw bench first)", file=str(path))
+    records = []
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if line.strip():
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                raise GraphError(f"line {n}: not JSON ({e.msg})", file=str(path)) from None
+    return records

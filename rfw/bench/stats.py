@@ -1,0 +1,76 @@
+"""Robust summaries of timing samples: median, p5-p95 spread and a bootstrap CI of the median.
+
+Everything is seeded, so one set of samples always gives the same numbers."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+RESAMPLES = 2000
+SEED = 20240607
+
+
+def bootstrap_ci(samples: Sequence[float], *, level: float = 0.95, resamples: int = RESAMPLES,
+                 seed: int = SEED) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval of the median of ``samples``.
+
+    One sample gives a zero-width interval at that value; none raises ``ValueError``."""
+    x = np.asarray(samples, np.float64)
+    if x.size == 0:
+        raise ValueError("bootstrap_ci needs at least one sample")
+    if x.size == 1:
+        return float(x[0]), float(x[0])
+    rng = np.random.default_rng(seed)
+    # resample indices in one block: (resamples, n) is small for benchmark sample counts
+    picks = x[rng.integers(0, x.size, size=(resamples, x.size))]
+    medians = np.median(picks, axis=1)
+    alpha = (1.0 - level) / 2
+    lo, hi = np.quantile(medians, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)
+
+
+def bootstrap_ci_runs(runs: Sequence[Sequence[float]], *, level: float = 0.95,
+                      resamples: int = RESAMPLES, seed: int = SEED) -> tuple[float, float]:
+    """Two-level bootstrap CI of the median over frames grouped by run (process): resample
+    the runs, then the frames inside each picked run. A run-to-run shift (another process,
+    another memory layout, machine drift) then widens the interval, as it should; frames of
+    one process alone would understate it. Runs of unequal length fall back to frames."""
+    runs = [np.asarray(r, np.float64) for r in runs if len(r)]
+    if not runs:
+        raise ValueError("bootstrap_ci_runs needs at least one sample")
+    if len(runs) == 1 or len({r.size for r in runs}) != 1:
+        return bootstrap_ci(np.concatenate(runs), level=level, resamples=resamples, seed=seed)
+    m = np.stack(runs)  # (R, F)
+    r, f = m.shape
+    rng = np.random.default_rng(seed)
+    pick_run = rng.integers(0, r, size=(resamples, r, 1))
+    pick_frame = rng.integers(0, f, size=(resamples, r, f))
+    medians = np.median(m[pick_run, pick_frame].reshape(resamples, r * f), axis=1)
+    alpha = (1.0 - level) / 2
+    lo, hi = np.quantile(medians, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)
+
+
+def summarize(samples: Sequence[float] | Sequence[Sequence[float]] | None, *,
+              seed: int = SEED) -> dict[str, Any] | None:
+    """``{n, runs, median, mean, p5, p95, ci_lo, ci_hi}``; None for no samples.
+
+    ``samples`` is one flat list, or one list per run (the CI then resamples runs too, see
+    :func:`bootstrap_ci_runs`); median and percentiles are over all samples."""
+    if samples is None:
+        return None
+    groups = [list(g) for g in samples] if samples and isinstance(
+        samples[0], list | tuple | np.ndarray) else [list(samples)]
+    groups = [[v for v in g if v is not None] for g in groups]
+    groups = [g for g in groups if g]
+    if not groups:
+        return None
+    x = np.concatenate([np.asarray(g, np.float64) for g in groups])
+    p5, med, p95 = np.percentile(x, [5, 50, 95])
+    lo, hi = bootstrap_ci_runs(groups, seed=seed)
+    return {"n": int(x.size), "runs": len(groups), "median": float(med),
+            "mean": float(x.mean()), "p5": float(p5), "p95": float(p95), "ci_lo": lo,
+            "ci_hi": hi}

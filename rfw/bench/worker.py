@@ -1,0 +1,172 @@
+"""One benchmark run in its own process: render a config, write every frame's timings.
+
+    python -m rfw.bench.worker --config CONFIG [--set K=V]... [--scene S] [--size WxH]
+        [--frames N] [--warmup N] [--backend wgpu|vk] --out DIR
+
+Writes ``DIR/record.json`` (per pass and per frame: GPU ms from timestamps, CPU record ms;
+whole-frame wall ms; memory, culling and ray counters where the run has them) and
+``DIR/image.png`` (the config's first output). A failure writes ``{"error": ...}`` and
+exits 1, so the runner can report it instead of dropping the variant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+# timings.json keys copied into the record as they are, where a run has them
+EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light")
+
+
+class FrameClock:
+    """Wall time of every frame: wraps ``frame()`` of the executors while active."""
+
+    def __init__(self) -> None:
+        self.ends: list[float] = []
+        self._patched: list[tuple[type, Any]] = []
+
+    def patch(self, cls: type) -> None:
+        original = cls.frame
+        clock = self
+
+        def frame(self: Any) -> None:
+            t = time.perf_counter()
+            original(self)
+            clock.ends.append((t, time.perf_counter()))
+
+        cls.frame = frame  # type: ignore[method-assign]
+        self._patched.append((cls, original))
+
+    def restore(self) -> None:
+        for cls, original in reversed(self._patched):
+            cls.frame = original  # type: ignore[method-assign]
+        self._patched.clear()
+
+    def last(self, n: int) -> list[float]:
+        return [(b - a) * 1e3 for a, b in self.ends[-n:]] if n else []
+
+
+def _samples(executor: Any) -> dict[str, dict[str, list[float]]]:
+    """Per-pass lists of per-frame ``gpu_ms`` and ``cpu_ms`` (mixed frames: both sides and
+    the bridges, which have CPU time only)."""
+    out: dict[str, dict[str, list[float]]] = {}
+    subs = getattr(executor, "executors", None)
+    sources = list(subs.values()) if isinstance(subs, dict) else [executor]
+    for ex in sources:
+        for name, t in ex.timings.items():
+            if t.gpu_ms or t.cpu_ms:
+                out[name] = {"gpu_ms": list(t.gpu_ms), "cpu_ms": list(t.cpu_ms)}
+    for name, t in getattr(executor, "bridge_timings", {}).items():
+        out[name] = {"gpu_ms": [], "cpu_ms": list(t.cpu_ms)}
+    return out
+
+
+def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int] | None,
+        frames: int, warmup: int, backend: str) -> tuple[dict[str, Any], Any]:
+    """Render once; returns the record and the first output as 8-bit RGBA."""
+    from ..backends.base import FrameExecutor
+    from ..config import apply_overrides, load_config
+    from ..render import pinned_elsewhere, render, to_png_array
+
+    cfg = load_config(config)
+    sets = list(sets)
+    if scene:
+        sets.append(f"scene={scene}")
+    if size:
+        sets.append(f"size={size[0]}x{size[1]}")
+    cfg = apply_overrides(cfg, sets)
+    clock = FrameClock()
+    clock.patch(FrameExecutor)
+    if pinned_elsewhere(cfg, backend):
+        from vkext.mixed import MixedFrame
+
+        clock.patch(MixedFrame)
+    try:
+        t0 = time.perf_counter()
+        result = render(cfg, frames=frames, warmup=warmup, backend=backend)
+        total_s = time.perf_counter() - t0
+    finally:
+        clock.restore()
+    timings = result.timings
+    ex = result.executor
+    samples = _samples(ex)
+    order = [p["name"] for p in timings["passes"]]
+    passes = []
+    for name in order:
+        s = samples.get(name, {"gpu_ms": [], "cpu_ms": []})
+        passes.append({"name": name, "gpu_ms": s["gpu_ms"][-frames:],
+                       "cpu_ms": s["cpu_ms"][-frames:]})
+    # whole frame per frame index: the sums over passes of that frame
+    gpu_frame = [sum(v) for v in zip(*(p["gpu_ms"] for p in passes if p["gpu_ms"]),
+                                     strict=False)] if any(p["gpu_ms"] for p in passes) else []
+    cpu_frame = [sum(v) for v in zip(*(p["cpu_ms"] for p in passes if p["cpu_ms"]),
+                                     strict=False)]
+    plan = ex.plan
+    record: dict[str, Any] = {
+        "device": timings.get("device"), "driver": timings.get("driver"),
+        "api": timings.get("api"), "backend": timings.get("backend", backend),
+        "config": timings.get("config"), "config_path": str(config),
+        "variants": timings.get("variants", {}), "settings": list(sets),
+        "scene": timings.get("scene"), "triangles": timings.get("triangles"),
+        "size": timings.get("size"), "frames": frames, "warmup": warmup,
+        "timestamps": bool(timings.get("timestamps")) and bool(gpu_frame),
+        "passes": passes,
+        "frame": {"gpu_ms": gpu_frame, "cpu_ms": cpu_frame, "wall_ms": clock.last(frames)},
+        "process_s": total_s,
+    }
+    for key in EXTRA_KEYS:
+        if key in timings:
+            record[key] = timings[key]
+    if "memory" not in record and hasattr(plan, "transient_bytes"):
+        # wgpu allocates per texture: the plan's numbers are what there is
+        record["memory"] = {"plan_transient_bytes": plan.transient_bytes,
+                            "unaliased_bytes": plan.unaliased_bytes, "alias": None,
+                            "source": "plan"}
+    formats = {r.name: r.format for r in plan.resources}
+    first = next(iter(result.images))
+    record["output"] = first
+    return record, to_png_array(result.images[first], formats[first])
+
+
+def _size(text: str) -> tuple[int, int]:
+    w, h = (int(v) for v in text.lower().split("x"))
+    return w, h
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m rfw.bench.worker")
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--scene")
+    ap.add_argument("--size", type=_size)
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--warmup", type=int, default=2)
+    ap.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
+    ap.add_argument("--out", required=True)
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        record, rgba = run(args.config, args.set, scene=args.scene, size=args.size,
+                           frames=args.frames, warmup=max(1, args.warmup), backend=args.backend)
+    except Exception as e:
+        message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        (out / "record.json").write_text(json.dumps(
+            {"error": f"{type(e).__name__}: {message}",
+             "traceback": traceback.format_exc(limit=8)}))
+        print(f"rfw bench worker: {type(e).__name__}: {message}", file=sys.stderr)
+        return 1
+    from PIL import Image
+
+    Image.fromarray(rgba, "RGBA").save(out / "image.png")
+    (out / "record.json").write_text(json.dumps(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,43 @@
+"""Image differences: PSNR, the magnified difference image, FLIP."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rfw.bench.images import compare, diff_image, psnr
+
+
+def _image(seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, size=(18, 32, 4), dtype=np.uint8)
+
+
+def test_psnr_of_identical_images_is_inf():
+    a = _image()
+    assert psnr(a, a.copy()) == math.inf
+    c = compare(a, a.copy())
+    assert c["psnr"] == math.inf
+    assert not c["diff"].any()
+    if "flip" in c:
+        assert c["flip"] == 0.0
+
+
+def test_psnr_known_value_and_alpha_ignored():
+    a = np.zeros((4, 4, 4), np.uint8)
+    b = a.copy()
+    b[..., :3] = 1  # mse 1 over RGB
+    b[..., 3] = 200  # alpha does not count
+    assert abs(psnr(a, b) - 20 * math.log10(255)) < 1e-9
+
+
+def test_diff_image_magnifies_and_flip_sees_a_change():
+    a = _image(1)
+    b = a.copy()
+    b[5, 7, 1] ^= 3
+    d = diff_image(a, b)
+    assert d.shape == (18, 32, 3) and d[5, 7, 0] == 3 * 8 and d.sum() == 3 * 8 * 3
+    c = compare(a, b)
+    assert 0 < c["psnr"] < math.inf
+    if "flip" in c:
+        assert c["flip"] > 0 and c["flip_map"].shape == (18, 32, 3)
