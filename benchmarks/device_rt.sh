@@ -36,19 +36,8 @@ if ! "$PYTHON" -c "import numpy, vulkan, pygltflib, trimesh, PIL, embreex" 2>/de
     exit 1
 fi
 
-{
-    echo "date: $(date -u +%FT%TZ)"
-    echo "host: $(uname -a)"
-    echo "python: $("$PYTHON" --version 2>&1)"
-    echo "glslang: $(glslangValidator --version 2>&1 | head -1)"
-    if command -v nvidia-smi >/dev/null; then
-        nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm,power.limit \
-            --format=csv 2>&1 || true
-    fi
-    if command -v vulkaninfo >/dev/null; then
-        vulkaninfo --summary 2>&1 | sed -n '/Devices:/,$p' || true
-    fi
-} >"$OUT/device.txt"
+. "$(dirname "$0")/device_info.sh"
+device_info "$OUT/device.txt"
 
 start=$SECONDS
 set +e

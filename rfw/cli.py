@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .config import parse_size
 from .fileio import atomic_write
 from .graph import CompiledGraph, GraphError, MemoryOptions, compile, load_graph, to_toml
 from .graph.inspect import describe, to_dot
@@ -19,12 +20,9 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "deferred.tom
 
 def _size(text: str) -> tuple[int, int]:
     try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size must be positive, got {w}x{h}")
-    return w, h
+        return parse_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _write_atomic(path: Path, text: str) -> None:

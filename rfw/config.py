@@ -268,6 +268,17 @@ def _bool(value: Any, key: str, source: str) -> bool:
     raise _fail(source, f"'{key}' must be true or false, got {value!r}")
 
 
+def parse_size(text: str) -> tuple[int, int]:
+    """``"WxH"`` -> ``(W, H)``, both positive; ValueError saying what was expected."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
+    if w < 1 or h < 1:
+        raise ValueError(f"size must be positive, got {w}x{h}")
+    return w, h
+
+
 def apply_overrides(cfg: Config, sets: list[str]) -> Config:
     """``--set key=value``: a variant, size/scene/frames, pass.enabled or pass.setting."""
     for item in sets:
@@ -280,10 +291,9 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
             cfg = _apply_variant(cfg, key, value)
         elif key == "size":
             try:
-                w, h = (int(v) for v in value.lower().split("x"))
-            except ValueError:
-                raise _fail(cfg.source, f"--set size={value}: expected WxH") from None
-            cfg = replace(cfg, size=(w, h))
+                cfg = replace(cfg, size=parse_size(value))
+            except ValueError as e:
+                raise _fail(cfg.source, f"--set size={value}: {e}") from None
         elif key == "scene":
             cfg = replace(cfg, scene=value)
         elif key == "frames":

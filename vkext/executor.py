@@ -473,14 +473,12 @@ class RayPipeline:
     table (``vkext.rt.ShaderBindingTable``: raygen, one miss record, one hit record)."""
 
     def __init__(self, device: VkDevice, prog: Program, max_recursion: int):
-        from .rt import ShaderBindingTable
+        from .rt import ShaderBindingTable, check_recursion, create_ray_pipeline
 
-        device.require("VK_KHR_ray_tracing_pipeline")
-        limit = device.extension_properties["VK_KHR_ray_tracing_pipeline"][
-            "maxRayRecursionDepth"]
-        if not 1 <= max_recursion <= limit:
-            raise ShaderError(f"{prog.name}: max recursion {max_recursion} is outside 1..{limit} "
-                              f"({device.name})")
+        try:
+            check_recursion(device, max_recursion, prog.name)
+        except ValueError as e:
+            raise ShaderError(str(e)) from None
         if "rgen" not in prog.modules:
             raise ShaderError(f"{prog.name}: a ray-tracing program needs a raygen shader")
         self.device, self.label = device, f"{prog.paths[0].name}:ray_tracing"
@@ -496,23 +494,9 @@ class RayPipeline:
                            unused, stages.index("rchit") if "rchit" in stages else unused,
                            stages.index("rahit") if "rahit" in stages else unused))
         self.counts = {"raygen": 1, "miss": int("rmiss" in prog.modules), "hit": int(hit)}
-        entry = ffi.new("char[]", b"main")
-        info_stages = new("VkPipelineShaderStageCreateInfo", len(stages))
-        for i, st in enumerate(stages):
-            info_stages[i].stage = const(_STAGE_BITS[st])
-            info_stages[i].module = prog.modules[st].handle
-            info_stages[i].pName = entry
-        ginfo = new("VkRayTracingShaderGroupCreateInfoKHR", len(groups))
-        for i, (kind, gen, closest, any_) in enumerate(groups):
-            g = ginfo[i]
-            g.type, g.generalShader, g.closestHitShader = kind, gen, closest
-            g.anyHitShader, g.intersectionShader = any_, unused
-        info = new("VkRayTracingPipelineCreateInfoKHR", stageCount=len(stages),
-                   pStages=info_stages, groupCount=len(groups), pGroups=ginfo,
-                   maxPipelineRayRecursionDepth=max_recursion,
-                   layout=prog.pipeline_layout.handle, basePipelineIndex=-1)
-        handle = device.fn.vkCreateRayTracingPipelinesKHR(device.device, ffi.NULL, ffi.NULL, 1,
-                                                          info, ffi.NULL)[0]
+        handle = create_ray_pipeline(
+            device, [(const(_STAGE_BITS[st]), prog.modules[st].handle) for st in stages], groups,
+            max_recursion, prog.pipeline_layout.handle)
         self.pipeline = Pipeline(device, handle, self.label)
         self.group_count = len(groups)
         self.sbt = None
@@ -527,14 +511,9 @@ class RayPipeline:
         return self.pipeline.handle
 
     def group_handles(self) -> list[bytes]:
-        size = self.device.extension_properties["VK_KHR_ray_tracing_pipeline"][
-            "shaderGroupHandleSize"]
-        data = ffi.new("char[]", size * self.group_count)
-        self.device.fn.vkGetRayTracingShaderGroupHandlesKHR(
-            self.device.device, self.pipeline.handle, 0, self.group_count,
-            size * self.group_count, data)
-        raw = bytes(ffi.buffer(data))
-        return [raw[i * size:(i + 1) * size] for i in range(self.group_count)]
+        from .rt import shader_group_handles
+
+        return shader_group_handles(self.device, self.pipeline.handle, self.group_count)
 
     def destroy(self) -> None:
         if self.sbt is not None:

@@ -281,7 +281,6 @@ class MeshletScene:
             update_descriptors(dev, writes)
             self.sets[cam] = s
         self.modules: dict[tuple[str, tuple], Any] = {}
-        self.push_size = _PUSH.size
         layouts = [self.set_layout.handle] + [vscene.layouts[i].handle for i in (1, 2, 3)] + \
             [self.pyramid_layout.handle]
         self.layout = self._pipeline_layout(layouts, _TASK_MESH)
@@ -306,7 +305,7 @@ class MeshletScene:
     def _pipeline_layout(self, layouts: list[Any], stages: Sequence[str]) -> Any:
         handles = ffi.new("VkDescriptorSetLayout[]", layouts)
         rng = ffi.new("VkPushConstantRange*")
-        rng.stageFlags, rng.offset, rng.size = _flags(stages), 0, self.push_size
+        rng.stageFlags, rng.offset, rng.size = _flags(stages), 0, _PUSH.size
         info = new("VkPipelineLayoutCreateInfo", setLayoutCount=len(layouts), pSetLayouts=handles,
                    pushConstantRangeCount=1, pPushConstantRanges=rng)
         return self._own(vk.vkCreatePipelineLayout(self.device.device, info, None),
@@ -318,7 +317,7 @@ class MeshletScene:
         handle = self.modules.get(key)
         if handle is None:
             spv = compile_glsl(path, defines)
-            if reflect(spv.code).push_constant_size > self.push_size:
+            if reflect(spv.code).push_constant_size > _PUSH.size:
                 raise ShaderError(f"{path.name}: push constants larger than MPush")
             words = ffi.new("uint32_t[]", len(spv.code) // 4)
             ffi.memmove(words, spv.code, len(spv.code))

@@ -238,11 +238,26 @@ class BindingSet:
         self.sets = None
 
 
+class _Reflected:
+    """A pipeline with a reflected layout of its own: both go together."""
+
+    pipeline: Any
+    layout: Any
+
+    def destroy(self) -> None:
+        if self.pipeline is not None:
+            self.pipeline.destroy()
+            self.pipeline = None
+        if self.layout is not None:
+            self.layout.destroy()
+            self.layout = None
+
+
 class _Pipeline(VkObject):
     destroy_fn, object_type = "vkDestroyPipeline", "PIPELINE"
 
 
-class ComputePipeline:
+class ComputePipeline(_Reflected):
     """One compute shader with its reflected layout (ray queries run in one)."""
 
     def __init__(self, device: VkDevice, path: str | Path,
@@ -282,13 +297,46 @@ class ComputePipeline:
                              f"maxComputeWorkGroupCount[0] = {limit}")
         vk.vkCmdDispatch(cmd, groups, 1, 1)
 
-    def destroy(self) -> None:
-        if self.pipeline is not None:
-            self.pipeline.destroy()
-            self.pipeline = None
-        if self.layout is not None:
-            self.layout.destroy()
-            self.layout = None
+
+def check_recursion(device: VkDevice, max_recursion: int, label: str) -> None:
+    """``max_recursion`` within 1..maxRayRecursionDepth of the device, else ValueError."""
+    device.require("VK_KHR_ray_tracing_pipeline")
+    limit = device.extension_properties["VK_KHR_ray_tracing_pipeline"]["maxRayRecursionDepth"]
+    if not 1 <= max_recursion <= limit:
+        raise ValueError(f"{label}: max recursion {max_recursion} is outside 1..{limit} "
+                         f"({device.name})")
+
+
+def create_ray_pipeline(device: VkDevice, stages: Sequence[tuple[int, Any]],
+                        groups: Sequence[tuple[int, int, int, int]], max_recursion: int,
+                        layout: Any) -> Any:
+    """``vkCreateRayTracingPipelinesKHR`` of ``stages`` (stage bit, module handle) and
+    ``groups`` (type, general, closest hit, any hit: stage indices or
+    VK_SHADER_UNUSED_KHR); returns the pipeline handle."""
+    entry = ffi.new("char[]", b"main")
+    sinfo = new("VkPipelineShaderStageCreateInfo", len(stages))
+    for i, (bit, module) in enumerate(stages):
+        sinfo[i].stage, sinfo[i].module, sinfo[i].pName = bit, module, entry
+    ginfo = new("VkRayTracingShaderGroupCreateInfoKHR", len(groups))
+    for i, (kind, gen, closest, any_) in enumerate(groups):
+        g = ginfo[i]
+        g.type, g.generalShader, g.closestHitShader = kind, gen, closest
+        g.anyHitShader, g.intersectionShader = any_, const("VK_SHADER_UNUSED_KHR")
+    info = new("VkRayTracingPipelineCreateInfoKHR", stageCount=len(stages), pStages=sinfo,
+               groupCount=len(groups), pGroups=ginfo, maxPipelineRayRecursionDepth=max_recursion,
+               layout=layout, basePipelineIndex=-1)
+    return device.fn.vkCreateRayTracingPipelinesKHR(device.device, ffi.NULL, ffi.NULL, 1, info,
+                                                    ffi.NULL)[0]
+
+
+def shader_group_handles(device: VkDevice, pipeline: Any, count: int) -> list[bytes]:
+    """Each group's opaque handle (``shaderGroupHandleSize`` bytes), in group order."""
+    size = device.extension_properties["VK_KHR_ray_tracing_pipeline"]["shaderGroupHandleSize"]
+    data = ffi.new("char[]", size * count)
+    device.fn.vkGetRayTracingShaderGroupHandlesKHR(device.device, pipeline, 0, count,
+                                                   size * count, data)
+    raw = bytes(ffi.buffer(data))
+    return [raw[i * size:(i + 1) * size] for i in range(count)]
 
 
 @dataclass(frozen=True)
@@ -299,7 +347,7 @@ class HitGroup:
     any: str | Path | None = None
 
 
-class RayTracingPipeline:
+class RayTracingPipeline(_Reflected):
     """A ray-tracing pipeline: one raygen shader, miss shaders, triangle hit groups.
 
     Shader groups are numbered raygen (0), misses (1..), hit groups (after the misses); a
@@ -309,12 +357,8 @@ class RayTracingPipeline:
     def __init__(self, device: VkDevice, raygen: str | Path, miss: Sequence[str | Path] = (),
                  hit: Sequence[HitGroup] = (), *, defines: Mapping[str, object] | None = None,
                  max_recursion: int = 1, label: str = ""):
-        device.require("VK_KHR_ray_tracing_pipeline")
-        props = device.extension_properties["VK_KHR_ray_tracing_pipeline"]
-        if not 1 <= max_recursion <= props["maxRayRecursionDepth"]:
-            raise ValueError(f"max_recursion {max_recursion} is outside 1.."
-                             f"{props['maxRayRecursionDepth']} ({device.name})")
         self.device, self.label = device, label or Path(raygen).stem
+        check_recursion(device, max_recursion, self.label)
         self.bind_point = const("VK_PIPELINE_BIND_POINT_RAY_TRACING_KHR")
         self.counts = {"raygen": 1, "miss": len(miss), "hit": len(hit)}
         self.layout = self.pipeline = None
@@ -350,22 +394,9 @@ class RayTracingPipeline:
                                          f"used as {kind}")
             mods = list(modules.values())
             self.layout = ReflectedLayout(device, mods, label=self.label)
-            entry = ffi.new("char[]", b"main")
-            stages = new("VkPipelineShaderStageCreateInfo", len(mods))
-            for i, m in enumerate(mods):
-                stages[i].stage, stages[i].module, stages[i].pName = m.stage_bit, m.handle, entry
-            ginfo = new("VkRayTracingShaderGroupCreateInfoKHR", len(groups))
-            for i, (kind, gen, closest, any_) in enumerate(groups):
-                g = ginfo[i]
-                g.type, g.generalShader, g.closestHitShader = kind, gen, closest
-                g.anyHitShader, g.intersectionShader = any_, unused
-            info = new("VkRayTracingPipelineCreateInfoKHR", stageCount=len(mods),
-                       pStages=stages, groupCount=len(groups), pGroups=ginfo,
-                       maxPipelineRayRecursionDepth=max_recursion, layout=self.layout.handle,
-                       basePipelineIndex=-1)
-            out = device.fn.vkCreateRayTracingPipelinesKHR(device.device, ffi.NULL, ffi.NULL, 1,
-                                                           info, ffi.NULL)
-            self.pipeline = _Pipeline(device, out[0], f"{self.label}:pipeline")
+            handle = create_ray_pipeline(device, [(m.stage_bit, m.handle) for m in mods], groups,
+                                         max_recursion, self.layout.handle)
+            self.pipeline = _Pipeline(device, handle, f"{self.label}:pipeline")
             self.group_count = len(groups)
         except BaseException:
             self.destroy()
@@ -380,22 +411,7 @@ class RayTracingPipeline:
 
     def group_handles(self) -> list[bytes]:
         """Each group's opaque handle (``shaderGroupHandleSize`` bytes), in group order."""
-        size = self.device.extension_properties["VK_KHR_ray_tracing_pipeline"][
-            "shaderGroupHandleSize"]
-        data = ffi.new("char[]", size * self.group_count)
-        self.device.fn.vkGetRayTracingShaderGroupHandlesKHR(
-            self.device.device, self.pipeline.handle, 0, self.group_count,
-            size * self.group_count, data)
-        raw = bytes(ffi.buffer(data))
-        return [raw[i * size:(i + 1) * size] for i in range(self.group_count)]
-
-    def destroy(self) -> None:
-        if self.pipeline is not None:
-            self.pipeline.destroy()
-            self.pipeline = None
-        if self.layout is not None:
-            self.layout.destroy()
-            self.layout = None
+        return shader_group_handles(self.device, self.pipeline.handle, self.group_count)
 
 
 class ShaderBindingTable:

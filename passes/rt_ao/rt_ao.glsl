@@ -1,5 +1,5 @@
-// rt_ao: what the ray-query and ray-pipeline variants share (include only). The stage file
-// defines occluded() before including this.
+// rt_ao: what the ray-query and ray-pipeline variants share (include only). occluded() comes
+// from rt_occluded_query.glsl or rt_occluded_pipeline.glsl, which the stage file includes after.
 #include "raytrace.glsl"
 
 layout(set = 0, binding = 0) uniform texture2D t_depth;

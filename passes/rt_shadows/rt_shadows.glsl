@@ -1,5 +1,5 @@
-// rt_shadows: what the ray-query and ray-pipeline variants share (include only). The stage
-// file declares the bindings' tlas use and defines occluded() before including this.
+// rt_shadows: what the ray-query and ray-pipeline variants share (include only). occluded()
+// comes from rt_occluded_query.glsl or rt_occluded_pipeline.glsl, included by the stage file.
 #include "raytrace.glsl"
 
 layout(set = 0, binding = 0) uniform texture2D t_depth;

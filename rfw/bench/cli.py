@@ -10,17 +10,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..cli import _size
+
 PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rfw_raycast")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size must be positive, got {w}x{h}")
-    return w, h
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

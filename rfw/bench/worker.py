@@ -19,6 +19,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from ..config import parse_size
+
 # timings.json keys copied into the record as they are, where a run has them
 EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light")
 
@@ -133,17 +135,12 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     return record, to_png_array(result.images[first], formats[first])
 
 
-def _size(text: str) -> tuple[int, int]:
-    w, h = (int(v) for v in text.lower().split("x"))
-    return w, h
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m rfw.bench.worker")
     ap.add_argument("--config", required=True)
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--scene")
-    ap.add_argument("--size", type=_size)
+    ap.add_argument("--size", type=parse_size)
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
