@@ -32,3 +32,16 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def inside(root: str | Path, name: str | Path) -> Path:
+    """``root / name``, refused unless it resolves (symlinks included) inside ``root``: a
+    name that comes from a config or a graph can never write elsewhere."""
+    from .errors import RfwError
+
+    base = Path(root).resolve()
+    path = (base / name).resolve()
+    if path != base and base not in path.parents:
+        raise RfwError(f"'{name}' would be written outside the output folder {base}",
+                       file=str(root))
+    return path

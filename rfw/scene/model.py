@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import RfwError
+
 
 @dataclass
 class Texture:
@@ -165,5 +167,5 @@ class Scene:
         return Camera(tuple(eye), tuple(center), zfar=radius * 10, znear=radius * 0.01)
 
 
-class SceneError(ValueError):
+class SceneError(RfwError):
     """A scene that cannot be loaded: the message names the file and the element."""

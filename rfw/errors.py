@@ -1,0 +1,105 @@
+"""rfw's user-facing errors: one line, ``FILE: ELEMENT: message``, exit code 2 at the CLI.
+
+Every error a user can cause (a bad config, scene, graph, shader, cache or command-line value)
+is an ``RfwError``; the CLI prints ``rfw: error: <line>`` and exits 2. Any other exception is
+a bug in rfw and may show its traceback. Values are validated where they enter (``check_*``
+below), so the message can name the file and the key.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import sys
+from collections.abc import Iterable
+from typing import Any
+
+# pass, resource, output and variant names: they become file names and labels
+IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
+
+
+def close_matches(word: str, choices: Iterable[str], n: int = 3) -> list[str]:
+    return difflib.get_close_matches(word, list(choices), n=n, cutoff=0.6)
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    found = close_matches(word, choices)
+    if not found:
+        return ""
+    return " (did you mean " + " or ".join(f"'{m}'" for m in found) + "?)"
+
+
+def _one_line(text: str) -> str:
+    # control characters (newlines included) never reach the terminal raw
+    return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m[0])[1:-1], text)
+
+
+class RfwError(ValueError):
+    """An error the user can fix. ``str()`` is one line: ``FILE: ELEMENT: message``.
+
+    ``element`` names the pass, slot, key or line (``pass 'ssao': setting 'radius'``);
+    ``more`` holds the other problems found in the same run."""
+
+    def __init__(self, message: str, *, file: str | None = None, element: str | None = None,
+                 suggest: tuple[str, Iterable[str]] | None = None,
+                 more: Iterable[str] = ()):
+        if suggest is not None:
+            message += did_you_mean(*suggest)
+        self.message = _one_line(message)
+        self.file = None if file is None else _one_line(str(file))
+        self.element = None if element is None else _one_line(element)
+        self.more = list(more)
+        super().__init__(self.line())
+
+    def line(self) -> str:
+        extra = f" (and {len(self.more)} more problem{'s' * (len(self.more) > 1)})" \
+            if self.more else ""
+        head = "".join(f"{p}: " for p in (self.file, self.element) if p)
+        return head + self.message + extra
+
+    def in_file(self, file: str | None) -> RfwError:
+        """Name ``file`` unless a file is already named (the innermost one wins)."""
+        if file and not self.file:
+            self.file = _one_line(str(file))
+            self.args = (self.line(),)
+        return self
+
+
+def check_identifier(kind: str, name: Any, *, file: str | None = None,
+                     element: str | None = None) -> str:
+    """``name`` if it is an identifier (``[A-Za-z_][A-Za-z0-9_.-]*``), else an RfwError:
+    names become file names, so ``../x``, ``/abs`` and control characters are refused."""
+    if not isinstance(name, str) or not IDENTIFIER.fullmatch(name) or ".." in name:
+        raise RfwError(f"{kind} name {name!r} is not an identifier (letters, digits, '_', "
+                       f"'.', '-'; starting with a letter or '_')", file=file, element=element)
+    return name
+
+
+def check_number(value: Any, key: str, *, kind: type = float, lo: float | None = None,
+                 hi: float | None = None, file: str | None = None,
+                 element: str | None = None) -> Any:
+    """``value`` as ``kind`` (int or float) if it is one, finite and within [lo, hi]; booleans
+    and strings are refused. The error names ``key`` (and ``file``/``element``)."""
+    ok_types = (int,) if kind is int else (int, float)
+    if isinstance(value, bool) or not isinstance(value, ok_types):
+        raise RfwError(f"'{key}' must be {'an integer' if kind is int else 'a number'}, "
+                       f"not {value!r}", file=file, element=element)
+    if kind is float and not math.isfinite(value):
+        raise RfwError(f"'{key}' must be finite, not {value!r}", file=file, element=element)
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        bounds = (f"between {lo} and {hi}" if lo is not None and hi is not None
+                  else f"at least {lo}" if lo is not None else f"at most {hi}")
+        raise RfwError(f"'{key}' must be {bounds}, not {value!r}", file=file, element=element)
+    return kind(value)
+
+
+_warned: set[str] = set()
+
+
+def warn(message: str) -> None:
+    """One line on stderr, ``rfw: warning: ...``, once per message per process."""
+    line = _one_line(message)
+    if line not in _warned:
+        _warned.add(line)
+        print(f"rfw: warning: {line}", file=sys.stderr)
