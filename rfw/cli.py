@@ -7,15 +7,24 @@ import json
 import shutil
 import subprocess
 import sys
+import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from .config import parse_size
+from .config import MAX_FRAMES, is_run_config, parse_size
+from .errors import RfwError
 from .fileio import atomic_write
-from .graph import CompiledGraph, GraphError, MemoryOptions, compile, load_graph, to_toml
+from .graph import CompiledGraph, Graph, GraphError, MemoryOptions, compile, load_graph, to_toml
 from .graph.inspect import describe, to_dot
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "deferred.toml"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one error line (``rfw: error: ...``, exit 2) like every other error."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"rfw: error: {self.prog}: {message} (usage: {self.prog} --help)\n")
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -25,12 +34,52 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _count(lo: int, hi: int) -> typing.Callable[[str], int]:
+    """An argparse type: an integer in [lo, hi] (``--frames 0`` is an error, not 1)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
+        return value
+
+    return parse
+
+
+def _real(lo: float, hi: float) -> typing.Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi]."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not lo <= value <= hi:  # nan fails both comparisons
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {text}")
+        return value
+
+    return parse
+
+
 def _write_atomic(path: Path, text: str) -> None:
     atomic_write(path, lambda f: f.write(text.encode("utf-8")))
 
 
+def _load(args: argparse.Namespace) -> Graph:
+    """The graph of a graph file (TOML, Raptor JSON) or of a run config (``configs/*.toml``),
+    built through its pass classes with its default variants."""
+    if Path(args.file).suffix.lower() == ".toml" and is_run_config(args.file):
+        from .config import build, load_config
+
+        return build(load_config(args.file)).graph
+    return load_graph(args.file, strict=args.strict)
+
+
 def _compile_file(args: argparse.Namespace) -> CompiledGraph:
-    graph = load_graph(args.file, strict=args.strict)
+    graph = _load(args)
     if getattr(args, "output", None):
         graph = graph.with_outputs(args.output)
     caps = None if getattr(args, "caps", None) is None else \
@@ -68,7 +117,7 @@ def cmd_dot(args: argparse.Namespace) -> int:
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
-    text = to_toml(load_graph(args.file, strict=args.strict))
+    text = to_toml(_load(args))
     if args.o is None:
         sys.stdout.write(text)
     else:
@@ -152,7 +201,7 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
 
 
 def _graph_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="graph file: .toml (rfw) or .json (Raptor)")
+    p.add_argument("file", help="graph file: .toml (rfw graph or run config) or .json (Raptor)")
     p.add_argument("--size", type=_size, help="output size WxH (default: the graph's own)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--strict", dest="strict", action="store_true", default=None,
@@ -169,14 +218,14 @@ def _graph_args(p: argparse.ArgumentParser) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="rfw", description="rfw: frame graphs for graphics "
+    ap = _Parser(prog="rfw", description="rfw: frame graphs for graphics "
                                  "research")
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
     run = sub.add_parser("run", help="render a config headless: images and per-pass timings")
     run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
     run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...) or 'default'")
     run.add_argument("--size", type=_size, help="output size WxH")
-    run.add_argument("--frames", type=int, help="frames to time (after one warm-up)")
+    run.add_argument("--frames", type=_count(1, MAX_FRAMES), help="frames to time (after one warm-up)")
     run.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
     run.add_argument("--validate", action="store_true",
                      help="vk: run under the validation layer; any message exits 1")
@@ -191,7 +240,7 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--scene")
     v.add_argument("--size", type=_size)
     v.add_argument("--set", action="append", metavar="KEY=VALUE")
-    v.add_argument("--frames", type=int, help="close after this many frames")
+    v.add_argument("--frames", type=_count(1, MAX_FRAMES), help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
     v.set_defaults(func=cmd_view)
     scenes = sub.add_parser("scenes", help="real test scenes from package registries")
@@ -215,7 +264,7 @@ def parser() -> argparse.ArgumentParser:
     show.add_argument("--max-vertices", type=int, default=64, help="per meshlet (default 64)")
     show.add_argument("--max-triangles", type=int, default=124,
                       help="per meshlet, a multiple of 4 (default 124)")
-    show.add_argument("--cone-weight", type=float, default=0.25,
+    show.add_argument("--cone-weight", type=_real(0.0, 1.0), default=0.25,
                       help="0: compact clusters, towards 1: tighter normal cones (default 0.25)")
     show.add_argument("--screenshot", metavar="PNG", help="render off screen to PNG and exit")
     show.add_argument("--size", type=_size, default=(1024, 768), help="window size WxH")
@@ -256,12 +305,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         return args.func(args)
-    except GraphError as e:
-        print(f"rfw: error: {e}", file=sys.stderr)
-        return 2
+    except RfwError as e:  # every error a user can cause (vkext's included) is one
+        return _fail(str(e))
+    except BrokenPipeError:
+        # `rfw graph plan ... | head`: the reader has gone; say nothing more
+        _silence_stdout()
+        return 0
     except OSError as e:
-        print(f"rfw: error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
-        return 2
+        where = f"{e.filename}: " if e.filename else ""
+        return _fail(f"{where}{e.strerror or e}")
+
+
+def _fail(line: str) -> int:
+    print(f"rfw: error: {line}", file=sys.stderr)
+    return 2
+
+
+def _silence_stdout() -> None:
+    # python flushes stdout at exit: point it at /dev/null so that flush cannot fail again
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

@@ -25,11 +25,14 @@ stands for its last option, the most portable one.
 
 from __future__ import annotations
 
+import math
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from .errors import check_identifier, check_number
 from .graph import Graph, GraphBuilder, GraphError
 from .graph.errors import did_you_mean
 from .graph.resources import SizeRule
@@ -39,6 +42,8 @@ from .registry import get_pass
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames")
 _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
+MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
+MAX_SIZE = 16384  # pixels per side: beyond any device's 2D image limit we know of
 
 
 @dataclass
@@ -75,8 +80,8 @@ class Config:
                          file=self.source)
 
 
-def _fail(source: str, message: str) -> GraphError:
-    return GraphError(message, file=source)
+def _fail(source: str, message: str, element: str | None = None) -> GraphError:
+    return GraphError(message, file=source, element=element)
 
 
 def _check_keys(table: dict, known: tuple[str, ...], where: str, source: str) -> None:
@@ -85,61 +90,160 @@ def _check_keys(table: dict, known: tuple[str, ...], where: str, source: str) ->
             raise _fail(source, f"{where}: unknown key '{key}'" + did_you_mean(key, known))
 
 
+def _read_toml(path: Path) -> dict[str, Any]:
+    """The TOML table in ``path``; a missing file, bad UTF-8 or bad TOML is one error naming
+    the file and the line."""
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise _fail(source, "file not found") from None
+    except IsADirectoryError:
+        raise _fail(source, "is a directory, not a config file") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        raise _fail(source, f"not valid UTF-8 (byte {raw[e.start]:#04x})",
+                    f"line {line}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        # tomllib ends its message with "(at line L, column C)": that becomes the element
+        m = re.search(r"\s*\(at line (\d+), column (\d+)\)$", str(e))
+        message = str(e)[:m.start()] if m else str(e)
+        element = f"line {m[1]}, column {m[2]}" if m else None
+        raise _fail(source, f"malformed TOML: {message}", element) from None
+
+
+def _table(value: Any, key: str, source: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise _fail(source, f"must be a table, not {value!r}", key)
+    return value
+
+
+def _string(value: Any, key: str, source: str) -> str:
+    if not isinstance(value, str):
+        raise _fail(source, f"must be a string, not {value!r}", key)
+    return value
+
+
+def _size_of(value: Any, source: str) -> tuple[int, int]:
+    if not (isinstance(value, list) and len(value) == 2):
+        raise _fail(source, f"must be two integers [width, height], not {value!r}", "size")
+    w, h = (check_number(v, "size", kind=int, lo=1, hi=MAX_SIZE, file=source, element="size")
+            for v in value)
+    return w, h
+
+
+def _camera(value: Any, source: str) -> dict[str, Any]:
+    camera = _table(value, "camera", source)
+    _check_keys(camera, _CAMERA_KEYS, "camera", source)
+    out: dict[str, Any] = {}
+    for key, v in camera.items():
+        where = f"camera.{key}"
+        if key in ("position", "target", "up"):
+            if not (isinstance(v, list) and len(v) == 3):
+                raise _fail(source, f"must be three numbers [x, y, z], not {v!r}", where)
+            out[key] = [check_number(x, where, file=source, element=where) for x in v]
+        elif key == "yfov":
+            out[key] = check_number(v, where, lo=0.01, hi=179.0, file=source, element=where)
+        else:
+            out[key] = check_number(v, where, lo=1e-6, hi=1e9, file=source, element=where)
+    if out.get("znear", 0.0) >= out.get("zfar", math.inf):
+        raise _fail(source, "'znear' must be smaller than 'zfar'", "camera")
+    return out
+
+
+def _pass_entry(t: Any, i: int, source: str) -> PassEntry:
+    if not isinstance(t, dict) or "name" not in t:
+        raise _fail(source, "needs a 'name'", f"[[pass]] #{i + 1}")
+    name = check_identifier("pass", t["name"], file=source, element=f"[[pass]] #{i + 1}")
+    where = f"pass '{name}'"
+    _check_keys(t, _PASS_KEYS, where, source)
+    use = check_identifier("pass id", t.get("use", name), file=source, element=where)
+    inputs = _table(t.get("inputs", {}), f"{where}: 'inputs'", source)
+    for slot, feed in inputs.items():
+        check_identifier("input slot", slot, file=source, element=f"{where}: inputs")
+        check_identifier("resource", _string(feed, f"{where}: inputs.{slot}", source),
+                         file=source, element=f"{where}: inputs.{slot}")
+    settings = _table(t.get("settings", {}), f"{where}: 'settings'", source)
+    if not isinstance(t.get("enabled", True), bool):
+        raise _fail(source, f"{where}: 'enabled' must be true or false")
+    if t.get("backend") not in (None, "wgpu", "vk"):
+        raise _fail(source, f"{where}: unknown backend {t['backend']!r}"
+                    + did_you_mean(str(t["backend"]), ("wgpu", "vk")))
+    return PassEntry(name, use, t.get("enabled", True), dict(inputs), dict(settings),
+                     t.get("backend"))
+
+
+def _check_variant(vname: str, v: Any, source: str) -> None:
+    check_identifier("variant", vname, file=source, element="variants")
+    v = _table(v, f"variants.{vname}", source)
+    for option, value in v.items():
+        if option == "default":
+            continue
+        where = f"variants.{vname}.{option}"
+        check_identifier("variant option", option, file=source, element=f"variants.{vname}")
+        if isinstance(value, list) and not (value and all(
+                isinstance(o, str) and o in v and isinstance(v[o], dict) for o in value)):
+            raise _fail(source, f"{where}: a list must name options of "
+                                f"the variant ({', '.join(k for k in v if k != 'default')})")
+        if not isinstance(value, dict | list):
+            raise _fail(source, f"{where}: expected a table of overrides "
+                                "or a list of options")
+
+
+_RUN_ONLY_KEYS = ("scene", "camera", "variants", "frames")
+
+
+def is_run_config(path: str | Path) -> bool:
+    """Whether ``path`` is a run config (passes by pass id, with ``use``, a scene...) rather
+    than a graph TOML (passes with typed slots); unreadable files are left to the loader."""
+    try:
+        data = _read_toml(Path(path))
+    except GraphError:
+        return False
+    tables = data.get("pass")
+    tables = [t for t in tables if isinstance(t, dict)] if isinstance(tables, list) else []
+    if any(k in data for k in _RUN_ONLY_KEYS) or any("use" in t for t in tables):
+        return True
+    return bool(tables) and not any("type" in t or "outputs" in t for t in tables)
+
+
 def load_config(path: str | Path) -> Config:
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise _fail(str(path), "file not found") from None
-    except tomllib.TOMLDecodeError as e:
-        raise _fail(str(path), f"malformed TOML: {e}") from None
+    data = _read_toml(path)
     source = str(path)
     _check_keys(data, _KEYS, "config", source)
-    passes = []
-    for i, t in enumerate(data.get("pass", [])):
-        if not isinstance(t, dict) or not isinstance(t.get("name"), str):
-            raise _fail(source, f"[[pass]] #{i + 1}: needs a 'name'")
-        where = f"pass '{t['name']}'"
-        _check_keys(t, _PASS_KEYS, where, source)
-        for key in ("inputs", "settings"):
-            if not isinstance(t.get(key, {}), dict):
-                raise _fail(source, f"{where}: '{key}' must be a table")
-        if not isinstance(t.get("enabled", True), bool):
-            raise _fail(source, f"{where}: 'enabled' must be true or false")
-        if t.get("backend") not in (None, "wgpu", "vk"):
-            raise _fail(source, f"{where}: unknown backend {t['backend']!r}"
-                        + did_you_mean(str(t["backend"]), ("wgpu", "vk")))
-        passes.append(PassEntry(t["name"], t.get("use", t["name"]), t.get("enabled", True),
-                                dict(t.get("inputs", {})), dict(t.get("settings", {})),
-                                t.get("backend")))
+    tables = data.get("pass", [])
+    if not isinstance(tables, list):
+        raise _fail(source, "must be an array of tables ([[pass]])", "pass")
+    passes = [_pass_entry(t, i, source) for i, t in enumerate(tables)]
     if not passes:
         raise _fail(source, "the config has no [[pass]] tables")
-    camera = data.get("camera")
-    if camera is not None:
-        _check_keys(camera, _CAMERA_KEYS, "camera", source)
-    size = data.get("size", [1280, 720])
-    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0
-                                                              for v in size)):
-        raise _fail(source, f"'size' must be two positive integers, got {size!r}")
-    variants = data.get("variants", {})
-    cfg = Config(str(data.get("name", path.stem)), passes, list(data.get("outputs", [])),
-                 str(data.get("scene", "default")), (size[0], size[1]), camera, variants,
-                 int(data.get("frames", 1)), source, base=list(passes))
+    camera = None if data.get("camera") is None else _camera(data["camera"], source)
+    outputs = data.get("outputs", [])
+    if not isinstance(outputs, list):
+        raise _fail(source, f"must be a list of resource names, not {outputs!r}", "outputs")
+    for o in outputs:
+        check_identifier("output", o, file=source, element="outputs")
+    variants = _table(data.get("variants", {}), "variants", source)
     for vname, v in variants.items():
-        for option, value in v.items():
-            if option == "default":
-                continue
-            if isinstance(value, list) and not (value and all(
-                    isinstance(o, str) and o in v and isinstance(v[o], dict) for o in value)):
-                raise _fail(source, f"variants.{vname}.{option}: a list must name options of "
-                                    f"the variant ({', '.join(k for k in v if k != 'default')})")
-            if not isinstance(value, dict | list):
-                raise _fail(source, f"variants.{vname}.{option}: expected a table of overrides "
-                                    "or a list of options")
+        _check_variant(vname, v, source)
+    scene = _string(data.get("scene", "default"), "scene", source)
+    if scene != "default":
+        scene = str(path.parent / scene)  # a config's scene is relative to the config
+    frames = check_number(data.get("frames", 1), "frames", kind=int, lo=1, hi=MAX_FRAMES,
+                          file=source, element="frames")
+    cfg = Config(_string(data.get("name", path.stem), "name", source), passes, list(outputs),
+                 scene, _size_of(data.get("size", [1280, 720]), source), camera, variants,
+                 frames, source, base=list(passes))
+    for vname, v in variants.items():
         default = v.get("default")
         if isinstance(default, bool):  # a switch: default = true
             default = _boolean_option(str(default).lower(), [k for k in v if k != "default"])
-        if default is None or default not in v:
+        if not isinstance(default, str) or default not in v:
             raise _fail(source, f"variants.{vname}: 'default' must name one of its options "
                                 f"({', '.join(k for k in v if k != 'default')})")
         cfg = _apply_variant(cfg, vname, default)
@@ -254,7 +358,9 @@ def _set(cfg: Config, key: str, value: Any) -> Config:
         elif tail == "enabled":
             passes.append(replace(p, enabled=_bool(value, key, cfg.source)))
         elif tail.startswith("inputs."):
-            passes.append(replace(p, inputs={**p.inputs, tail[7:]: value}))
+            slot = check_identifier("input slot", tail[7:], file=cfg.source, element=key)
+            feed = check_identifier("resource", value, file=cfg.source, element=key)
+            passes.append(replace(p, inputs={**p.inputs, slot: feed}))
         else:
             passes.append(replace(p, settings={**p.settings, tail: value}))
     return replace(cfg, passes=passes)
@@ -276,6 +382,8 @@ def parse_size(text: str) -> tuple[int, int]:
         raise ValueError(f"expected WxH (e.g. 1920x1080), got '{text}'") from None
     if w < 1 or h < 1:
         raise ValueError(f"size must be positive, got {w}x{h}")
+    if w > MAX_SIZE or h > MAX_SIZE:
+        raise ValueError(f"size {w}x{h} is over {MAX_SIZE} pixels per side")
     return w, h
 
 
@@ -297,7 +405,7 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
         elif key == "scene":
             cfg = replace(cfg, scene=value)
         elif key == "frames":
-            cfg = replace(cfg, frames=int(value))
+            cfg = replace(cfg, frames=_frames(value, cfg.source))
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
@@ -308,6 +416,15 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
             cfg = replace(cfg, explicit=[*cfg.explicit, (key, value)])
     return cfg
+
+
+def _frames(text: str, source: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise _fail(source, f"must be an integer, not {text!r}", "--set frames") from None
+    return check_number(value, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=source,
+                        element="--set frames")
 
 
 @dataclass
