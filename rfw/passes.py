@@ -20,6 +20,7 @@ A pass is a class in ``passes/<id>/<id>.py`` with its shader beside it::
 from __future__ import annotations
 
 import inspect
+import math
 import struct
 import typing
 from pathlib import Path
@@ -103,26 +104,72 @@ def _align(buf: bytearray, n: int) -> None:
     buf += b"\0" * (-len(buf) % n)
 
 
+# ints are packed as WGSL i32, floats as f32: values outside these never reach a shader
+I32 = (-(1 << 31), (1 << 31) - 1)
+F32_MAX = 3.4028234663852886e38
+_TRUE, _FALSE = ("true", "1", "yes", "on"), ("false", "0", "no", "off")
+
+
 def _convert(value: Any, kind: Any, where: str) -> Any:
-    try:
-        if kind is bool:
-            if isinstance(value, str):
-                if value.lower() in ("true", "1", "yes", "on"):
-                    return True
-                if value.lower() in ("false", "0", "no", "off"):
-                    return False
-                raise ValueError(value)
-            return bool(value)
-        if kind in (int, float, str):
-            return kind(value)
-        if _is_vec(kind):
-            items = value.split(",") if isinstance(value, str) else list(value)
-            if len(items) != len(typing.get_args(kind)):
-                raise ValueError(value)
-            return tuple(float(v) for v in items)
-    except (TypeError, ValueError):
-        raise SettingsError(f"{where}: expected {getattr(kind, '__name__', kind)}, "
-                            f"got {value!r}") from None
+    """``value`` as the declared ``kind``: strings (from ``--set``) are parsed, other types
+    must match (``5`` is no string, ``"two"`` no number); numbers must be finite and fit the
+    type the shader reads."""
+    if kind is bool:
+        return _to_bool(value, where)
+    if kind is int:
+        return _to_int(value, where)
+    if kind is float:
+        return _to_float(value, where)
+    if kind is str:
+        if not isinstance(value, str):
+            raise SettingsError(f"{where}: expected a string, got {value!r}")
+        return value
+    if _is_vec(kind):
+        items = value.split(",") if isinstance(value, str) else value
+        n = len(typing.get_args(kind))
+        if not isinstance(items, list | tuple) or len(items) != n:
+            raise SettingsError(f"{where}: expected {n} numbers, got {value!r}")
+        return tuple(_to_float(v, where) for v in items)
+    return value
+
+
+def _to_bool(value: Any, where: str) -> bool:
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
+        return value.strip().lower() in _TRUE
+    raise SettingsError(f"{where}: expected true or false, got {value!r}")
+
+
+def _to_int(value: Any, where: str) -> int:
+    if isinstance(value, str):
+        try:
+            value = int(value.strip())
+        except ValueError:
+            raise SettingsError(f"{where}: expected an integer, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise SettingsError(f"{where}: expected an integer, got {value!r}")
+    if not I32[0] <= value <= I32[1]:
+        raise SettingsError(f"{where}: {value} does not fit a 32-bit integer "
+                            f"({I32[0]}..{I32[1]})")
+    return value
+
+
+def _to_float(value: Any, where: str) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value.strip())
+        except ValueError:
+            raise SettingsError(f"{where}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SettingsError(f"{where}: expected a number, got {value!r}")
+    if isinstance(value, int) and abs(value) > F32_MAX:
+        raise SettingsError(f"{where}: {value} does not fit a 32-bit float")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SettingsError(f"{where}: must be finite, got {value!r}")
+    if abs(value) > F32_MAX:
+        raise SettingsError(f"{where}: {value!r} does not fit a 32-bit float")
     return value
 
 

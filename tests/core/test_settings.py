@@ -22,7 +22,7 @@ def test_defaults_conversion_and_unknown_keys():
     with pytest.raises(SettingsError, match=r"pass 'tm': unknown setting 'exposre' \(did you "
                                             r"mean 'exposure'\?\)"):
         Params("pass 'tm'", exposre=2)
-    with pytest.raises(SettingsError, match=r"setting 'curve': expected int, got 'fast'"):
+    with pytest.raises(SettingsError, match=r"setting 'curve': expected an integer, got 'fast'"):
         Params("pass 'tm'", curve="fast")
 
 
@@ -39,3 +39,48 @@ def test_replace_and_equality():
     p = Params()
     q = p.replace(curve=0)
     assert q.curve == 0 and p.curve == 1 and q != p and q == Params(curve=0)
+
+
+# every bad value is refused where it enters, naming the setting; the good ones beside them
+# show the check is not simply refusing everything
+BAD = [
+    ("curve", 99999999999999, "does not fit a 32-bit integer"),
+    ("curve", -(1 << 31) - 1, "does not fit a 32-bit integer"),
+    ("curve", 2.5, "expected an integer"),
+    ("curve", True, "expected an integer"),
+    ("exposure", float("nan"), "must be finite"),
+    ("exposure", "inf", "must be finite"),
+    ("exposure", "-Infinity", "must be finite"),
+    ("exposure", 1e39, "does not fit a 32-bit float"),
+    ("exposure", 10 ** 40, "does not fit a 32-bit float"),
+    ("exposure", "two", "expected a number"),
+    ("exposure", [1.0], "expected a number"),
+    ("enabled", 5, "expected true or false"),
+    ("enabled", "maybe", "expected true or false"),
+    ("tint", "1,nan,0", "must be finite"),
+    ("tint", (1.0, 2.0), "expected 3 numbers"),
+    ("tint", 5, "expected 3 numbers"),
+    ("label", 5, "expected a string"),
+]
+GOOD = [
+    ("curve", (1 << 31) - 1, (1 << 31) - 1),
+    ("curve", -(1 << 31), -(1 << 31)),
+    ("curve", " 7 ", 7),
+    ("exposure", 3, 3.0),
+    ("exposure", "-1e38", -1e38),
+    ("enabled", "ON", True),
+    ("tint", [0, 1, 2], (0.0, 1.0, 2.0)),
+    ("label", "y", "y"),
+]
+
+
+@pytest.mark.parametrize("key,value,needle", BAD, ids=[f"{k}={v!r}" for k, v, _ in BAD])
+def test_bad_values_are_refused_naming_the_setting(key, value, needle):
+    with pytest.raises(SettingsError) as e:
+        Params("pass 'tm'", **{key: value})
+    assert f"pass 'tm': setting '{key}'" in str(e.value) and needle in str(e.value)
+
+
+@pytest.mark.parametrize("key,value,expected", GOOD, ids=[f"{k}={v!r}" for k, v, _ in GOOD])
+def test_values_at_the_bounds_are_kept(key, value, expected):
+    assert getattr(Params(**{key: value}), key) == expected
