@@ -662,6 +662,17 @@ class ImageBinding:
     view: ImageView
 
 
+def _check_storage_format(what: str, d: DescriptorInfo, view: ImageView, resource: str) -> None:
+    """A storage image's declared format (``layout(rgba8)``) must be the view's: Vulkan
+    leaves a mismatch undefined and no validation message reports it."""
+    have = format_info(view.format)
+    if d.format is None or have.vk is None or have.vk == d.format:
+        return
+    declared = format_info(d.format)
+    raise ShaderError(f"{what} declared {declared.wgpu or declared.name} ({d.format}), but "
+                      f"'{resource}' is {have.wgpu or have.name} ({have.vk})")
+
+
 class VkPassContext(SlotContext):
     """What ``Pass.record`` sees on Vulkan: the wgpu ``PassContext``'s interface."""
 
@@ -815,12 +826,14 @@ class VkPassContext(SlotContext):
             if kind == "storage_image" and layout != "GENERAL":
                 raise ShaderError(f"{what}, but the plan has '{value.resource}' in {layout} "
                                   "in this pass (declare the slot as a storage output)")
-            view = value.view
+            view, resource = value.view, value.resource
         elif isinstance(value, ImageView):
             layout = "GENERAL" if kind == "storage_image" else "SHADER_READ_ONLY_OPTIMAL"
-            view = value
+            view, resource = value, value.image.label
         else:
             raise ShaderError(f"{what}, but the pass gives {type(value).__name__}")
+        if kind == "storage_image":
+            _check_storage_format(what, d, view, resource)
         payload = (view.handle, image_layout(layout))
         return (*payload, sampler.handle) if sampler is not None else payload
 

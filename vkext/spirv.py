@@ -19,6 +19,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rfw.errors import warn
 from rfw.fileio import atomic_write
 from rfw.graph.errors import GraphError
 
@@ -101,8 +102,9 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
         h.update(str(p).encode() + b"\0" + seen[p] + b"\0")
     key = h.hexdigest()
     cached = cache_dir() / f"{key}.spv"
-    if cached.is_file():
-        return Spirv(path, stage, cached.read_bytes(), key)
+    code = _cached(cached)
+    if code is not None:
+        return Spirv(path, stage, code, key)
     with tempfile.TemporaryDirectory(prefix="rfw-glsl-") as tmp:
         out = Path(tmp) / "out.spv"
         source = _with_include_extension(path, Path(tmp))
@@ -115,6 +117,26 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
         code = out.read_bytes()
     atomic_write(cached, lambda f: f.write(code))  # a parallel compile never sees half a file
     return Spirv(path, stage, code, key)
+
+
+def _cached(path: Path) -> bytes | None:
+    """The cache entry's SPIR-V, or None to compile: a missing entry, or a corrupt one
+    (truncated, garbled), which is discarded with a warning so the compile replaces it."""
+    try:
+        code = path.read_bytes()
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        warn(f"{path}: cannot read SPIR-V cache entry ({e.strerror or e}); recompiling")
+        return None
+    try:
+        check_module(code)
+        reflect(code)
+    except ShaderCompileError as e:
+        warn(f"{path}: corrupt SPIR-V cache entry ({e.message}); discarded and recompiled")
+        path.unlink(missing_ok=True)
+        return None
+    return code
 
 
 def _with_include_extension(path: Path, tmp: Path) -> Path:
@@ -160,6 +182,7 @@ class DescriptorInfo:
     #            combined_image_sampler | sampler | acceleration_structure
     count: int = 1
     writable: bool = True
+    format: str | None = None  # a storage image's declared format (Vulkan name), None: any
 
 
 @dataclass
@@ -193,16 +216,60 @@ _MODELS = {0: "vert", 4: "frag", 5: "comp", 5267: "task", 5268: "mesh", 5364: "t
            5317: "rmiss", 5318: "rcall"}
 
 
+# OpTypeImage's Image Format operand -> the Vulkan format it requires (SPIR-V 1.6, 3.11;
+# Vulkan "Compatibility Between SPIR-V Image Formats and Vulkan Formats"); 0 is Unknown
+_IMAGE_FORMATS = {
+    1: "R32G32B32A32_SFLOAT", 2: "R16G16B16A16_SFLOAT", 3: "R32_SFLOAT", 4: "R8G8B8A8_UNORM",
+    5: "R8G8B8A8_SNORM", 6: "R32G32_SFLOAT", 7: "R16G16_SFLOAT", 8: "B10G11R11_UFLOAT_PACK32",
+    9: "R16_SFLOAT", 10: "R16G16B16A16_UNORM", 11: "A2B10G10R10_UNORM_PACK32",
+    12: "R16G16_UNORM", 13: "R8G8_UNORM", 14: "R16_UNORM", 15: "R8_UNORM",
+    16: "R16G16B16A16_SNORM", 17: "R16G16_SNORM", 18: "R8G8_SNORM", 19: "R16_SNORM",
+    20: "R8_SNORM", 21: "R32G32B32A32_SINT", 22: "R16G16B16A16_SINT", 23: "R8G8B8A8_SINT",
+    24: "R32_SINT", 25: "R32G32_SINT", 26: "R16G16_SINT", 27: "R8G8_SINT", 28: "R16_SINT",
+    29: "R8_SINT", 30: "R32G32B32A32_UINT", 31: "R16G16B16A16_UINT", 32: "R8G8B8A8_UINT",
+    33: "R32_UINT", 34: "A2B10G10R10_UINT_PACK32", 35: "R32G32_UINT", 36: "R16G16_UINT",
+    37: "R8G8_UINT", 38: "R16_UINT", 39: "R8_UINT", 40: "R64_UINT", 41: "R64_SINT"}
+_OP_FUNCTION_END = 56
+
+
+def check_module(code: bytes) -> None:
+    """A ShaderCompileError unless ``code`` is whole SPIR-V: the magic number, whole words,
+    instructions that fit, and a last function that ends (a truncated file fails one)."""
+    if len(code) < 20 or struct.unpack_from("<I", code)[0] != 0x07230203:
+        raise ShaderCompileError("not a SPIR-V module (bad magic number)")
+    if len(code) % 4:
+        raise ShaderCompileError(f"malformed SPIR-V: {len(code)} bytes is not whole words")
+    words = struct.unpack(f"<{len(code) // 4}I", code)
+    i, last = 5, -1
+    while i < len(words):
+        count = words[i] >> 16
+        if count == 0 or i + count > len(words):
+            raise ShaderCompileError(f"malformed SPIR-V: instruction at word {i} "
+                                     f"{'is empty' if count == 0 else 'runs past the end'}")
+        last, i = words[i] & 0xFFFF, i + count
+    if last != _OP_FUNCTION_END:
+        raise ShaderCompileError("malformed SPIR-V: the module does not end with a function "
+                                 "end (truncated?)")
+
+
 def _string(words: list[int]) -> str:
     raw = b"".join(struct.pack("<I", w) for w in words)
     return raw.split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 def reflect(code: bytes) -> Reflection:
-    """Descriptor sets and bindings, push-constant size and workgroup size from SPIR-V."""
-    if len(code) < 20 or struct.unpack_from("<I", code)[0] != 0x07230203:
-        raise ShaderCompileError("not a SPIR-V module (bad magic number)")
-    words = list(struct.unpack(f"<{len(code) // 4}I", code))
+    """Descriptor sets and bindings, push-constant size and workgroup size from SPIR-V;
+    a module that is not whole SPIR-V is a ShaderCompileError (``check_module``)."""
+    check_module(code)
+    try:
+        return _reflect(list(struct.unpack(f"<{len(code) // 4}I", code)))
+    except (IndexError, KeyError, RecursionError) as e:
+        # operands missing or ids that point nowhere: garbled, though whole, SPIR-V
+        raise ShaderCompileError(f"malformed SPIR-V: {type(e).__name__} while reflecting "
+                                 f"({e})") from None
+
+
+def _reflect(words: list[int]) -> Reflection:
     names: dict[int, str] = {}
     decorations: dict[int, dict[int, int]] = {}
     member_offsets: dict[int, dict[int, int]] = {}
@@ -237,7 +304,8 @@ def reflect(code: bytes) -> Reflection:
         elif op == _OP_TYPE_MATRIX:
             types[args[0]] = ("matrix", args[1], args[2])
         elif op == _OP_TYPE_IMAGE:
-            types[args[0]] = ("image", args[2], args[6])  # dim, sampled (1 yes, 2 storage)
+            # dim, sampled (1 yes, 2 storage), image format
+            types[args[0]] = ("image", args[2], args[6], args[7])
         elif op == _OP_TYPE_SAMPLER:
             types[args[0]] = ("sampler",)
         elif op == _OP_TYPE_SAMPLED_IMAGE:
@@ -312,6 +380,8 @@ def reflect(code: bytes) -> Reflection:
             continue
         name = names.get(var) or names.get(t) or f"set{dec.get(_DEC_SET, 0)}_b{dec[_DEC_BINDING]}"
         writable = _DEC_NON_WRITABLE not in dec
+        fmt = _IMAGE_FORMATS.get(kind[3]) if what == "storage_image" else None
         refl.descriptors[name] = DescriptorInfo(name, dec.get(_DEC_SET, 0), dec[_DEC_BINDING],
-                                                what, count, writable)
+                                                what, count, writable,
+                                                None if fmt is None else f"VK_FORMAT_{fmt}")
     return refl

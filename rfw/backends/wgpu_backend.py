@@ -199,7 +199,7 @@ def _layout_entry(b: BindingInfo, visibility: int, fmt: str | None,
         access = {"write": "write-only", "read": "read-only",
                   "read_write": "read-write"}[inner[1].strip()]
         entry["visibility"] = visibility & ~wgpu.ShaderStage.VERTEX
-        entry["storage_texture"] = {"access": access, "format": inner[0].strip(),
+        entry["storage_texture"] = {"access": access, "format": _storage_format(b),
                                     "view_dimension": _dimension(b.type)}
     else:
         if "depth" in b.type:
@@ -215,6 +215,11 @@ def _layout_entry(b: BindingInfo, visibility: int, fmt: str | None,
         entry["texture"] = {"sample_type": sample, "view_dimension": _dimension(b.type),
                             "multisampled": "multisampled" in b.type}
     return entry
+
+
+def _storage_format(b: BindingInfo) -> str:
+    # texture_storage_2d<rgba8unorm, write>: the texel format is the first parameter
+    return b.type[b.type.index("<") + 1:b.type.rindex(">")].split(",")[0].strip()
 
 
 def _dimension(wtype: str) -> str:
@@ -291,12 +296,25 @@ class PassContext(SlotContext):
                                   f"{prog.source.lines[0][0] if prog.source.lines else '?'} "
                                   f"binds {', '.join(missing)} but the pass gives "
                                   f"{', '.join(sorted(values)) or 'nothing'}")
+            for b in wanted:
+                if b.kind == "storage-texture":
+                    self._check_storage_format(prog, b, values[b.name])
             entries = [{"binding": b.binding,
                         "resource": self.executor.as_resource(values[b.name], b,
                                                               self.pass_)} for b in wanted]
             out.append(self.device.create_bind_group(layout=prog.layouts[g], entries=entries,
                                                      label=f"{self.pass_.name}:g{g}"))
         return out
+
+    def _check_storage_format(self, prog: Program, b: BindingInfo, value: Any) -> None:
+        # up front: wgpu reports a mismatch late, as its own validation error
+        declared, have = _storage_format(b), self.executor.format_of(value)
+        if have is None or have == declared:
+            return
+        name = getattr(value, "label", "") or "the texture"  # views are labelled by resource
+        raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' of "
+                          f"{prog.source.lines[0][0] if prog.source.lines else '?'} is a "
+                          f"storage texture declared {declared}, but '{name}' is {have}")
 
     def _check_extra(self, prog: Program, values: dict[str, Any], path: str) -> None:
         extra = [k for k in values if k not in prog.bindings]

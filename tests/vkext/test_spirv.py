@@ -1,11 +1,17 @@
 """GLSL to SPIR-V with glslang: cache, includes, defines, errors with file and line, and
 layouts reflected from the binary (never hand-written)."""
 
+import os
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from vkext.spirv import ShaderCompileError, compile_glsl, reflect
+
+ROOT = Path(__file__).resolve().parents[2]
 
 pytestmark = pytest.mark.skipif(shutil.which("glslangValidator") is None,
                                 reason="needs glslangValidator (scripts/setup-system.sh)")
@@ -111,3 +117,73 @@ void main() {
 def test_reflect_refuses_garbage():
     with pytest.raises(ShaderCompileError, match="bad magic"):
         reflect(b"\0" * 64)
+
+
+def test_reflect_reads_storage_image_formats(tmp_path):
+    write(tmp_path, "helpers.glsl", "float twice(float x) { return 2.0 * x; }\n")
+    r = reflect(compile_glsl(write(tmp_path, "f.comp.glsl", COMPUTE), {"SCALE": "1.0"}).code)
+    assert r.descriptors["o_dst"].format == "VK_FORMAT_R16G16B16A16_SFLOAT"
+    assert r.descriptors["t_src"].format is None  # sampled: any format
+    rgba8 = COMPUTE.replace("rgba16f)", "rgba8)")
+    r = reflect(compile_glsl(write(tmp_path, "g.comp.glsl", rgba8), {"SCALE": "1.0"}).code)
+    assert r.descriptors["o_dst"].format == "VK_FORMAT_R8G8B8A8_UNORM"
+
+
+@pytest.mark.parametrize("damage", ["truncated", "not whole words", "bad magic",
+                                    "zero-length instruction", "cut at an instruction"])
+def test_reflect_refuses_damaged_modules(tmp_path, damage):
+    write(tmp_path, "helpers.glsl", "float twice(float x) { return 2.0 * x; }\n")
+    code = compile_glsl(write(tmp_path, "f.comp.glsl", COMPUTE), {"SCALE": "1.0"}).code
+    reflect(code)  # negative control: the undamaged module reflects
+    with pytest.raises(ShaderCompileError, match="SPIR-V"):
+        reflect(damaged(code, damage))
+
+
+def damaged(code: bytes, how: str) -> bytes:
+    words = len(code) // 4
+    if how == "truncated":
+        return code[:len(code) // 2 // 4 * 4]
+    if how == "not whole words":
+        return code[:-3]
+    if how == "bad magic":
+        return b"\x00\x00\x00\x00" + code[4:]
+    if how == "zero-length instruction":
+        return code[:20] + b"\x00\x00\x00\x00" + code[24:]
+    # the last instruction (OpFunctionEnd, one word) removed: still whole instructions
+    assert how == "cut at an instruction" and words > 6
+    return code[:-4]
+
+
+VK_RUN = ["run", "configs/deferred.toml", "--backend", "vk", "--size", "64x36", "--frames", "1"]
+
+
+def rfw_vk(tmp_path, cache):
+    env = {**os.environ, "RFW_CACHE_SPIRV": str(cache)}
+    return subprocess.run([sys.executable, "-m", "rfw.cli", *VK_RUN, "--out",
+                           str(tmp_path / "out")], capture_output=True, text=True, env=env,
+                          cwd=ROOT, timeout=300, check=False)
+
+
+def test_corrupt_cache_entries_heal_through_the_cli(tmp_path):
+    cache = tmp_path / "spirv"
+    first = rfw_vk(tmp_path, cache)
+    assert first.returncode == 0, first.stderr
+    entries = sorted(cache.glob("*.spv"))
+    assert len(entries) >= 4, entries
+    good = {p.name: p.read_bytes() for p in entries}
+    # negative control: a sound cache is used silently
+    again = rfw_vk(tmp_path, cache)
+    assert again.returncode == 0 and "warning" not in again.stderr, again.stderr
+    hows = ["truncated", "not whole words", "bad magic", "cut at an instruction"]
+    for p, how in zip(entries, hows, strict=False):
+        p.write_bytes(damaged(good[p.name], how))
+    healed = rfw_vk(tmp_path, cache)
+    assert healed.returncode == 0, healed.stderr
+    warnings = [line for line in healed.stderr.splitlines() if line.startswith("rfw: warning:")]
+    assert len(warnings) == len(hows), healed.stderr
+    assert all("corrupt SPIR-V cache entry" in w for w in warnings), warnings
+    assert {p.name for p in entries[:len(hows)]} == {
+        next(n for n in good if n in w) for w in warnings}
+    # rebuilt whole, the same bytes glslang gave the first time, and no temporary left behind
+    assert {p.name: p.read_bytes() for p in cache.glob("*.spv")} == good
+    assert not [p for p in cache.iterdir() if p.suffix != ".spv"]
