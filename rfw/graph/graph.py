@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
+from ..errors import check_identifier
 from .errors import GraphError
 from .resources import PASS_TYPES, Binding, Slot, Texture
 
@@ -107,8 +108,15 @@ class PassBuilder:
         self.inputs: list[Binding] = []
         self.outputs: list[Binding] = []
 
+    def _name(self, kind: str, name: Any, slot: str | None = None) -> str:
+        # slot and resource names become labels and file names: identifiers only
+        where = f"pass '{self.name}'" + (f", slot '{slot}'" if slot is not None else "")
+        return check_identifier(kind, name, file=self._graph.source, element=where)
+
     def input(self, slot: str, source: str, spec: Slot | None = None) -> PassBuilder:
         """Read ``source`` (a resource name, ``"pass.slot"`` by default) through ``slot``."""
+        self._name("slot", slot)
+        self._name("resource", source, slot)
         self.inputs.append(Binding(slot, "in", spec or Texture(), source))
         return self
 
@@ -116,6 +124,7 @@ class PassBuilder:
                target: str | None = None) -> PassBuilder:
         """Create a resource (named ``"<pass>.<slot>"`` unless ``name`` is given), or, for a
         reference slot, write ``target`` in place."""
+        self._name("slot", slot)
         if spec.type == "reference":
             if target is None:
                 raise GraphError(f"pass '{self.name}', slot '{slot}': a reference output needs "
@@ -123,6 +132,7 @@ class PassBuilder:
             resource = target
         else:
             resource = name or f"{self.name}.{slot}"
+        self._name("resource", resource, slot)
         self.outputs.append(Binding(slot, "out", spec, resource))
         return self
 
@@ -159,6 +169,7 @@ class GraphBuilder:
                  settings: Mapping[str, Any] | None = None,
                  schema: Iterable[str] | None = None, origin: str | None = None,
                  backend: str | None = None) -> PassBuilder:
+        check_identifier("pass", name, file=self.source)
         if type not in PASS_TYPES:
             raise GraphError(f"pass '{name}': unknown pass type '{type}'", file=self.source,
                              suggest=(type, PASS_TYPES))
@@ -172,11 +183,14 @@ class GraphBuilder:
 
     def external(self, name: str, spec: Slot) -> GraphBuilder:
         """Import a user-owned resource (never aliased) that passes read or write."""
+        check_identifier("external resource", name, file=self.source)
         self._imports.append((name, spec.with_(external=True)))
         return self
 
     def output(self, *names: str) -> GraphBuilder:
         """Mark graph outputs: culling keeps exactly the passes these depend on."""
+        for name in names:
+            check_identifier("output", name, file=self.source, element="outputs")
         self._outputs = [*(self._outputs or []), *names]
         return self
 
