@@ -26,19 +26,25 @@ import hashlib
 import importlib.machinery
 import importlib.metadata
 import importlib.util
+import io
 import os
+import zipfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
+from .errors import warn
 from .fileio import atomic_write
 
 # the PyPI package bundles the C library 0.22 (MESHOPTIMIZER_VERSION 220 in its src/meshoptimizer.h)
 MESHOPTIMIZER_PIN = "0.2.30a0"
 MAX_VERTICES_LIMIT = 255  # kMeshletMaxVertices in clusterizer.cpp
 MAX_TRIANGLES_LIMIT = 512  # kMeshletMaxTriangles
-CACHE_FORMAT = 1  # bump when the cached arrays change meaning
+CACHE_FORMAT = 2  # bump when the cached arrays change meaning
+# an entry: magic, sha256 of the payload, then the payload (an .npz of the arrays)
+CACHE_MAGIC = b"RFWMLT2\n"
+CACHE_SUFFIX = ".meshlets"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -313,27 +319,49 @@ def cached_meshlets(
     cone_weight: float = 0.25,
     cache_dir: Path | str | None = None,
 ) -> Meshlets:
-    """``build_meshlets`` through a content-addressed ``.npz`` cache (written atomically)."""
+    """``build_meshlets`` through a content-addressed cache (written atomically). A damaged
+    entry is rebuilt with one warning; a cache folder that cannot be written is skipped with
+    one warning."""
     params = dict(max_vertices=max_vertices, max_triangles=max_triangles, cone_weight=cone_weight)
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = folder / f"{meshlet_cache_key(positions, indices, **params)}.npz"
+    path = folder / f"{meshlet_cache_key(positions, indices, **params)}{CACHE_SUFFIX}"
     if path.is_file():
-        try:
-            with np.load(path) as data:
-                bounds = MeshletBounds(
-                    **{f.name: data[f"bounds.{f.name}"] for f in fields(MeshletBounds)}
-                )
-                return Meshlets(data["meshlets"], data["vertices"], data["triangles"], bounds)
-        except (OSError, KeyError, ValueError):
-            pass  # a damaged entry is rebuilt and overwritten
+        found = _read_entry(path)
+        if found is not None:
+            return found
+        warn(f"{path}: corrupt cache entry, rebuilt")
     result = build_meshlets(positions, indices, **params)
-    arrays = {
-        "meshlets": result.meshlets,
-        "vertices": result.vertices,
-        "triangles": result.triangles,
-    }
-    arrays.update(
-        {f"bounds.{f.name}": getattr(result.bounds, f.name) for f in fields(MeshletBounds)}
-    )
-    atomic_write(path, lambda f: np.savez(f, **arrays))  # readers see old or whole new
+    try:
+        atomic_write(path, lambda f: f.write(_encode_entry(result)))  # old or whole new
+    except OSError as e:
+        warn(f"{folder}: cannot write the meshlet cache ({e.strerror or e}); not cached")
     return result
+
+
+def _encode_entry(m: Meshlets) -> bytes:
+    arrays = {"meshlets": m.meshlets, "vertices": m.vertices, "triangles": m.triangles}
+    arrays.update({f"bounds.{f.name}": getattr(m.bounds, f.name) for f in fields(MeshletBounds)})
+    payload = io.BytesIO()
+    np.savez(payload, **arrays)
+    body = payload.getvalue()
+    return CACHE_MAGIC + hashlib.sha256(body).digest() + body
+
+
+def _read_entry(path: Path) -> Meshlets | None:
+    """The cached meshlets, or None when the entry is damaged: the magic and a sha256 over
+    the payload catch truncation and flipped bytes before numpy reads anything."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    head = len(CACHE_MAGIC) + 32
+    body = data[head:]
+    if len(data) < head or not data.startswith(CACHE_MAGIC) \
+            or hashlib.sha256(body).digest() != data[len(CACHE_MAGIC):head]:
+        return None
+    try:
+        with np.load(io.BytesIO(body), allow_pickle=False) as z:
+            bounds = MeshletBounds(**{f.name: z[f"bounds.{f.name}"] for f in fields(MeshletBounds)})
+            return Meshlets(z["meshlets"], z["vertices"], z["triangles"], bounds)
+    except (KeyError, ValueError, EOFError, zipfile.BadZipFile):
+        return None  # a checksummed entry of another layout: rebuilt like a damaged one

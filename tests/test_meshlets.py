@@ -343,7 +343,7 @@ def test_cache_hit_returns_equal_arrays(tmp_path, monkeypatch):
     pos, faces = _meshes()["torus"]
     first = cached_meshlets(pos, faces, cache_dir=tmp_path)
     files = list(tmp_path.iterdir())
-    assert len(files) == 1 and files[0].suffix == ".npz"
+    assert len(files) == 1 and files[0].suffix == ml.CACHE_SUFFIX
     key = ml.meshlet_cache_key(pos, faces, max_vertices=64, max_triangles=124, cone_weight=0.25)
     assert files[0].stem == key and len(key) == 64
 
@@ -360,14 +360,52 @@ def test_cache_hit_returns_equal_arrays(tmp_path, monkeypatch):
     monkeypatch.setenv("RFW_CACHE_MESHLETS", str(tmp_path / "env"))
     other = cached_meshlets(pos, faces, cone_weight=0.5)
     assert len(list((tmp_path / "env").iterdir())) == 1
-    assert not (tmp_path / "env" / f"{key}.npz").exists()
+    assert not (tmp_path / "env" / f"{key}{ml.CACHE_SUFFIX}").exists()
     _assert_same(other, _built("torus", cone_weight=0.5))
 
 
-def test_cache_rebuilds_a_damaged_entry(tmp_path):
+DAMAGES = {
+    "not a zip": lambda good: b"not a zip",
+    "empty": lambda good: b"",
+    "header only": lambda good: good[:40],
+    "truncated": lambda good: good[: len(good) // 2],
+    "one byte flipped": lambda good: good[:-7] + bytes([good[-7] ^ 0x20]) + good[-6:],
+    "bare npz of old": lambda good: good[40:],  # the payload without magic and checksum
+}
+
+
+@pytest.mark.parametrize("damage", list(DAMAGES))
+def test_cache_rebuilds_a_damaged_entry(tmp_path, capfd, damage):
     pos, faces = _meshes()["cube"]
     key = ml.meshlet_cache_key(pos, faces, max_vertices=64, max_triangles=124, cone_weight=0.25)
-    (tmp_path / f"{key}.npz").write_bytes(b"not a zip")
+    entry = tmp_path / f"{key}{ml.CACHE_SUFFIX}"
+    cached_meshlets(pos, faces, cache_dir=tmp_path)
+    good = entry.read_bytes()
+    entry.write_bytes(DAMAGES[damage](good))
+    assert entry.read_bytes() != good  # the damage is real
+    capfd.readouterr()
     _assert_same(cached_meshlets(pos, faces, cache_dir=tmp_path), _built("cube"))
+    err = capfd.readouterr().err.splitlines()
+    assert err == [f"rfw: warning: {entry}: corrupt cache entry, rebuilt"]
+    assert entry.read_bytes() == good  # healed
     _assert_same(cached_meshlets(pos, faces, cache_dir=tmp_path), _built("cube"))
-    assert [p.name for p in tmp_path.iterdir()] == [f"{key}.npz"]  # no temporary left behind
+    assert capfd.readouterr().err == ""  # the healed entry is a hit, without a warning
+    assert [p.name for p in tmp_path.iterdir()] == [entry.name]  # no temporary left behind
+
+
+def test_cache_hit_reads_the_entry_not_a_rebuild(tmp_path, monkeypatch):
+    # negative control of the checks above: a good entry is used as it is, with no warning
+    pos, faces = _meshes()["cube"]
+    cached_meshlets(pos, faces, cache_dir=tmp_path)
+    monkeypatch.setattr(ml, "build_meshlets", lambda *a, **k: pytest.fail("rebuilt"))
+    _assert_same(cached_meshlets(pos, faces, cache_dir=tmp_path), _built("cube"))
+
+
+def test_unwritable_cache_folder_warns_and_still_builds(tmp_path, capfd):
+    pos, faces = _meshes()["cube"]
+    blocker = tmp_path / "file"
+    blocker.write_text("a file where the cache folder would be")
+    _assert_same(cached_meshlets(pos, faces, cache_dir=blocker / "meshlets"), _built("cube"))
+    err = capfd.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"rfw: warning: {blocker / 'meshlets'}: cannot "
+                                                "write the meshlet cache")
