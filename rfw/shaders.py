@@ -56,9 +56,15 @@ def preprocess(path: str | Path, defines: dict[str, object] | None = None,
 def _expand(path: Path, env: dict[str, str], host: dict[str, str], out: list[str],
             where: list[tuple[str, int]], search: list[Path], once: set[Path]) -> None:
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        data = path.read_bytes()
     except OSError as e:
         raise ShaderError(f"{path}: cannot read shader: {e.strerror or e}") from None
+    try:
+        lines = data.decode("utf-8").splitlines()
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise ShaderError(f"{path}:{line}: not UTF-8 (byte {e.start}: "
+                          f"{data[e.start:e.end].hex()})") from None
     once.add(path.resolve())
     active = [True]  # one entry per open conditional
     for n, line in enumerate(lines, 1):

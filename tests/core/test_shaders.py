@@ -78,3 +78,26 @@ def test_compile_errors_point_at_the_original_file(tmp_path, device):
 def test_explain_maps_lines(tmp_path):
     src = preprocess(write(tmp_path, "m.wgsl", "a\nb\n"))
     assert explain(src, "error at wgsl:2:3 oops").startswith(f"{tmp_path / 'm.wgsl'}:2: ")
+
+
+@pytest.mark.parametrize("where", ["main", "include"])
+def test_invalid_utf8_names_file_and_line(tmp_path, where):
+    good = "fn g() -> f32 { return 1.0; }\n"
+    bad = b"// ok\nfn h() -> f32 { return 2.0; } // \xff\xfe latin-1?\n"
+    inc = tmp_path / "inc.wgsl"
+    main = tmp_path / "main.wgsl"
+    if where == "main":
+        inc.write_text(good)
+        main.write_bytes(b'#include "inc.wgsl"\n' + bad)
+        bad_file, line = main, 3
+    else:
+        inc.write_bytes(bad)
+        main.write_text('#include "inc.wgsl"\n' + good)
+        bad_file, line = inc, 2
+    with pytest.raises(ShaderError) as e:
+        preprocess(main)
+    text = str(e.value)
+    assert text.startswith(f"{bad_file}:{line}: not UTF-8") and "\n" not in text
+    # negative control: the same bytes, valid UTF-8, preprocess
+    bad_file.write_text(bad.decode("latin-1"))
+    assert "return 2.0" in preprocess(main).text
