@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import warn
 from .gltf import _Loader, load_gltf
 from .meshfile import load_meshfile
 from .model import Instance, Material, Mesh, Scene, SceneError
@@ -1085,23 +1086,35 @@ class Result:
 
 def cached(spec: SceneSpec, cache: Path) -> dict | None:
     """The scene's JSON when its files in ``cache`` are complete and match the pin."""
+    return _inspect(spec, cache)[0]
+
+
+def _inspect(spec: SceneSpec, cache: Path) -> tuple[dict | None, Path | None]:
+    """``(json, None)`` for a good entry; ``(None, file)`` for a damaged one (a file that
+    is not what the JSON records, or a JSON that does not parse); ``(None, None)`` when the
+    entry is absent or made from another pin or format (fetched again without a warning)."""
     glb, lic, meta = (cache / f"{spec.name}{s}" for s in (".glb", ".LICENSE.txt", ".json"))
     try:
-        info = json.loads(meta.read_text("utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(info, dict) or info.get("format") != FORMAT \
-            or info.get("sha256") != spec.source.sha256 \
+        info = json.loads(meta.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        return None, None
+    except (OSError, ValueError):  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+        return None, meta
+    if not isinstance(info, dict):
+        return None, meta
+    if info.get("format") != FORMAT or info.get("sha256") != spec.source.sha256 \
             or info.get("package") != spec.source.package \
             or info.get("version") != spec.source.version:
-        return None
+        return None, None
+    if not lic.is_file():
+        return None, lic
     try:
-        if not lic.is_file() or glb.stat().st_size != info.get("glb_bytes") \
+        if glb.stat().st_size != info.get("glb_bytes") \
                 or sha256_file(glb) != info.get("glb_sha256"):
-            return None
+            return None, glb
     except OSError:
-        return None
-    return info
+        return None, glb
+    return info, None
 
 
 def _clean_stale(cache: Path) -> None:
@@ -1201,7 +1214,7 @@ def fetch(names: Iterable[str] | None, cache: Path, *, force: bool = False,
     try:
         for name in dict.fromkeys(names):
             spec = scenes[name]
-            info = None if force else cached(spec, cache)
+            info, damaged = (None, None) if force else _inspect(spec, cache)
             if info is not None:
                 r = Result(name, "cached", info["triangles"], info["meshes"],
                            info["glb_bytes"], 0.0, cache / f"{name}.glb")
@@ -1228,6 +1241,8 @@ def fetch(names: Iterable[str] | None, cache: Path, *, force: bool = False,
                 report(f"rfw: error: {err}")
                 results.append(err)
                 continue
+            if damaged is not None:
+                warn(f"{damaged}: corrupt cache entry, rebuilt")
             report(f"{name}: fetched {r.triangles:,} triangles, {_plural(r.meshes, 'mesh')}, "
                    f"{_size(r.glb_bytes)} in {r.seconds:.1f} s -> {r.path}")
             for note in r.notes:

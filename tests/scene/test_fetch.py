@@ -432,9 +432,13 @@ def test_second_fetch_does_nothing(registry, tmp_path):
     assert not list(cache.glob(".fetch-*"))  # nothing to download: no work folder either
 
 
-@pytest.mark.parametrize("damage", ["truncate glb", "other pin", "no license", "bad json",
-                                    "old format"])
-def test_damaged_or_outdated_scene_is_fetched_again(registry, tmp_path, damage):
+DAMAGED = {"truncate glb": "dragon.glb", "flip a glb byte": "dragon.glb",
+           "no license": "dragon.LICENSE.txt", "bad json": "dragon.json",
+           "json not utf-8": "dragon.json", "json not an object": "dragon.json"}
+
+
+@pytest.mark.parametrize("damage", [*DAMAGED, "other pin", "old format"])
+def test_damaged_or_outdated_scene_is_fetched_again(registry, tmp_path, damage, capfd):
     cache = tmp_path / "cache"
     scenes = registry.scenes()
     F.fetch(["dragon"], cache, scenes=scenes, report=quiet)
@@ -442,18 +446,34 @@ def test_damaged_or_outdated_scene_is_fetched_again(registry, tmp_path, damage):
     meta = cache / "dragon.json"
     if damage == "truncate glb":
         (cache / "dragon.glb").write_bytes(good[:100])
+    elif damage == "flip a glb byte":  # same size: only the checksum sees it
+        (cache / "dragon.glb").write_bytes(good[:-5] + bytes([good[-5] ^ 1]) + good[-4:])
     elif damage == "other pin":
         meta.write_text(meta.read_text().replace(scenes["dragon"].source.sha256, "0" * 64))
     elif damage == "no license":
         (cache / "dragon.LICENSE.txt").unlink()
     elif damage == "bad json":
         meta.write_text("{")
+    elif damage == "json not utf-8":
+        meta.write_bytes(b'{"name": "\xff"}')
+    elif damage == "json not an object":
+        meta.write_text("[1, 2]")
     else:
         meta.write_text(meta.read_text().replace('"format": 1', '"format": 0'))
+    assert F.cached(scenes["dragon"], cache) is None
+    capfd.readouterr()
     results = F.fetch(["dragon"], cache, scenes=scenes, report=quiet)
     assert results[0].status == "fetched"
     assert (cache / "dragon.glb").read_bytes() == good
     assert F.cached(scenes["dragon"], cache) is not None
+    err = capfd.readouterr().err.splitlines()
+    if damage in DAMAGED:  # one line naming the damaged file
+        assert err == [f"rfw: warning: {cache / DAMAGED[damage]}: corrupt cache entry, rebuilt"]
+    else:  # an older pin or format is not damage: fetched again quietly
+        assert err == []
+    # healed: the next fetch finds it up to date, without a warning
+    assert F.fetch(["dragon"], cache, scenes=scenes, report=quiet)[0].status == "cached"
+    assert capfd.readouterr().err == ""
 
 
 def test_force_fetches_again(registry, tmp_path):
@@ -516,7 +536,8 @@ def test_glb_that_does_not_match_its_source_is_refused(registry, tmp_path, monke
     real = F.scene_to_glb
 
     def lossy(scene, **kwargs):
-        doubled = Instance(0, np.identity(4, np.float32) * 2, "dragon")
+        # an affine scale by 2 (a loader may refuse a non-affine matrix for other reasons)
+        doubled = Instance(0, np.diag([2, 2, 2, 1]).astype(np.float32), "dragon")
         scene = dataclasses.replace(scene, instances=[doubled])
         return real(scene, **kwargs)
 
