@@ -161,6 +161,7 @@ class GraphBuilder:
         self.strict = strict
         self.source = source
         self._passes: list[PassBuilder] = []
+        self._names: set[str] = set()  # a scan per pass made big graphs quadratic
         self._imports: list[tuple[str, Slot]] = []
         self._outputs: list[str] | None = None
 
@@ -173,12 +174,13 @@ class GraphBuilder:
         if type not in PASS_TYPES:
             raise GraphError(f"pass '{name}': unknown pass type '{type}'", file=self.source,
                              suggest=(type, PASS_TYPES))
-        if any(p.name == name for p in self._passes):
+        if name in self._names:
             raise GraphError(f"pass '{name}' is declared twice", file=self.source)
         p = PassBuilder(self, name, type, enabled=enabled, side_effect=side_effect,
                         requires=tuple(requires), settings=settings or {}, schema=schema,
                         origin=origin, backend=backend)
         self._passes.append(p)
+        self._names.add(name)
         return p
 
     def external(self, name: str, spec: Slot) -> GraphBuilder:
