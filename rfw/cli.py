@@ -128,7 +128,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .config import apply_overrides, load_config
-    from .render import render, table, write_outputs
+    from .render import backend_for, clear_outputs, render, table, write_outputs
 
     cfg = load_config(args.config or DEFAULT_CONFIG)
     sets = list(args.set or [])
@@ -137,12 +137,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     cfg = apply_overrides(cfg, sets)
-    if args.backend != "vk" and (args.validate or args.no_alias):
-        raise GraphError("--validate and --no-alias need --backend vk")
-    result = render(cfg, frames=args.frames, backend=args.backend, validation=args.validate,
+    backend = args.backend or backend_for(cfg)
+    if backend != "vk" and (args.validate or args.no_alias):
+        raise GraphError("--validate and --no-alias need --backend vk", file=cfg.source)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise RfwError("is not a folder", file=str(out), element="--out")
+    # this run's paths, checked and cleared first: a failed run leaves no stale results
+    clear_outputs(out, cfg.outputs)
+    result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
                     alias=not args.no_alias)
     formats = {r.name: r.format for r in result.executor.plan.resources}
-    written = write_outputs(result, Path(args.out), formats)
+    written = write_outputs(result, out, formats)
     print(table(result.timings))
     memory = result.timings.get("memory")
     if memory:
@@ -225,8 +231,11 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
     run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...) or 'default'")
     run.add_argument("--size", type=_size, help="output size WxH")
-    run.add_argument("--frames", type=_count(1, MAX_FRAMES), help="frames to time (after one warm-up)")
-    run.add_argument("--backend", default="wgpu", choices=["wgpu", "vk"])
+    run.add_argument("--frames", type=_count(1, MAX_FRAMES),
+                     help="frames to time (after one warm-up)")
+    run.add_argument("--backend", choices=["wgpu", "vk"],
+                     help="backend of unpinned passes (default: vk when every pass is pinned "
+                     "to vk, else wgpu)")
     run.add_argument("--validate", action="store_true",
                      help="vk: run under the validation layer; any message exits 1")
     run.add_argument("--no-alias", action="store_true",

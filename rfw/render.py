@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from .config import Config, build
-from .fileio import atomic_write
+from .config import MAX_FRAMES, Config, build
+from .errors import RfwError, check_number
+from .fileio import atomic_write, inside
 from .graph import compile
 from .graph.formats import format_info
 
@@ -58,7 +59,9 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     copy resources across through host memory and are timed as passes of their own, and
     ``device`` may be either backend's (the other one is made and dropped here)."""
     if backend not in ("wgpu", "vk"):
-        raise ValueError(f"unknown backend '{backend}' (wgpu or vk)")
+        raise RfwError(f"unknown backend '{backend}' (wgpu or vk)", file=cfg.source)
+    if frames is not None:
+        check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
     if backend == "vk" and not _is_wgpu_device(device):
         from vkext.backend import render_vk
 
@@ -83,6 +86,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     built = build(cfg)
     plan = compile(built.graph)
     device = device or Device()
+    check_extents(plan, device.device.limits.get("max-texture-dimension-2d"), cfg.source)
     scene = load_scene_for(cfg, scene)
     gpu_scene = GpuScene(device.device, scene, camera_for(cfg, scene))
     gpu_scene.set_viewport(cfg.size)
@@ -103,6 +107,24 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         cfg, frames or cfg.frames, scene, gpu_scene.default_light, passes,
         timestamps="timestamp-query" in device.features)}
     return Result(cfg, images, timings, ex)
+
+
+def check_extents(plan: Any, limit: int | None, source: str) -> None:
+    """Every image of ``plan`` within the device's 2D limit: a clear error, not a GPU one."""
+    for r in plan.resources:
+        if limit and r.kind == "image" and max(r.width, r.height) > limit:
+            raise RfwError(f"'{r.name}' would be {r.width}x{r.height}, over the device's "
+                           f"limit of {limit} pixels per side (use a smaller --size)",
+                           file=source, element="size")
+
+
+def backend_for(cfg: Config) -> str:
+    """The backend a run takes when none is asked for: vk when every enabled pass is pinned
+    to vk (in the config or by its class), else wgpu (pinned passes then mix in)."""
+    from .registry import get_pass
+
+    pins = {e.backend or get_pass(e.use).backend for e in cfg.passes if e.enabled}
+    return "vk" if pins == {"vk"} else "wgpu"
 
 
 def _is_wgpu_device(device: Any) -> bool:
@@ -158,21 +180,34 @@ def to_png_array(image: np.ndarray, fmt: str) -> np.ndarray:
     return a
 
 
+def output_paths(out_dir: Path, names: Any) -> list[Path]:
+    """Where a run writes: ``<output>.png`` per name, then ``timings.json``, each refused
+    unless it lands inside ``out_dir`` (symlinks resolved)."""
+    return [inside(out_dir, f"{name}.png") for name in names] + [
+        inside(out_dir, "timings.json")]
+
+
+def clear_outputs(out_dir: Path, names: Any) -> None:
+    """Remove what a previous run left at this run's paths: a run that fails then leaves no
+    image or timings that could pass for its own."""
+    for path in output_paths(out_dir, names):
+        if path.is_file() or path.is_symlink():
+            path.unlink()
+
+
 def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -> list[Path]:
-    """``<output>.png`` per graph output and ``timings.json``, each written atomically."""
+    """``<output>.png`` per graph output, then ``timings.json`` (last: it marks a complete
+    run), each written atomically inside ``out_dir``."""
     from PIL import Image
 
+    *images, timings = output_paths(out_dir, result.images)
     out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, image in result.images.items():
-        path = out_dir / f"{name}.png"
+    for path, (name, image) in zip(images, result.images.items(), strict=True):
         rgba = to_png_array(image, plan_formats[name])
         atomic_write(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
-        written.append(path)
-    path = out_dir / "timings.json"
-    atomic_write(path, lambda f: f.write(json.dumps(result.timings, indent=2).encode() + b"\n"))
-    written.append(path)
-    return written
+    atomic_write(timings, lambda f: f.write(json.dumps(result.timings, indent=2).encode()
+                                            + b"\n"))
+    return [*images, timings]
 
 
 def table(timings: dict[str, Any]) -> str:

@@ -6,6 +6,7 @@ import keyword
 import re
 from pathlib import Path
 
+from .fileio import atomic_write, inside
 from .graph.errors import GraphError
 
 _COMPUTE_PY = '''"""{title}: TODO say what it computes (this docstring is the catalogue entry)."""
@@ -142,10 +143,11 @@ def new_pass(name: str, folder: Path, *, kind: str = "compute",
              tests: Path | None = None) -> list[Path]:
     """Write ``folder/<name>/`` (module, shader, ``__init__``) and a test; returns the files."""
     if not re.fullmatch(r"[a-z][a-z0-9_]*", name) or keyword.iskeyword(name):
-        raise GraphError(f"pass name '{name}' must be a snake_case identifier")
-    target = folder / name
+        raise GraphError(f"pass name '{name}' must be a snake_case identifier",
+                         element="new-pass")
+    target = inside(folder, name)  # every file below is checked to stay in its folder
     if target.exists():
-        raise GraphError(f"{target} already exists")
+        raise GraphError("already exists: not overwritten", file=str(target))
     cls = "".join(w.upper() if w in ("ssao", "fxaa", "taa") else w.capitalize()
                   for w in name.split("_")) + "Pass"
     title = name.replace("_", " ").capitalize()
@@ -155,11 +157,12 @@ def new_pass(name: str, folder: Path, *, kind: str = "compute",
     py, wgsl, test = ((_COMPUTE_PY, _COMPUTE_WGSL, _COMPUTE_TEST) if kind == "compute" else
                       (_RASTER_PY, _RASTER_WGSL, _RASTER_TEST))
     shader = f"{name}.comp.wgsl" if kind == "compute" else f"{name}.wgsl"
-    files = {target / "__init__.py": "", target / f"{name}.py": py.format(**fields),
-             target / shader: wgsl.format(**fields)}
-    tests = tests if tests is not None else target
-    files[tests / f"test_{name}.py"] = test.format(**fields)
+    files = {inside(target, "__init__.py"): "", inside(target, f"{name}.py"): py.format(**fields),
+             inside(target, shader): wgsl.format(**fields)}
+    test_path = inside(tests if tests is not None else target, f"test_{name}.py")
+    if test_path.exists():
+        raise GraphError("already exists: not overwritten", file=str(test_path))
+    files[test_path] = test.format(**fields)
     for path, text in files.items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
+        atomic_write(path, lambda f, t=text: f.write(t.encode("utf-8")))
     return list(files)
