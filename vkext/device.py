@@ -13,17 +13,19 @@ from collections import Counter
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
+from rfw.errors import RfwError
+
 from .consts import IMPORT_ERROR, VALUE_RETURNING, call_api, const, ffi, lib, vk
 
 API_VERSION = (1 << 22) | (3 << 12)  # VK_MAKE_API_VERSION(0, 1, 3, 0)
 VALIDATION_LAYER = "VK_LAYER_KHRONOS_validation"
 
 
-class VkUnavailableError(RuntimeError):
+class VkUnavailableError(RfwError, RuntimeError):
     """No usable Vulkan: no loader, no driver, or no device that does Vulkan 1.3."""
 
 
-class VkMissingFeatureError(RuntimeError):
+class VkMissingFeatureError(RfwError, RuntimeError):
     """The device lacks a capability an operation needs."""
 
 

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rfw.errors import RfwError
 from rfw.graph.compile import CompiledGraph, MemoryOptions, ResourcePlan
 from rfw.graph.formats import FormatInfo, format_info
 
@@ -23,7 +24,7 @@ from .device import VkDevice
 MiB = 1 << 20
 
 
-class VkOutOfMemoryError(MemoryError):
+class VkOutOfMemoryError(RfwError, MemoryError):
     """An allocation the device cannot satisfy (too large for its heap, or refused)."""
 
 
@@ -31,7 +32,7 @@ class PlanMismatchError(ValueError):
     """The driver needs more bytes or a stricter alignment than the compiled plan gives."""
 
 
-class UnsupportedFormatError(ValueError):
+class UnsupportedFormatError(RfwError):
     """The device cannot make an image of that format, usage and shape."""
 
 
