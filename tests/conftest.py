@@ -1,7 +1,10 @@
-"""Shared fixtures: one wgpu device per session, and a tiny scene built in code."""
+"""Shared fixtures: one wgpu device per session, a tiny scene built in code, the courtyard and
+a cache of renders per session, and the same random and clock state for every test."""
 
 from __future__ import annotations
 
+import random
+import time
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +13,9 @@ import pytest
 from rfw.scene.model import Camera, Instance, Light, Material, Mesh, Scene
 
 ROOT = Path(__file__).resolve().parents[1]
+SEED = 20261201
+# 2027-01-15 08:00:00 UTC: what time.strftime() without a time says during a test
+FIXED_TIME = time.gmtime(1_800_000_000)
 
 
 def box_mesh(sx: float, sy: float, sz: float, name: str = "box") -> Mesh:
@@ -66,3 +72,48 @@ def device():
 @pytest.fixture
 def scene() -> Scene:
     return tiny_scene()
+
+
+@pytest.fixture(autouse=True)
+def _seeded_rngs():
+    # a test that reaches for the global RNGs sees the same numbers whatever ran before it on
+    # its xdist worker (rfw itself only uses seeded generators of its own)
+    random.seed(SEED)
+    np.random.seed(SEED)
+
+
+@pytest.fixture(autouse=True)
+def _fixed_clock(monkeypatch):
+    # the wall clock rfw reads is time.strftime() (rfw.bench.runner stamps its records);
+    # durations (time.perf_counter) stay real
+    real = time.strftime
+    monkeypatch.setattr(time, "strftime",
+                        lambda fmt, t=None: real(fmt, FIXED_TIME if t is None else t))
+
+
+@pytest.fixture(scope="session")
+def courtyard():
+    from rfw.scene import default_scene
+
+    return default_scene()  # about a second to build: once per session (per xdist worker)
+
+
+@pytest.fixture(scope="session")
+def renders(device, courtyard):
+    """``get(cfg, scene)`` -> {output: RGBA8 image} for scene "courtyard" or "tiny"; each
+    distinct config (compared by value: a mutated config is another render) renders once."""
+    from rfw.render import render, to_png_array
+
+    cache: dict[tuple[str, str], dict[str, np.ndarray]] = {}
+
+    def get(cfg, scene: str) -> dict[str, np.ndarray]:
+        key = (repr(cfg), scene)
+        if key not in cache:
+            result = render(cfg, scene=courtyard if scene == "courtyard" else tiny_scene(),
+                            device=device)
+            formats = {r.name: r.format for r in result.executor.plan.resources}
+            cache[key] = {out: to_png_array(img, formats[out])
+                          for out, img in result.images.items()}
+        return cache[key]
+
+    return get

@@ -2,12 +2,18 @@
 
 Each render is compared with ``tests/golden/<adapter>/<config>__<scene>.png``, where
 ``<adapter>`` names the device and driver (``golden_util.adapter_key``, for example
-``llvmpipe-llvm15-256bit-mesa-25.0``): at most 1 level apart per 8-bit channel, and no pixel over that.
-Lavapipe renders these bit for bit the same from run to run, so the 1 level is headroom,
-not noise. On an adapter without goldens the configs still render and the comparison
-skips. A mismatch writes ``actual.png``, ``expected.png`` and ``diff.png`` (x16) under
-pytest's tmp path and names the folder.
+``llvmpipe-llvm15-256bit-mesa-25.0``), through ``golden_util.image_diff`` within
+``golden_util.BOUNDS``: a FLIP bound, bounds on the pixels over 1 and over 2 levels and on
+the mean absolute and signed differences. Lavapipe renders these bit for bit the same from
+run to run on one machine, but llvmpipe compiles for the host CPU: on another processor a
+few shadow-edge pixels move by up to 42 levels and a few hundred by 1 or 2. The bounds
+accept every golden re-rendered on an AMD EPYC (``tests/data/golden-other-cpu/``) and reject
+exposure +3 %, a one-pixel shift, a technique switched off and a pass skipped, for every
+config (``test_golden_scheme.py``). A mismatch writes ``actual.png``, ``expected.png`` and
+``diff.png`` (x16) under pytest's tmp path and names the folder.
 
+On an adapter without goldens the configs still render, and the comparison fails under CI
+(the ``CI`` environment variable) and skips elsewhere, naming the command that creates them.
 Regenerate this adapter's goldens (the commit says why the pictures changed)::
 
     RFW_REGEN_GOLDEN=1 .venv/bin/python -m pytest tests/test_golden.py
@@ -25,9 +31,8 @@ import pytest
 
 from rfw.config import PassEntry, apply_overrides, build, load_config
 from rfw.graph import GraphError, compile
-from rfw.render import render, to_png_array
 
-from .conftest import ROOT, tiny_scene
+from .conftest import ROOT
 from .golden_util import check_golden
 
 SIZE = (192, 108)
@@ -35,34 +40,9 @@ CONFIGS = sorted(p.stem for p in (ROOT / "configs").glob("*.toml"))
 SCENES = ("courtyard", "tiny")
 
 
-def config(name: str):
+def config(name: str, *sets: str):
     return apply_overrides(load_config(ROOT / "configs" / f"{name}.toml"),
-                           [f"size={SIZE[0]}x{SIZE[1]}"])
-
-
-@pytest.fixture(scope="session")
-def courtyard():
-    from rfw.scene import default_scene
-
-    return default_scene()  # about a second to build: once per session (per xdist worker)
-
-
-@pytest.fixture(scope="session")
-def renders(device, courtyard):
-    """``get(cfg, scene)`` -> {output: RGBA8 image}; each (config, scene) renders once."""
-    cache: dict[tuple[str, str], dict[str, np.ndarray]] = {}
-
-    def get(cfg, scene: str) -> dict[str, np.ndarray]:
-        key = (cfg.name, scene)
-        if key not in cache:
-            result = render(cfg, scene=courtyard if scene == "courtyard" else tiny_scene(),
-                            device=device)
-            formats = {r.name: r.format for r in result.executor.plan.resources}
-            cache[key] = {out: to_png_array(img, formats[out])
-                          for out, img in result.images.items()}
-        return cache[key]
-
-    return get
+                           [f"size={SIZE[0]}x{SIZE[1]}", *sets])
 
 
 def rgb(images: dict[str, np.ndarray]) -> np.ndarray:
