@@ -77,7 +77,7 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
             ex.run(n)
             images = {name: ex.read(name) for name in outputs}
             memory = ex.memory()
-            accel = _accel(ex)  # before the scene, which owns the structures, goes
+            accel = accel_stats(ex)  # before the scene, which owns the structures, goes
         finally:
             if ex is not None:
                 ex.destroy()
@@ -90,7 +90,7 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
         **device.describe(), **frame_record(cfg, n, scene, vscene.default_light, passes,
                                             timestamps="timestamp" in device.caps),
         "memory": memory}
-    culling = _culling(ex)
+    culling = culling_counters(ex)
     if culling is not None:
         timings["culling"] = culling
     if techniques:
@@ -103,7 +103,7 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
     return Result(cfg, images, timings, ex)
 
 
-def _accel(ex: Any) -> dict[str, Any] | None:
+def accel_stats(ex: Any) -> dict[str, Any] | None:
     """The acceleration structures the frame's builder pass made: counts, bytes before and
     after compaction, build times and the frame builds (rebuilds or refits)."""
     for name, p in ex.passes.items():
@@ -113,7 +113,7 @@ def _accel(ex: Any) -> dict[str, Any] | None:
     return None
 
 
-def _culling(ex: Any) -> dict[str, Any] | None:
+def culling_counters(ex: Any) -> dict[str, Any] | None:
     """The last frame's GPU culling counters of the meshlet passes, in timings.json's
     names. ``culled_occlusion`` is None where no pass runs the occlusion test (no late
     phase), ``triangles_culled_backface`` where no pass culls triangles."""

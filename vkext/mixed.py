@@ -45,6 +45,7 @@ import numpy as np
 from rfw.config import Built, Config, build
 from rfw.graph import CompiledGraph, compile
 from rfw.graph.bridges import backend_of, insert_bridges
+from rfw.graph.formats import format_info
 from rfw.graph.graph import Graph
 from rfw.graph.resources import Binding, SizeRule
 from rfw.render import Result, camera_for, frame_record, load_scene_for, median
@@ -149,6 +150,9 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                                           "layers", file=graph.source)
                     spec = out.spec if out.spec.type == "buffer" else \
                         out.spec.with_(size=SizeRule.fixed(r.width, r.height))
+                    if s == "wgpu" and r.kind != "buffer" and format_info(r.format).depth:
+                        spec = _depth_for_wgpu(spec, r.format, br, _readers(decls, side,
+                                                                            br), graph.source)
                     passes.append(replace(p, inputs=(), outputs=(replace(out, spec=spec),),
                                           backend=None))
             elif side[p.name] == s:
@@ -167,6 +171,36 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
         rewired = {b.slot: b.resource for b in decls[name].inputs if b.spec.type != "history"}
         slots[name] = {slot: rewired.get(slot, res) for slot, res in mapping.items()}
     return MixedPlan(plan, backend, side, bridges, graphs, slots, owner)
+
+
+# depth formats a bridge carries into wgpu as r32float (the host copy has the depth values)
+_DEPTH_AS_FLOAT = ("depth32float", "depth16unorm")
+
+
+def _readers(decls: dict[str, Any], side: dict[str, str], br: Bridge) -> list[tuple[str, Any]]:
+    """(pass, slot spec) of every pass on the bridge's destination that reads its copy."""
+    return [(name, b.spec) for name, p in decls.items() if side[name] == br.dst
+            for b in p.inputs if b.resource == br.copy]
+
+
+def _depth_for_wgpu(spec: Any, fmt: str, br: Bridge, readers: list[tuple[str, Any]],
+                    source: str | None) -> Any:
+    """WebGPU cannot write depth textures from the host (``write_texture`` and copies into
+    them are refused), so a depth image crossing into wgpu arrives as r32float: the depth
+    values themselves, for passes that sample depth as a texture (ssao accepts r32float).
+    A reader that needs a real depth texture, or a stencil, cannot be served: one line."""
+    why = "wgpu cannot write depth textures from the host"
+    if fmt not in _DEPTH_AS_FLOAT:
+        raise ShaderError(f"'{br.resource}' ({fmt}) is made on {br.src} and read on wgpu, but "
+                          f"{why} and only {', '.join(_DEPTH_AS_FLOAT)} cross as r32float: pin "
+                          f"its readers to {br.src}", element=f"bridge '{br.name}'", file=source)
+    for name, slot in readers:
+        if slot.type != "texture":
+            raise ShaderError(f"reads '{br.resource}' ({fmt}, made on {br.src}) as a "
+                              f"{slot.type} slot on wgpu, but {why} (a bridge carries it as "
+                              f"r32float, for sampling only): pin '{name}' to {br.src}",
+                              element=f"pass '{name}'", file=source)
+    return spec.with_(format="r32float")
 
 
 def _sized(b: Binding, plan: CompiledGraph) -> Binding:
@@ -261,11 +295,14 @@ class MixedFrame:
     @staticmethod
     def _write(backend: str, ex: Any, bridge: str, resource: str, data: np.ndarray) -> None:
         if backend == "wgpu":
-            if ex.plan.resource(resource).kind == "buffer":
+            r = ex.plan.resource(resource)
+            if r.kind == "buffer":
                 ex.device.device.queue.write_buffer(ex.buffer(resource), 0,
                                                     np.ascontiguousarray(data).tobytes())
-            else:
-                ex.upload(resource, data)
+                return
+            if r.format == "r32float" and data.dtype == np.uint16:  # depth16unorm's words
+                data = data.astype(np.float32) / np.float32(65535)
+            ex.upload(resource, data)
             return
         state = ex.state_in(bridge, resource)  # transfer dst: the consumer's barrier's from
         if resource in ex.buffers:
@@ -372,6 +409,7 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
     backend of unpinned passes. Devices not given are made here (the Vulkan one with the
     validation layer when ``validation``) and destroyed; ``timings["validation"]`` counts
     the Vulkan side's messages; ``timings["memory"]`` is the Vulkan side's transients."""
+    from .backend import accel_stats, culling_counters
     from .device import VkDevice
 
     built = build(cfg)
@@ -392,6 +430,8 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
         frame.run(n)
         images = {name: frame.read(name) for name in frame.plan.outputs}
         memory = frame.executors["vk"].memory() if on_vk else None
+        # before the scenes, which own the structures, go
+        accel = accel_stats(frame.executors["vk"]) if on_vk else None
     finally:
         if frame is not None:
             frame.destroy()
@@ -411,6 +451,12 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
         "bridges": [p["name"] for p in passes if p["name"] in frame.mixed.bridges]}
     if memory is not None:
         timings["memory"] = memory
+    # the vk side's counters, as a vk-only run reports them
+    culling = culling_counters(frame.executors["vk"]) if on_vk else None
+    if culling is not None:
+        timings["culling"] = culling
+    if accel is not None:
+        timings["accel"] = accel
     if validation:
         timings["validation"] = {"messages": len(vk_device.messages),
                                  "texts": [m.text for m in vk_device.messages[:20]]}

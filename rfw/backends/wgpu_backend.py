@@ -217,6 +217,12 @@ def _layout_entry(b: BindingInfo, visibility: int, fmt: str | None,
     return entry
 
 
+def _declared_at(source: Source, name: str) -> str:
+    """``file:line`` of the binding's declaration (it may be in an include)."""
+    m = re.search(rf"\bvar(?:<[^>]*>)?\s+{re.escape(name)}\s*:", source.text)
+    return source.where(source.text.count("\n", 0, m.start()) + 1) if m else "?"
+
+
 def _storage_format(b: BindingInfo) -> str:
     # texture_storage_2d<rgba8unorm, write>: the texel format is the first parameter
     return b.type[b.type.index("<") + 1:b.type.rindex(">")].split(",")[0].strip()
@@ -297,8 +303,7 @@ class PassContext(SlotContext):
                                   f"binds {', '.join(missing)} but the pass gives "
                                   f"{', '.join(sorted(values)) or 'nothing'}")
             for b in wanted:
-                if b.kind == "storage-texture":
-                    self._check_storage_format(prog, b, values[b.name])
+                self._check_format(prog, b, values[b.name])
             entries = [{"binding": b.binding,
                         "resource": self.executor.as_resource(values[b.name], b,
                                                               self.pass_)} for b in wanted]
@@ -306,15 +311,25 @@ class PassContext(SlotContext):
                                                      label=f"{self.pass_.name}:g{g}"))
         return out
 
-    def _check_storage_format(self, prog: Program, b: BindingInfo, value: Any) -> None:
+    def _check_format(self, prog: Program, b: BindingInfo, value: Any) -> None:
         # up front: wgpu reports a mismatch late, as its own validation error
-        declared, have = _storage_format(b), self.executor.format_of(value)
-        if have is None or have == declared:
+        have = self.executor.format_of(value)
+        if have is None or b.kind not in ("storage-texture", "texture"):
+            return
+        if b.kind == "storage-texture":
+            declared = _storage_format(b)
+            if have == declared:
+                return
+            want = f"storage texture declared {declared}"
+        elif b.type.startswith("texture_depth") and not format_info(have).depth:
+            want = f"{b.type.split('<')[0]} (a depth format)"
+        else:
             return
         name = getattr(value, "label", "") or "the texture"  # views are labelled by resource
-        raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' of "
-                          f"{prog.source.lines[0][0] if prog.source.lines else '?'} is a "
-                          f"storage texture declared {declared}, but '{name}' is {have}")
+        hint = " (depth made on another backend arrives as r32float)" if "@" in name else ""
+        raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' "
+                          f"({_declared_at(prog.source, b.name)}) is a {want}, but '{name}' "
+                          f"is {have}{hint}")
 
     def _check_extra(self, prog: Program, values: dict[str, Any], path: str) -> None:
         extra = [k for k in values if k not in prog.bindings]
