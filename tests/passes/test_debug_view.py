@@ -5,14 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pass_scenes import corner_scene, wall_scene
+from precision import assert_unorm8
 
 from rfw import SettingsError, get_pass
 from rfw.config import load_config
 from rfw.render import render
 from rfw.testing import run_pass
-
-# rounding to 8 bits: within half a step, plus a little for GPU float arithmetic
-HALF_STEP = 0.52
 
 
 def view(fmt: str, source: np.ndarray, device, scene=None, **settings) -> np.ndarray:
@@ -44,7 +42,7 @@ def test_normals_map_to_half_plus_half(device):
     n = np.random.default_rng(7).uniform(-1, 1, (8, 8, 4)).astype(np.float16)
     out = view("rgba16float", n, device, mode="normals")
     expected = (n[..., :3].astype(np.float64) * 0.5 + 0.5) * 255
-    assert np.abs(out[..., :3] - expected).max() < HALF_STEP
+    assert_unorm8(out[..., :3], expected)
     np.testing.assert_array_equal(out[..., 3], 255)
 
 
@@ -59,7 +57,7 @@ def test_depth_linearised_with_camera_near_and_far(device):
     d = np.linspace(0.5, 0.999, 64, dtype=np.float32).reshape(8, 8, 1)
     out = view("r32float", d, device, scene=sc, mode="depth", range=(0.0, 0.1))
     expected = np.clip(linear_depth(d[..., 0], 0.1, 50.0) / 0.1, 0, 1) * 255
-    assert np.abs(out[..., 0] - expected).max() < HALF_STEP
+    assert_unorm8(out[..., 0], expected)
     assert (out[..., 0] == out[..., 1]).all() and (out[..., 0] == out[..., 2]).all()
     assert len(np.unique(out[..., 0])) > 20  # the range spreads the values
 
@@ -70,7 +68,10 @@ def test_heatmap_of_one_channel(device):
     src[..., 0] = 0.75  # other channels are ignored
     out = view("rgba32float", src, device, mode="heatmap", channel=2, range=(-1.0, 3.0))
     expected = turbo((src[..., 2] + 1.0) / 4.0) * 255
-    assert np.abs(out[..., :3] - expected).max() < HALF_STEP
+    assert_unorm8(out[..., :3], expected)
+    # negative control: the map over a range 2.5 % wider is told apart
+    with pytest.raises(AssertionError, match="nearest"):
+        assert_unorm8(out[..., :3], turbo((src[..., 2] + 1.0) / 4.1) * 255)
     # below and above the range clamp to the map's ends
     np.testing.assert_array_equal(out[0, 0], out[0, 1])
     np.testing.assert_array_equal(out[-1, -1], out[-1, -2])
@@ -98,8 +99,22 @@ settings = { mode = "depth", range = [0.0, 0.2] }
     d = images["gbuffer.depth"][..., 0]
     expected = np.clip(linear_depth(d, cam.znear, cam.zfar) / 0.2, 0, 1) * 255
     got = images["debug.view"][..., 0]
-    assert np.abs(got - expected).max() < HALF_STEP
+    assert_unorm8(got, expected)
+    # negative control: a far plane 5 % off is told apart
+    wrong = np.clip(linear_depth(d, cam.znear, cam.zfar * 1.05) / 0.2, 0, 1) * 255
+    with pytest.raises(AssertionError, match="nearest"):
+        assert_unorm8(got, wrong)
     assert int(got.max()) - int(got.min()) > 20  # near floor darker than the far wall
+
+
+def test_eight_bit_check_allows_the_two_nearest_codes_only():
+    # Vulkan lets a float to UNORM conversion give either neighbour: 127.5 may be 127 or 128
+    assert_unorm8(np.array([127, 128, 10, 11], np.uint8), np.array([127.5, 127.5, 10.3, 10.3]))
+    for wrong in (9, 12):
+        with pytest.raises(AssertionError, match="nearest"):
+            assert_unorm8(np.array([wrong], np.uint8), np.array([10.3]))
+    with pytest.raises(AssertionError, match="nearest"):
+        assert_unorm8(np.array([254], np.uint8), np.array([255.0]), slack=0)
 
 
 def test_unknown_mode_suggests_the_closest():
