@@ -38,7 +38,18 @@ from typing import Any, NoReturn
 import numpy as np
 import pygltflib
 
-from .model import Camera, Instance, Light, Material, Mesh, Scene, SceneError, Texture
+from ..errors import warn as warn_once
+from .model import (
+    WORLD_LIMIT,
+    Camera,
+    Instance,
+    Light,
+    Material,
+    Mesh,
+    Scene,
+    SceneError,
+    Texture,
+)
 from .util import compute_normals, compute_tangents, normalize
 
 # extensions whose absence would change the result, but which this loader implements
@@ -179,6 +190,16 @@ def _decode(value: Any, hint: Any, where: str) -> Any:
 _HINTS: dict[type, dict[str, Any]] = {}
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _finite32(a: Any) -> bool:
+    """True when every value lies within the world renderers can hold in float32 (no NaN,
+    no infinity, nothing beyond ``WORLD_LIMIT``)."""
+    a = np.asarray(a, np.float64)
+    return bool(np.all(np.isfinite(a)) and np.all(np.abs(a) <= WORLD_LIMIT))
+
+
 def _hints(cls: type) -> dict[str, Any]:
     if cls not in _HINTS:
         _HINTS[cls] = typing.get_type_hints(cls)
@@ -218,6 +239,10 @@ class _Loader:
             self.warned.add(message)
             warnings.warn(f"{self.source}: {message}", stacklevel=4)
 
+    def skipped(self, where: str, message: str) -> None:
+        """A valid but unusable element (a zero-scale node's camera): one warning line."""
+        warn_once(f"{self.source}: {where}: {message}")
+
     @contextmanager
     def element(self, where: str) -> Iterator[None]:
         """Last line of defence: any unexpected error inside names the element."""
@@ -252,8 +277,10 @@ class _Loader:
         if value is None:
             return default
         if isinstance(value, bool) or not isinstance(value, int | float) \
-                or not math.isfinite(value):
-            self.fail(where, f"{name} must be a finite number, got {json.dumps(value)}")
+                or not math.isfinite(value) or abs(value) > _FLOAT32_MAX:
+            # renderers take every number as float32: larger ones would become infinity
+            self.fail(where, f"{name} must be a finite number (float32), got "
+                             f"{json.dumps(value)}")
         return float(value)
 
     def numbers(self, value: Any, n: int, where: str, name: str,
@@ -291,7 +318,8 @@ class _Loader:
             self.fail("JSON", "nested too deeply")
         self.check_extensions()
         self.build()
-        return self.scene
+        # zero-scale nodes are valid glTF: skipped with a warning that names them
+        return self.scene.drawable()
 
     def split_glb(self, data: bytes) -> memoryview:
         """The JSON chunk; keeps the BIN chunk in ``self.glb_bin``."""
@@ -552,7 +580,8 @@ class _Loader:
                     cam, infinite = self.camera(node.camera, nwhere, world)
                     if infinite:
                         open_zfar.append(len(self.scene.cameras))
-                    self.scene.cameras.append(cam)
+                    if cam is not None:
+                        self.scene.cameras.append(cam)
                 ext = (node.extensions or {}).get("KHR_lights_punctual")
                 if ext is not None:
                     self.light(ext, nwhere, world)
@@ -838,14 +867,17 @@ class _Loader:
 
     # -- cameras and lights ---------------------------------------------------------------
 
-    def camera(self, index: Any, where: str, world: np.ndarray) -> tuple[Camera, bool]:
+    def camera(self, index: Any, where: str,
+               world: np.ndarray) -> tuple[Camera | None, bool]:
         cam = self.item("cameras", index, f"{where}.camera")
         cwhere = f"cameras[{index}]"
         eye = world[:3, 3]
         forward = normalize((world[:3, :3] @ [0.0, 0.0, -1.0])[None])[0]
         up = normalize((world[:3, :3] @ [0.0, 1.0, 0.0])[None])[0]
-        if not np.all(np.isfinite(world)) or abs(float(forward @ up)) > 0.999:
-            self.fail(where, f"transform of {cwhere} is degenerate")
+        if not _finite32(world) or abs(float(forward @ up)) > 0.999:
+            # a zero scale is valid glTF: the camera sees nothing, so it is left out
+            self.skipped(where, f"{cwhere} skipped: its transform is degenerate")
+            return None, False
         name = cam.name or cwhere
         if cam.type == "orthographic" or (cam.type is None and cam.orthographic is not None):
             o = cam.orthographic
@@ -860,6 +892,9 @@ class _Loader:
             back = max(10.0 * abs(ymag), 10.0)
             yfov = 2.0 * math.atan(abs(ymag) / back) if ymag else math.radians(5.0)
             pos = eye - forward * back
+            if not _finite32(pos) or not _finite32(zfar + back):
+                self.skipped(where, f"{cwhere} skipped: it lies beyond {WORLD_LIMIT:g}")
+                return None, False
             return Camera(tuple(map(float, pos)), tuple(map(float, eye)),
                           tuple(map(float, up)), yfov, znear, zfar + back, name), False
         if cam.type not in ("perspective", None) or cam.perspective is None:
@@ -877,6 +912,9 @@ class _Loader:
             if zfar <= znear:
                 self.fail(cwhere, f"perspective.zfar {zfar} must exceed znear {znear}")
         target = eye + forward
+        if not _finite32(target):
+            self.skipped(where, f"{cwhere} skipped: it lies beyond {WORLD_LIMIT:g}")
+            return None, False
         return Camera(tuple(map(float, eye)), tuple(map(float, target)), tuple(map(float, up)),
                       yfov, znear, 500.0 if zfar is None else zfar, name), zfar is None
 
@@ -921,7 +959,9 @@ class _Loader:
                 self.fail(swhere, "spot cone angles need 0 <= inner < outer <= pi/2")
         light.position = tuple(map(float, world[:3, 3]))
         direction = world[:3, :3] @ [0.0, 0.0, -1.0]
-        if not np.all(np.isfinite(direction)) or np.linalg.norm(direction) < 1e-12:
-            self.fail(where, "transform is degenerate: the light has no direction")
+        if not _finite32(world) or np.linalg.norm(direction) < 1e-12:
+            # a zero scale is valid glTF: such a light has no direction, so it is left out
+            self.skipped(where, f"{swhere} skipped: its transform is degenerate")
+            return
         light.direction = tuple(map(float, normalize(direction[None])[0]))
         self.scene.lights.append(light)

@@ -112,7 +112,7 @@ class _Converter:
         if not self.scene.instances:
             what = f" (only {', '.join(sorted(skipped))})" if skipped else ""
             raise SceneError(f"{self.source}: no triangles found{what}")
-        return self.scene
+        return self.scene.drawable()  # zero-scale nodes: skipped with a warning
 
     def mesh(self, name: str, geom: trimesh.Trimesh) -> Mesh | None:
         positions = np.asarray(geom.vertices, np.float64)

@@ -6,11 +6,11 @@ backends never see a file format.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import RfwError
+from ..errors import RfwError, warn
 
 
 @dataclass
@@ -76,6 +76,49 @@ class Instance:
     mesh: int  # index into Scene.meshes
     transform: np.ndarray  # (4, 4) float32, column vectors: world = T @ local
     name: str = ""
+
+
+def transform_problem(transform: np.ndarray) -> str | None:
+    """Why ``transform`` cannot place an instance, or None when it can.
+
+    Renderers need a finite affine matrix whose float32 inverse-transpose (the normal
+    matrix) is finite too: a zero scale (valid glTF) collapses the mesh and has no normal.
+    """
+    m = np.asarray(transform, np.float64)
+    if m.shape != (4, 4):
+        return f"transform has shape {m.shape}, not (4, 4)"
+    if not np.all(np.isfinite(m)) or not np.all(np.isfinite(m.astype(np.float32))):
+        return "transform has NaN or infinite entries (in float32)"
+    if not np.array_equal(m[3], [0.0, 0.0, 0.0, 1.0]):
+        return "transform is not affine (last row is not 0 0 0 1)"
+    a = m[:3, :3]
+    scale = float(np.abs(a).max())
+    # relative to the largest entry: a scale of 1e-3 is fine, a collapsed axis is not
+    if scale == 0.0 or abs(float(np.linalg.det(a / scale))) < 1e-12:
+        return "transform is singular (a zero scale collapses the mesh)"
+    normal = np.linalg.inv(a).T.astype(np.float32)
+    if not np.all(np.isfinite(normal)):
+        return "transform's normal matrix overflows float32"
+    return None
+
+
+# world coordinates beyond this lose every digit a renderer needs (their squares, taken in
+# float32 for distances, overflow near 1.8e19)
+WORLD_LIMIT = 1e18
+
+
+def _corners(mesh: Mesh, transform: np.ndarray) -> np.ndarray:
+    a, b = mesh.bounds()
+    corners = np.array([[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1])
+                        for z in (a[2], b[2])])
+    with np.errstate(all="ignore"):
+        return (corners @ np.asarray(transform, np.float64).T)[:, :3]
+
+
+def is_mirrored(transform: np.ndarray) -> bool:
+    """True when ``transform`` turns the mesh inside out (negative determinant): its
+    triangles' winding flips on screen, so front faces must be chosen the other way."""
+    return float(np.linalg.det(np.asarray(transform, np.float64)[:3, :3])) < 0.0
 
 
 @dataclass
@@ -144,27 +187,66 @@ class Scene:
         return sum(self.meshes[i.mesh].triangle_count for i in self.instances)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """World-space axis-aligned bounds of all instances."""
+        """World-space axis-aligned bounds of all drawable instances (degenerate
+        transforms and empty meshes are left out, as renderers leave them out)."""
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for inst in self.instances:
-            a, b = self.meshes[inst.mesh].bounds()
-            corners = np.array([[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1])
-                                for z in (a[2], b[2])])
-            world = corners @ inst.transform.T
-            lo = np.minimum(lo, world[:, :3].min(axis=0))
-            hi = np.maximum(hi, world[:, :3].max(axis=0))
+            if self.instance_problem(inst):
+                continue
+            mesh = self.meshes[inst.mesh]
+            if len(mesh.positions) == 0:
+                continue
+            world = _corners(mesh, inst.transform)
+            lo = np.minimum(lo, world.min(axis=0))
+            hi = np.maximum(hi, world.max(axis=0))
         return lo, hi
+
+    def instance_problem(self, inst: Instance) -> str | None:
+        """Why ``inst`` cannot be drawn, or None: its transform (``transform_problem``), or
+        a world position too far out for float32 arithmetic."""
+        why = transform_problem(inst.transform)
+        if why is None and 0 <= inst.mesh < len(self.meshes) \
+                and len(self.meshes[inst.mesh].positions):
+            far = float(np.abs(_corners(self.meshes[inst.mesh], inst.transform)).max())
+            if not far <= WORLD_LIMIT:
+                why = f"it reaches {far:.3g} from the origin (more than {WORLD_LIMIT:g})"
+        return why
 
     def default_camera(self) -> Camera:
         """The scene's first camera, else one framing its bounds."""
         if self.cameras:
             return self.cameras[0]
         lo, hi = self.bounds()
+        if not np.all(np.isfinite(lo)):  # nothing drawable: look at the origin
+            lo, hi = np.full(3, -1.0), np.ones(3)
         center = (lo + hi) / 2
         radius = float(np.linalg.norm(hi - lo)) / 2 or 1.0
         eye = center + np.array([0.6, 0.5, 1.0]) / np.linalg.norm([0.6, 0.5, 1.0]) * radius * 2.0
         return Camera(tuple(eye), tuple(center), zfar=radius * 10, znear=radius * 0.01)
+
+    def drawable(self) -> Scene:
+        """This scene without instances that cannot be drawn (singular, NaN or infinite
+        transforms), each named in a one-line warning; ``self`` when none is dropped.
+
+        Raises
+        ------
+        SceneError
+            when the scene had instances and none is left.
+        """
+        keep = []
+        for k, inst in enumerate(self.instances):
+            why = self.instance_problem(inst)
+            if why is None:
+                keep.append(inst)
+            else:
+                warn(f"{self.source or self.name}: instance {inst.name or k!r} skipped: {why}")
+        if len(keep) == len(self.instances):
+            return self
+        if not keep:
+            raise SceneError("no instance can be drawn (every transform is singular or not "
+                             "finite)", file=self.source or self.name)
+        return replace(self, instances=keep)
 
 
 class SceneError(RfwError):

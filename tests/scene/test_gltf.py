@@ -884,7 +884,7 @@ def _fuzz_space():
 
 _FUZZ_PATHS, _FUZZ_VALUES = _fuzz_space()
 FUZZ = settings(max_examples=int(os.environ.get("RFW_FUZZ_EXAMPLES", 200)), deadline=None,
-                suppress_health_check=list(HealthCheck))
+                derandomize=True, suppress_health_check=list(HealthCheck))
 
 
 @FUZZ
