@@ -282,6 +282,11 @@ def _overrides(v: dict[str, Any], option: str) -> dict[str, Any]:
     return v[value[-1]] if isinstance(value, list) else value
 
 
+def pass_class(cfg: Config, entry: PassEntry) -> type[Pass]:
+    """The class of ``entry``'s pass id; an unknown id names the config and the pass."""
+    return get_pass(entry.use, file=cfg.source, element=f"pass '{entry.name}'")
+
+
 def missing_caps(cfg: Config, caps: frozenset[str]) -> dict[str, list[str]]:
     """The capabilities each enabled pass of ``cfg`` needs and ``caps`` lacks (by pass)."""
     from .graph.compile import IMPLIED_CAPS
@@ -290,7 +295,10 @@ def missing_caps(cfg: Config, caps: frozenset[str]) -> dict[str, list[str]]:
     for entry in cfg.passes:
         if not entry.enabled:
             continue
-        inst = get_pass(entry.use)(entry.name, **entry.settings)
+        try:
+            inst = pass_class(cfg, entry)(entry.name, **entry.settings)
+        except GraphError as e:
+            raise e.in_file(cfg.source) from None
         need = [c for c in (*IMPLIED_CAPS.get(inst.type, ()), *inst.requires) if c not in caps]
         if need:
             out[entry.name] = need
@@ -441,7 +449,7 @@ def build(cfg: Config) -> Built:
     instances: dict[str, Pass] = {}
     slots: dict[str, dict[str, str]] = {}
     for entry in cfg.passes:
-        cls = get_pass(entry.use)
+        cls = pass_class(cfg, entry)
         try:
             inst = cls(entry.name, **entry.settings)
         except GraphError as e:

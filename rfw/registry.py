@@ -61,13 +61,16 @@ def reload() -> None:
     _load_all()
 
 
-def get_pass(pass_id: str) -> type[Pass]:
+def get_pass(pass_id: str, *, file: str | None = None,
+             element: str | None = None) -> type[Pass]:
+    """The class registered as ``pass_id``; an unknown id is a GraphError naming ``file`` and
+    ``element`` (the config and its pass) with the closest ids."""
     _load_all()
     try:
         return _REGISTRY[pass_id]
     except KeyError:
-        raise GraphError(f"unknown pass '{pass_id}'" + did_you_mean(pass_id, _REGISTRY)) \
-            from None
+        raise GraphError(f"unknown pass '{pass_id}'" + did_you_mean(pass_id, _REGISTRY),
+                         file=file, element=element) from None
 
 
 def available() -> dict[str, type[Pass]]:

@@ -121,9 +121,9 @@ def check_extents(plan: Any, limit: int | None, source: str) -> None:
 def backend_for(cfg: Config) -> str:
     """The backend a run takes when none is asked for: vk when every enabled pass is pinned
     to vk (in the config or by its class), else wgpu (pinned passes then mix in)."""
-    from .registry import get_pass
+    from .config import pass_class
 
-    pins = {e.backend or get_pass(e.use).backend for e in cfg.passes if e.enabled}
+    pins = {e.backend or pass_class(cfg, e).backend for e in cfg.passes if e.enabled}
     return "vk" if pins == {"vk"} else "wgpu"
 
 
@@ -149,9 +149,9 @@ def frame_record(cfg: Config, frames: int, scene: Any, default_light: bool,
 def pinned_elsewhere(cfg: Config, backend: str) -> bool:
     """Whether an enabled pass of ``cfg`` is pinned (in the config or by its class) to a
     backend other than ``backend``: its frame then mixes backends."""
-    from .registry import get_pass
+    from .config import pass_class
 
-    return any(e.enabled and (e.backend or get_pass(e.use).backend) not in (None, backend)
+    return any(e.enabled and (e.backend or pass_class(cfg, e).backend) not in (None, backend)
                for e in cfg.passes)
 
 

@@ -9,6 +9,7 @@ pipeline cache is keyed by the preprocessed source's hash.
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import time
 from dataclasses import replace
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from .config import Config, apply_overrides, build
+from .errors import RfwError
 from .graph import GraphError, compile
 from .render import camera_for, load_scene_for
 
@@ -54,11 +56,13 @@ class Viewer:
 
         self.cfg = cfg
         self.loop = loop
+        # a bad config or scene fails here, before a window opens
+        compile(build(cfg).graph)
+        self.scene = load_scene_for(cfg, scene)
+        self.camera = camera_for(cfg, self.scene)
         self.canvas = canvas or RenderCanvas(size=cfg.size, title=f"rfw: {cfg.name}",
                                              update_mode="continuous")
         self.device = Device()
-        self.scene = load_scene_for(cfg, scene)
-        self.camera = camera_for(cfg, self.scene)
         self.gpu_scene = GpuScene(self.device.device, self.scene, self.camera)
         self.context = self.canvas.get_wgpu_context()
         self.format = self.context.get_preferred_format(self.device.adapter)
@@ -238,7 +242,13 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
     if scene:
         sets = [*sets, f"scene={scene}"]
     cfg = apply_overrides(cfg, sets)
-    v = Viewer(cfg, frames=frames, script=script)
+    compile(build(cfg).graph)  # config and scene errors first, with or without a display
+    loaded = load_scene_for(cfg)
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        # glfw aborts the process without a display: say so instead
+        raise RfwError("no display for a window (set DISPLAY, or run under xvfb-run -a); "
+                       "'rfw run' renders headless", element="rfw view")
+    v = Viewer(cfg, scene=loaded, frames=frames, script=script)
     start = time.perf_counter()
     v.run()
     v.say(f"closed after {v.frame_count} frames in {time.perf_counter() - start:.1f} s")
