@@ -8,9 +8,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..cli import _size
+from ..errors import RfwError, check_number
 
 PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rfw_raycast")
 
@@ -54,6 +56,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Exit code: 0 when every run worked, 1 when any failed (the report of the others is
+    still written), 2 for bad input (raised as an RfwError before any run)."""
     from ..graph import GraphError
 
     head, rest = args.configs[0], args.configs[1:]
@@ -62,15 +66,20 @@ def run(args: argparse.Namespace) -> int:
 
         if len(rest) != 2:
             raise GraphError("usage: rfw bench compare OLD NEW (folders or results.jsonl)")
-        return compare(Path(rest[0]), Path(rest[1]), threshold=args.threshold,
+        threshold = check_number(args.threshold, "--threshold", lo=0.0)
+        return compare(Path(rest[0]), Path(rest[1]), threshold=threshold,
                        fail_on_regression=args.fail_on_regression, show_all=args.all)
     if head == "report":
         from .report import main_report
 
         if len(rest) != 1:
             raise GraphError("usage: rfw bench report DIR")
-        return main_report(rest[0], reference=args.reference)
-    from .report import write_report
+        try:
+            return main_report(rest[0], reference=args.reference)
+        except ValueError as e:
+            if isinstance(e, RfwError):
+                raise
+            raise GraphError(str(e), file=rest[0]) from None
     from .runner import make_plan, run_plan
 
     peers = _peers(args.peers)
@@ -78,19 +87,54 @@ def run(args: argparse.Namespace) -> int:
                      warmup=args.warmup, repeat=args.repeat, backends=args.backend,
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
                      seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)
-    out = Path(args.out)
+    _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
+    out = _out_dir(args.out)
     print(f"rfw bench: {len(plan.jobs)} variant(s) x {plan.repeat} repeat(s) at "
           f"{plan.size[0]}x{plan.size[1]}, {plan.frames} frames (+{plan.warmup} warm-up) "
           f"-> {out}")
     for note in plan.notes:
         print(f"  note: {note}")
     results = run_plan(plan, out, progress=not args.no_progress)
-    try:
-        md, page = write_report(out, reference=args.reference)
-    except ValueError as e:
-        raise GraphError(str(e)) from None
+    return _finish(out, results, args.reference)
+
+
+def _out_dir(text: str) -> Path:
+    """``--out`` from the working directory, as an absolute path (runs use it elsewhere)."""
+    out = Path(text).expanduser().resolve()
+    if out.exists() and not out.is_dir():
+        raise RfwError("not a folder", file=text, element="--out")
+    return out
+
+
+def _check_reference(reference: str | None, labels: list[str]) -> None:
+    # checked before the runs: a typo must not cost the whole benchmark
+    if reference is None or reference in labels:
+        return
+    if reference.isdigit():
+        check_number(int(reference), "--reference", kind=int, lo=0, hi=len(labels) - 1)
+        return
+    raise RfwError(f"--reference '{reference}': no such variant ({', '.join(labels)})",
+                   suggest=(reference, labels))
+
+
+def _finish(out: Path, results: Path, reference: str | None) -> int:
+    """Write the report of the runs that worked; list the failed runs, one line each."""
+    from .report import write_report
+    from .runner import load_results
+
+    records = load_results(results)
+    failed = [r for r in records if r.get("error")]
+    md, page = write_report(out, reference=reference)
     print(f"wrote {results}, {md}, {page}")
-    return 0
+    if not failed:
+        return 0
+    all_failed = len(failed) == len(records)
+    print(f"rfw bench: {'all ' if all_failed else ''}{len(failed)} of {len(records)} runs "
+          "failed:", file=sys.stderr)
+    for r in failed:
+        why = " ".join(str(r["error"]).split())
+        print(f"  {r.get('variant')} #{int(r.get('repeat', 0)) + 1}: {why}", file=sys.stderr)
+    return 1
 
 
 def _peers(text: str) -> list[str]:

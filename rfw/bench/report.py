@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import check_identifier
+from ..fileio import inside
 from .images import compare, load_png, save_png
 from .runner import load_results
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
@@ -330,21 +332,22 @@ def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
     ref = _pick_reference(rfw, reference)
     if not ref.image:
         return ref, []
-    ref_img = load_png(out_dir / ref.image)
+    ref_img = load_png(inside(out_dir, ref.image))
     rows = []
     for v in rfw:
         if not v.image:
             continue
-        img = load_png(out_dir / v.image)
+        img = load_png(inside(out_dir, v.image))
         row: dict[str, Any] = {"variant": v, "image": v.image}
         if img.shape == ref_img.shape:
             c = compare(ref_img, img)
-            diff = Path("images") / f"{v.records[0]['variant_id']}.diff.png"
-            save_png(out_dir / diff, c["diff"])
+            name = check_identifier("variant id", v.records[0].get("variant_id"))
+            diff = Path("images") / f"{name}.diff.png"
+            save_png(inside(out_dir, diff), c["diff"])
             row.update(psnr=c["psnr"], diff=str(diff), flip=c.get("flip"), ssim=c.get("ssim"))
             if "flip_map" in c:
-                fmap = Path("images") / f"{v.records[0]['variant_id']}.flip.png"
-                save_png(out_dir / fmap, c["flip_map"])
+                fmap = Path("images") / f"{name}.flip.png"
+                save_png(inside(out_dir, fmap), c["flip_map"])
                 row["flip_map"] = str(fmap)
         rows.append(row)
     return ref, rows

@@ -19,11 +19,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..errors import RfwError, check_identifier, check_number
+from ..fileio import inside
 from ..graph import GraphError
 from .stats import summarize
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
+MAX_FRAMES = 100_000  # per run: more is a typo, not a benchmark
+MAX_REPEAT = 1_000
 PEERS_RUN = ROOT / "benchmarks" / "peers" / "run.py"
 
 
@@ -72,17 +76,40 @@ class Plan:
 
 
 def resolve_config(name: str) -> Path:
-    """A config path, or a bare name of ``configs/<name>.toml``."""
-    p = Path(name)
-    if p.exists() or p.suffix:
-        return p
+    """A config file (relative to the working directory) or a bare name of
+    ``configs/<name>.toml``, as an absolute path: the runs happen in other processes."""
+    p = Path(name).expanduser()
+    if p.is_file():
+        return p.resolve()
     candidate = CONFIGS / f"{name}.toml"
-    return candidate if candidate.exists() else p
+    if not p.suffix and candidate.is_file():
+        return candidate
+    if p.exists():
+        raise GraphError("not a config file", file=name)
+    known = sorted(c.stem for c in CONFIGS.glob("*.toml"))
+    raise GraphError(f"config not found (neither a file nor configs/{p.stem}.toml)",
+                   file=name, suggest=(p.stem, known))
+
+
+def resolve_scene(scene: str | None) -> str | None:
+    """``None``/``default`` as they are, a scene file as an absolute path (from the working
+    directory); a missing file fails here, before any run."""
+    if scene is None or scene == "default":
+        return scene
+    p = Path(scene).expanduser()
+    if not p.is_file():
+        raise GraphError("scene file not found" if not p.exists() else "not a scene file",
+                       file=scene, element="--scene")
+    return str(p.resolve())
 
 
 def _slug(text: str) -> str:
+    """A run folder name (an identifier: no separators, no '..', no leading digit)."""
     keep = "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
-    return keep.strip("_")[:80] or "job"
+    while ".." in keep:
+        keep = keep.replace("..", "_")
+    keep = keep.strip("_.-")[:80] or "job"
+    return check_identifier("run", keep if keep[0].isalpha() else f"v_{keep}")
 
 
 def _parse_vary(items: list[str]) -> list[tuple[str, list[str]]]:
@@ -109,7 +136,7 @@ def _check(path: Path, sets: list[str]) -> Any:
 def _accepts(path: Path, key: str, value: str) -> bool:
     try:
         _check(path, [f"{key}={value}"])
-    except GraphError:
+    except RfwError:
         return False
     return True
 
@@ -129,9 +156,13 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     an ``ao`` variant); an axis no config knows is an error."""
     if not configs:
         raise GraphError("rfw bench: name at least one config")
-    if frames < 1 or repeat < 1 or warmup < 0:
-        raise GraphError("rfw bench: --frames and --repeat must be >= 1, --warmup >= 0")
-    scenes = scenes or [None]  # type: ignore[list-item]
+    frames = check_number(frames, "--frames", kind=int, lo=1, hi=MAX_FRAMES)
+    warmup = check_number(warmup, "--warmup", kind=int, lo=0, hi=MAX_FRAMES)
+    repeat = check_number(repeat, "--repeat", kind=int, lo=1, hi=MAX_REPEAT)
+    timeout = check_number(timeout, "--timeout", kind=float, lo=1e-3)
+    if peer_frames is not None:
+        peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES)
+    scenes = list(dict.fromkeys(resolve_scene(s) for s in scenes)) if scenes else [None]
     backends = backends or ["wgpu"]
     sets = list(sets or [])
     axes = _parse_vary(list(vary or []))
@@ -226,27 +257,39 @@ def _command(job: Job, plan: Plan, out: Path) -> list[str]:
 
 
 def run_one(job: Job, plan: Plan, out: Path) -> dict[str, Any]:
-    """Run one job in a fresh process; its record (``error`` set when it failed)."""
+    """Run one job in a fresh process, in the caller's working directory (relative paths in
+    ``--set`` mean what they mean to ``rfw run``); its record (``error`` set when it failed)."""
     out.mkdir(parents=True, exist_ok=True)
+    for stale in ("record.json", "image.png", "log.txt"):  # a failed run shows no old image
+        (out / stale).unlink(missing_ok=True)
     t = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
     try:
         done = subprocess.run(_command(job, plan, out), capture_output=True, text=True,
-                              timeout=plan.timeout, check=False, env=env, cwd=ROOT)
+                              timeout=plan.timeout, check=False, env=env)
     except subprocess.TimeoutExpired:
-        return {"error": f"timed out after {plan.timeout:.0f} s",
+        (out / "image.png").unlink(missing_ok=True)
+        return {"error": f"timed out after {plan.timeout:g} s",
                 "elapsed_s": time.perf_counter() - t}
     elapsed = time.perf_counter() - t
-    path = out / "record.json"
-    if path.exists():
-        record = json.loads(path.read_text())
-    else:
+    (out / "log.txt").write_text(done.stdout + done.stderr)
+    record = _read_record(out / "record.json")
+    if record is None:
         tail = (done.stderr.strip().splitlines() or ["no output"])[-1]
         record = {"error": f"exit {done.returncode}: {tail}"}
-    (out / "log.txt").write_text(done.stdout + done.stderr)
+    elif done.returncode and not record.get("error"):
+        record = {"error": f"exit {done.returncode} after writing its record"}
     record["elapsed_s"] = elapsed
     return record
+
+
+def _read_record(path: Path) -> dict[str, Any] | None:
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None  # missing or cut short: the process output says why
+    return record if isinstance(record, dict) else None
 
 
 def pass_stats(record: dict[str, Any]) -> None:
@@ -285,12 +328,14 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True) -> Path:
         for seq, (r, pos, job) in enumerate(schedule):
             if bar is not None:
                 bar.set_postfix_str(f"{job.label} #{r + 1}", refresh=True)
-            run_dir = out_dir / "runs" / job.id / f"r{r}"
+            run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
             record = run_one(job, plan, run_dir)
             pass_stats(record)
             if job.kind == "peer":
                 record["peer_kind"] = record.get("kind")
             image = run_dir / "image.png"
+            if record.get("error"):
+                image.unlink(missing_ok=True)
             record.update({
                 "kind": job.kind, "variant": job.label, "variant_id": job.id, "repeat": r,
                 "sequence": seq, "position": pos, **env, **meta,
@@ -320,11 +365,18 @@ def load_results(path: Path) -> list[dict[str, Any]]:
         path = path / "results.jsonl"
     if not path.exists():
         raise GraphError("no results.jsonl here (run rfw bench first)", file=str(path))
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise GraphError(f"not UTF-8 (byte {e.start})", file=str(path)) from None
     records = []
-    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+    for n, line in enumerate(text.splitlines(), 1):
         if line.strip():
             try:
-                records.append(json.loads(line))
+                record = json.loads(line)
             except json.JSONDecodeError as e:
                 raise GraphError(f"line {n}: not JSON ({e.msg})", file=str(path)) from None
+            if not isinstance(record, dict) or not isinstance(record.get("variant"), str):
+                raise GraphError(f"line {n}: not a run record (no 'variant')", file=str(path))
+            records.append(record)
     return records

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import parse_size
+from ..fileio import atomic_write
 
 # timings.json keys copied into the record as they are, where a run has them
 EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light")
@@ -153,16 +154,20 @@ def main(argv: list[str] | None = None) -> int:
                            frames=args.frames, warmup=max(1, args.warmup), backend=args.backend)
     except Exception as e:
         message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        (out / "record.json").write_text(json.dumps(
-            {"error": f"{type(e).__name__}: {message}",
-             "traceback": traceback.format_exc(limit=8)}))
+        _write_json(out / "record.json", {"error": f"{type(e).__name__}: {message}",
+                                          "traceback": traceback.format_exc(limit=8)})
         print(f"rfw bench worker: {type(e).__name__}: {message}", file=sys.stderr)
         return 1
     from PIL import Image
 
-    Image.fromarray(rgba, "RGBA").save(out / "image.png")
-    (out / "record.json").write_text(json.dumps(record))
+    atomic_write(out / "image.png", lambda f: Image.fromarray(rgba, "RGBA").save(f, "PNG"))
+    _write_json(out / "record.json", record)  # last: a record means the run is complete
     return 0
+
+
+def _write_json(path: Path, record: dict[str, Any]) -> None:
+    data = json.dumps(record).encode()
+    atomic_write(path, lambda f: f.write(data))
 
 
 if __name__ == "__main__":
