@@ -3,6 +3,11 @@
     rfw bench CONFIG... [options]        run the matrix, write results.jsonl and the reports
     rfw bench compare OLD NEW [options]  per-pass changes beyond the noise
     rfw bench report DIR [--reference]   re-write the reports from DIR/results.jsonl
+
+Relative paths (configs, scenes, ``--out``, folders to compare) mean what they mean in the
+caller's working directory, and the runs happen there. Exit code: 0 when every run worked,
+1 when any failed (one line each on stderr; the report of the others is still written),
+2 for bad input, found before any run starts.
 """
 
 from __future__ import annotations
