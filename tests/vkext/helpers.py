@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+
+import numpy as np
 
 from rfw.graph import Attachment, DepthAttachment, GraphBuilder, Texture
 from rfw.graph.graph import Graph
 from vkext.consts import const, ffi, vk
 from vkext.memory import Image, ImageView
+
+
+def unorm_codes(value: float, bits: int = 8) -> set[int]:
+    """The codes Vulkan lets a driver store for ``value`` in a UNORM format: either of the
+    two nearest to ``value * (2**bits - 1)`` (round to nearest is only recommended: for 0.5
+    lavapipe stores 128, NVIDIA 127), or that value alone when it is a whole number."""
+    r = float(np.float32(value)) * ((1 << bits) - 1)  # clear colours travel as float32
+    return {math.floor(r), math.ceil(r)}
 
 
 def chain_graph(n: int = 4, size: int = 256, fmt: str = "rgba8unorm") -> Graph:

@@ -36,7 +36,14 @@ from vkext.commands import (
 )
 from vkext.memory import staging_buffer
 
-from .helpers import chain_graph, clear_pass, copy_chain_graph, copy_pass, depth_chain_graph
+from .helpers import (
+    chain_graph,
+    clear_pass,
+    copy_chain_graph,
+    copy_pass,
+    depth_chain_graph,
+    unorm_codes,
+)
 
 SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER"}),
                 frozenset({"SHADER_SAMPLED_READ"}))
@@ -118,9 +125,18 @@ def test_plan_barriers_validate_and_transfer(vk_device):
         assert any(b.resource == "p0.depth" for b in plan.barriers)  # and a depth image
         out = _emulate(vk_device, plan, tm, "p3.color")
         assert out.shape == (64, 64, 4)
-        assert tuple(out[5, 7]) == (217, 128, 64, 255)  # p3 cleared to (0.85, .5, .25, 1)
+        # p3 cleared to (0.85, .5, .25, 1); p2's red (0.6) would be 153
+        for got, cleared in zip(out[5, 7], (0.85, 0.5, 0.25, 1.0), strict=True):
+            assert int(got) in unorm_codes(cleared), (tuple(out[5, 7]), cleared)
     finally:
         tm.destroy()
+
+
+def test_unorm_codes_are_the_two_nearest():
+    assert unorm_codes(0.5) == {127, 128}  # a tie: either
+    assert unorm_codes(0.85) == {216, 217}
+    assert unorm_codes(0.0) == {0} and unorm_codes(1.0) == {255}  # exact ends
+    assert 153 not in unorm_codes(0.85)  # another pass's clear is told apart
 
 
 def test_depth_readback(vk_device):
