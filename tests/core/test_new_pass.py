@@ -1,6 +1,7 @@
 """``rfw new-pass`` writes passes that register, compile and pass their own tests."""
 
 import importlib
+import os
 import subprocess
 import sys
 
@@ -18,12 +19,13 @@ def test_generated_pass_works(tmp_path, monkeypatch, kind, capsys):
     folder = tmp_path / "plugins" / name
     assert {p.name for p in folder.iterdir()} >= {"__init__.py", f"{name}.py",
                                                  f"test_{name}.py"}
-    # the generated test runs as a user would run it
+    # the generated test runs as a user would run it; the plugin folder goes in front of
+    # the PYTHONPATH that may be what makes rfw importable (no install on the GPU machine)
+    path = [str(tmp_path / "plugins"), *filter(None, [os.environ.get("PYTHONPATH")])]
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            str(folder / f"test_{name}.py")], cwd=tmp_path / "plugins",
                           capture_output=True, text=True, check=False,
-                          env={**__import__("os").environ, "PYTHONPATH": str(tmp_path /
-                                                                               "plugins")})
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(path)})
     assert done.returncode == 0, done.stdout + done.stderr
     monkeypatch.syspath_prepend(str(tmp_path / "plugins"))
     try:
