@@ -321,6 +321,9 @@ class SceneAccel:
         rows = []
         self.tlas_instances: list[int] = []  # scene instance index of each TLAS record
         cull_off = const("VK_GEOMETRY_INSTANCE_TRIANGLE_FACING_CULL_DISABLE_BIT_KHR")
+        # no TRIANGLE_FLIP_FACING for mirrored instances: ray tracing decides facing in
+        # object space, where an instance transform cannot change the winding, so a mirrored
+        # instance faces out where its mesh does (and facing culling is off anyway)
         for k, inst in enumerate(scene.instances):
             blas = self.blas[inst.mesh]
             if blas is None:

@@ -28,8 +28,10 @@ base), through a task + mesh + fragment pipeline without vertex input.
 The culling tests assume model matrices made of rotation, uniform scale and translation: the
 sphere radius is scaled by the largest column length (conservative for any scale), the normal
 cone is moved with the model matrix, which keeps its angle only for uniform scale; an
-instance with a mirroring transform (negative determinant) or a non-uniform scale is never
-cone-culled.
+instance with a non-uniform scale is never cone-culled. A mirroring transform (negative
+determinant) keeps angles: its cone moves with it, and the mesh shader emits its triangles
+with two corners swapped (and the tangent sign flipped), so front faces stay
+counter-clockwise on screen.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ import numpy as np
 from rfw.backends.scene_data import main_camera_bytes
 from rfw.graph.sync import State
 from rfw.meshlets import cached_meshlets, pack_for_gpu
+from rfw.scene.model import is_mirrored
 from rfw.shaders import ShaderError
 
 from .commands import barrier, image_layout, read_buffer, upload_buffer
@@ -142,9 +145,12 @@ def _instance_rows(transform: np.ndarray) -> bytes:
     normal = np.linalg.inv(model).T
     cols = np.linalg.norm(model[:3, :3], axis=0)
     scale = float(cols.max())
-    uniform = bool(np.allclose(cols, scale, rtol=1e-4)) and np.linalg.det(model[:3, :3]) > 0
+    uniform = bool(np.allclose(cols, scale, rtol=1e-4))
+    # z: -1 for a mirroring transform, whose triangles the mesh shader emits the other way
+    # round; a mirror keeps angles, so its cone (moved by the model matrix) still holds
+    sign = -1.0 if is_mirrored(model) else 1.0
     return (model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
-            + struct.pack("<4f", scale, 1.0 if uniform else 0.0, 0.0, 0.0))
+            + struct.pack("<4f", scale, 1.0 if uniform else 0.0, sign, 0.0))
 
 
 def _bounding_sphere(positions: np.ndarray) -> tuple[float, float, float, float]:

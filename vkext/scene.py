@@ -26,10 +26,11 @@ from rfw.backends.scene_data import (
     main_camera_bytes,
     material_bytes,
     mip_chain,
+    mirrored_arrays,
     sun_camera_bytes,
 )
 from rfw.graph.sync import State
-from rfw.scene.model import Camera, Scene
+from rfw.scene.model import Camera, Scene, is_mirrored
 
 from .commands import TRANSFER_DST, ImageBarrier, barrier, one_time
 from .consts import const, ffi, lib, vk
@@ -348,7 +349,7 @@ class VkScene:
     def __init__(self, device: VkDevice, scene: Scene, camera: Camera | None = None, *,
                  block_size: int = 32 * MiB):
         self.device = device
-        self.scene = scene
+        self.scene = scene = scene.drawable()  # singular transforms: skipped, with a warning
         self.camera = camera or scene.default_camera()
         self.size = (1, 1)
         self._objects: list[Any] = []
@@ -391,6 +392,7 @@ class VkScene:
             vb = ffi.new("VkBuffer[4]", [b.handle for b in bufs])
             self.meshes.append(_MeshBuffers(vb, ffi.new("VkDeviceSize[4]"), ib.handle,
                                             len(idx)))
+        self._mirrored_meshes(up)
 
         # static uniforms: materials then instances, each at an aligned offset
         mats = [material_bytes(m) for m in scene.materials]
@@ -438,6 +440,26 @@ class VkScene:
             dev, mag="linear", min="linear", compare="less-equal", label="scene.shadow"))
 
         self._descriptor_sets()
+
+    def _mirrored_meshes(self, up: _Upload) -> None:
+        # a mirrored instance draws with two corners swapped and the tangent sign flipped
+        # (gpu_scene.mirrored_arrays): counter-clockwise front faces again, same pipelines
+        scene = self.scene
+        self.mirrored = [is_mirrored(i.transform) for i in scene.instances]
+        self.mirrored_meshes: dict[int, _MeshBuffers] = {}
+        for k in sorted({i.mesh for i in scene.instances if is_mirrored(i.transform)}):
+            mesh, plain = scene.meshes[k], self.mesh_buffers[k]
+            indices, tangents = mirrored_arrays(mesh)
+            made = []
+            for a, usage, what in ((tangents, "vertex", "tan"), (indices, "index", "indices")):
+                b = self.allocator.create_buffer(max(16, a.nbytes), (usage, "transfer_dst"),
+                                                 label=f"{mesh.name}.{what}:mirrored")
+                if a.nbytes:
+                    up.buffer(b, a)
+                made.append(b)
+            vb = ffi.new("VkBuffer[4]", [b.handle for b in (*plain[:3], made[0])])
+            self.mirrored_meshes[k] = _MeshBuffers(vb, ffi.new("VkDeviceSize[4]"),
+                                                   made[1].handle, len(indices))
 
     def _texture(self, up: _Upload, pixels: np.ndarray, srgb: bool, label: str) -> ImageView:
         levels = mip_chain(np.ascontiguousarray(pixels, np.uint8))
@@ -544,7 +566,8 @@ class VkScene:
             mesh = self.scene.meshes[inst.mesh]
             if self.scene.materials[mesh.material].alpha_mode not in alpha:
                 continue
-            buffers = self.meshes[inst.mesh]
+            mirrored = self.mirrored[k]
+            buffers = self.mirrored_meshes[inst.mesh] if mirrored else self.meshes[inst.mesh]
             if buffers.count == 0:
                 continue
             if mesh.material != last_material:
@@ -553,10 +576,10 @@ class VkScene:
                 last_material = mesh.material
             lib.vkCmdBindDescriptorSets(cmd, point, layout, 3, 1, self.instance_sets[k], 0,
                                         ffi.NULL)
-            if inst.mesh != last_mesh:
+            if (inst.mesh, mirrored) != last_mesh:
                 lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
                 lib.vkCmdBindIndexBuffer(cmd, buffers.index, 0, index_type)
-                last_mesh = inst.mesh
+                last_mesh = (inst.mesh, mirrored)
             lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, 0)
             draws += 1
         return draws

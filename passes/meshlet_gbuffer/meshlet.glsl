@@ -51,7 +51,8 @@ layout(set = 0, binding = 13, std140) uniform MCullCameraBlock { MCamera m_cull;
 struct MInstance {
     mat4 model;
     mat4 normal;     // inverse transpose of model
-    vec4 bounds;     // x: largest column scale of model, y: 1 if the cone test is valid
+    vec4 bounds;     // x: largest column scale of model, y: 1 if the cone test is valid,
+                     // z: -1 if model mirrors (negative determinant), else 1
 };
 layout(set = 0, binding = 1, std430) readonly buffer MInstances { MInstance m_instances[]; };
 // vertex_offset, triangle_offset (words), vertex_count, triangle_count

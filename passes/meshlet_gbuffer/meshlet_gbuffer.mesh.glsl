@@ -52,6 +52,8 @@ void main() {
     SetMeshOutputsEXT(vcount, tcount);
     mat4 model = m_instances[payload.instance].model;
     mat4 normal = m_instances[payload.instance].normal;
+    // a mirroring model reverses the winding on screen and the tangent frame's handedness
+    bool mirrored = m_instances[payload.instance].bounds.z < 0.0;
     bool cull_triangles = (m_push.flags & F_TRIANGLES) != 0u;
     if (gl_LocalInvocationIndex == 0u) {
         s_backface = 0u;
@@ -62,7 +64,7 @@ void main() {
         gl_MeshVerticesEXT[v].gl_Position = vk_clip(clip);
         o_normal[v] = (normal * vec4(m_normals[k].xyz, 0.0)).xyz;
         vec4 t = m_tangents[k];
-        o_tangent[v] = vec4((model * vec4(t.xyz, 0.0)).xyz, t.w);
+        o_tangent[v] = vec4((model * vec4(t.xyz, 0.0)).xyz, mirrored ? -t.w : t.w);
         o_uv[v] = m_uvs[k].xy;
         s_screen[v] = vec3(clip.xy / clip.w * 0.5 * m_push.viewport, clip.w);
     }
@@ -72,6 +74,9 @@ void main() {
         for (uint c = 0u; c < 3u; ++c) {
             uint b = 3u * t + c;
             idx[c] = (m_triangles[m.y + (b >> 2u)] >> (8u * (b & 3u))) & 0xffu;
+        }
+        if (mirrored) {
+            idx = idx.xzy;  // counter-clockwise on screen again: the pipeline culls back faces
         }
         gl_PrimitiveTriangleIndicesEXT[t] = idx;
 #ifdef MESHLET_COLORS

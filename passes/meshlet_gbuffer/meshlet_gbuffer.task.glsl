@@ -42,11 +42,13 @@ bool cone_culled(uint row, MInstance inst) {
     uint packed = m_cones[row];
     int cutoff_s8 = bitfieldExtract(int(packed), 24, 8);
     if (cutoff_s8 >= 127 || inst.bounds.y == 0.0) {
-        return false;  // a cone that covers every direction (or a mirrored instance)
+        return false;  // a cone that covers every direction (or a non-uniform scale)
     }
     vec3 axis = vec3(bitfieldExtract(int(packed), 0, 8), bitfieldExtract(int(packed), 8, 8),
                      bitfieldExtract(int(packed), 16, 8)) / 127.0;
-    // rotation and uniform scale keep angles: the cone moves with the model matrix
+    // rotation, mirroring and uniform scale keep angles: the cone moves with the model
+    // matrix (a mirrored instance's triangles are emitted rewound, so its front faces
+    // are the mirrored ones)
     vec3 apex = (inst.model * vec4(m_cone_apex[row].xyz, 1.0)).xyz;
     vec3 axis_w = mat3(inst.model) * axis / inst.bounds.x;
     return dot(normalize(apex - m_cull.position.xyz), axis_w) >= float(cutoff_s8) / 127.0;

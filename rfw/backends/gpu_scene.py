@@ -10,13 +10,14 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Scene
+from ..scene.model import Camera, Scene, is_mirrored
 from .scene_data import (
     instance_bytes,
     lights_bytes,
     main_camera_bytes,
     material_bytes,
     mip_chain,
+    mirrored_arrays,
     sun_camera_bytes,
 )
 
@@ -24,7 +25,7 @@ from .scene_data import (
 class GpuScene:
     def __init__(self, device: Any, scene: Scene, camera: Camera | None = None):
         self.device = device
-        self.scene = scene
+        self.scene = scene = scene.drawable()  # singular transforms: skipped, with a warning
         self.camera = camera or scene.default_camera()
         self._buffers: list[Any] = []
         self._textures: list[Any] = []
@@ -62,16 +63,27 @@ class GpuScene:
 
     def _upload_meshes(self) -> None:
         v = wgpu.BufferUsage.VERTEX
+        self.mirrored = [is_mirrored(i.transform) for i in self.scene.instances]
+        used_mirrored = {i.mesh for i in self.scene.instances if is_mirrored(i.transform)}
         self.meshes = []
-        for m in self.scene.meshes:
+        self.mirrored_meshes: dict[int, tuple[list[Any], Any, int]] = {}
+        for k, m in enumerate(self.scene.meshes):
+            positions = self._buffer(m.positions.astype(np.float32), v, f"{m.name}.positions")
+            normals = self._buffer(m.normals.astype(np.float32), v, f"{m.name}.normals")
+            uvs = self._buffer(m.uvs.astype(np.float32), v, f"{m.name}.uvs")
             self.meshes.append((
-                [self._buffer(m.positions.astype(np.float32), v, f"{m.name}.positions"),
-                 self._buffer(m.normals.astype(np.float32), v, f"{m.name}.normals"),
-                 self._buffer(m.uvs.astype(np.float32), v, f"{m.name}.uvs"),
+                [positions, normals, uvs,
                  self._buffer(m.tangents.astype(np.float32), v, f"{m.name}.tangents")],
                 self._buffer(m.indices.astype(np.uint32), wgpu.BufferUsage.INDEX,
                              f"{m.name}.indices"),
                 len(m.indices)))
+            if k in used_mirrored:
+                indices, tangents = mirrored_arrays(m)
+                self.mirrored_meshes[k] = (
+                    [positions, normals, uvs,
+                     self._buffer(tangents, v, f"{m.name}.tangents:mirrored")],
+                    self._buffer(indices, wgpu.BufferUsage.INDEX, f"{m.name}.indices:mirrored"),
+                    len(m.indices))
 
     def _texture(self, pixels: np.ndarray, srgb: bool, label: str) -> Any:
         levels = mip_chain(pixels)
@@ -170,7 +182,9 @@ class GpuScene:
             mat = self.scene.materials[mesh.material]
             if mat.alpha_mode not in alpha:
                 continue
-            buffers, index, count = self.meshes[inst.mesh]
+            # a mirrored instance draws its mesh with the winding (and tangent sign) reversed
+            buffers, index, count = self.mirrored_meshes[inst.mesh] if self.mirrored[k] \
+                else self.meshes[inst.mesh]
             rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
             rp.set_bind_group(3, self._instance_group(prog.layouts[3], k))
             for slot, buf in enumerate(buffers):

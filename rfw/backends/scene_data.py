@@ -10,7 +10,7 @@ import struct
 
 import numpy as np
 
-from ..scene.model import Camera, Light, Material, Scene
+from ..scene.model import Camera, Light, Material, Mesh, Scene
 
 MAX_LIGHTS = 16
 DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
@@ -35,7 +35,9 @@ def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
 
 def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
     """An orthographic light camera that encloses the scene's bounds along ``direction``."""
-    lo, hi = scene.bounds() if scene.instances else (np.zeros(3), np.ones(3))
+    lo, hi = scene.bounds()
+    if not np.all(np.isfinite(lo)):  # nothing drawable: any box will do
+        lo, hi = np.zeros(3), np.ones(3)
     center = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
     d = direction / np.linalg.norm(direction)
@@ -59,10 +61,26 @@ def material_bytes(m: Material) -> bytes:
 
 
 def instance_bytes(model: np.ndarray) -> bytes:
+    """The model matrix, then its inverse-transpose for normals (which keeps a mirrored
+    instance's normals pointing out; ``Scene.drawable`` has dropped singular ones)."""
     model = np.asarray(model, np.float64)
     normal = np.linalg.inv(model).T
     # WGSL and GLSL matrices are column-major
     return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
+
+
+def mirrored_arrays(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Indices and tangents for drawing ``mesh`` under a mirroring transform.
+
+    A negative determinant reverses every triangle's winding on screen, so its front faces
+    would be culled: swapping two corners restores counter-clockwise front faces for every
+    pass and backend with the pipelines unchanged. The tangent's w flips too, because
+    ``cross(M n, M t)`` points against ``M cross(n, t)`` when M mirrors.
+    """
+    indices = np.ascontiguousarray(mesh.indices.astype(np.uint32).reshape(-1, 3)[:, [0, 2, 1]])
+    tangents = mesh.tangents.astype(np.float32, copy=True)
+    tangents[:, 3] *= -1.0
+    return indices.ravel(), tangents
 
 
 def lights_bytes(scene: Scene) -> tuple[bytes, np.ndarray, bool]:
