@@ -24,8 +24,16 @@ import numpy as np
 import pytest
 
 from . import golden_util
-from .golden_util import (BOUNDS, REGEN_COMMAND, REGEN_ENV, adapter_key, check_golden,
-                          image_diff, mismatch, read_png)
+from .golden_util import (
+    BOUNDS,
+    REGEN_COMMAND,
+    REGEN_ENV,
+    adapter_key,
+    check_golden,
+    image_diff,
+    mismatch,
+    read_png,
+)
 from .test_golden import CONFIGS, config
 
 OTHER_CPU = Path(__file__).resolve().parent / "data" / "golden-other-cpu"
