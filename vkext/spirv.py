@@ -111,21 +111,26 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
         cmd = [exe, "-V", "--target-env", target, "-S", stage, "-o", str(out),
                *(f"-I{d}" for d in [path.parent, *dirs]),
                *(f"-D{k}={v}" for k, v in sorted((defines or {}).items())), str(source)]
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        done = subprocess.run(cmd, capture_output=True, text=True, errors="replace",
+                              check=False)
         if done.returncode != 0 or not out.is_file():
             raise ShaderCompileError(_first_error(done.stdout + done.stderr, path, source))
         code = out.read_bytes()
-    atomic_write(cached, lambda f: f.write(code))  # a parallel compile never sees half a file
+    try:  # a parallel compile never sees half a file
+        atomic_write(cached, lambda f: f.write(code))
+    except OSError as e:  # the compile stands; only later runs pay for it again
+        warn(f"{cache_dir()}: cannot write the SPIR-V cache ({e.strerror or e}); "
+             "shaders are compiled every run")
     return Spirv(path, stage, code, key)
 
 
 def _cached(path: Path) -> bytes | None:
     """The cache entry's SPIR-V, or None to compile: a missing entry, or a corrupt one
     (truncated, garbled), which is discarded with a warning so the compile replaces it."""
+    if not path.is_file():
+        return None
     try:
         code = path.read_bytes()
-    except FileNotFoundError:
-        return None
     except OSError as e:
         warn(f"{path}: cannot read SPIR-V cache entry ({e.strerror or e}); recompiling")
         return None
@@ -142,7 +147,11 @@ def _cached(path: Path) -> bytes | None:
 def _with_include_extension(path: Path, tmp: Path) -> Path:
     # glslang needs GL_GOOGLE_include_directive for #include; add it after #version so
     # shader files stay plain, and keep line numbers with #line
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ShaderCompileError(f"not UTF-8 text (byte {e.start}: {e.reason})",
+                                 file=str(path)) from None
     if "#include" not in text or "GL_GOOGLE_include_directive" in text:
         return path
     lines = text.splitlines()

@@ -187,3 +187,22 @@ def test_corrupt_cache_entries_heal_through_the_cli(tmp_path):
     # rebuilt whole, the same bytes glslang gave the first time, and no temporary left behind
     assert {p.name: p.read_bytes() for p in cache.glob("*.spv")} == good
     assert not [p for p in cache.iterdir() if p.suffix != ".spv"]
+
+
+def test_shader_that_is_not_utf8_is_one_error(tmp_path):
+    bad = tmp_path / "latin.comp.glsl"
+    bad.write_bytes(b"#version 460\n// caf\xe9\nlayout(local_size_x = 1) in;\nvoid main() {}\n")
+    with pytest.raises(ShaderCompileError, match=r"latin\.comp\.glsl: not UTF-8 text \(byte 19"):
+        compile_glsl(bad)
+    bad.write_bytes(bad.read_bytes().replace(b"\xe9", b"e"))  # negative control
+    assert reflect(compile_glsl(bad).code).stage == "comp"
+
+
+def test_unwritable_cache_warns_and_still_compiles(tmp_path, monkeypatch, capsys):
+    (tmp_path / "a-file").write_text("")
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "a-file" / "spirv"))
+    src = write(tmp_path, "plain.comp.glsl",
+                "#version 460\nlayout(local_size_x = 2) in;\nvoid main() {}\n")
+    assert reflect(compile_glsl(src).code).local_size == (2, 1, 1)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rfw: warning: ") and "SPIR-V cache" in err[0]
