@@ -3,6 +3,8 @@
 # meshoptimizer sdist), .deb (Debian 12's glslang-tools, spirv-tools, vulkan-validationlayers),
 # .scenes (bench_meshlets.py --export-scenes). It sets PATH, LD_LIBRARY_PATH, PYTHONPATH,
 # VK_LAYER_PATH and VK_DRIVER_FILES so that rfw, its tests and the benchmarks run there.
+# benchmarks/device_prepare.sh builds .gl, .whl and .deb on a machine with network;
+# benchmarks/device_test.sh runs the test suite there.
 for f in .gl/*.deb; do dpkg -x "$f" /; done
 ldconfig
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
