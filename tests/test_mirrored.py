@@ -23,7 +23,7 @@ import pytest
 
 from rfw.config import apply_overrides, load_config
 from rfw.render import render, to_png_array
-from rfw.scene.model import Scene, Texture
+from rfw.scene.model import Camera, Scene, SceneError, Texture
 
 from .conftest import ROOT, tiny_scene
 
@@ -163,6 +163,25 @@ def test_unfixed_tangent_sign_fails_the_comparison(case, monkeypatch):
     assert mirror_mismatch(config, backend, sets) > 0.1
 
 
+def test_mirrored_courtyard_culls_the_same_meshlets():
+    # the mirrored cone: a mirror keeps angles, so the same meshlets face away as before
+    _needs("vk", "meshlet")
+    from rfw.scene import default_scene
+
+    cfg = apply_overrides(load_config(ROOT / "configs" / "meshlet.toml"), ["size=160x90"])
+    images, culling = [], []
+    for scene in (default_scene(), mirrored(default_scene())):
+        result = render(cfg, scene=scene, backend="vk")
+        formats = {r.name: r.format for r in result.executor.plan.resources}
+        ((name, img),) = result.images.items()
+        images.append(to_png_array(img, formats[name])[..., :3].astype(int))
+        culling.append(result.timings["culling"])
+    assert culling[0]["culled_cone"] > 0
+    assert culling[1] == culling[0]
+    diff = np.abs(images[1] - images[0][:, ::-1]).max(axis=-1)
+    assert (diff > TOL).mean() <= TIES
+
+
 def test_shading_differs_between_the_mirror_and_the_original():
     # the comparison is not trivially satisfied: the tiny scene is not mirror-symmetric
     original = image("forward", bumpy_scene(), "wgpu")
@@ -234,3 +253,21 @@ def test_only_zero_scale_nodes_is_one_error_line(tmp_path):
                       "singular or not finite)"]
     assert "Traceback" not in run.stderr
 
+
+
+# ---------------------------------------------------------------------------------------------
+# degenerate cameras
+
+
+def test_camera_looking_along_up_still_has_a_view():
+    cam = Camera((0.0, 5.0, 0.0), (0.0, 0.0, 0.0))  # straight down, up = +Y
+    view = cam.view()
+    assert np.all(np.isfinite(view))
+    centre = view @ np.array([0.0, 0.0, 0.0, 1.0])
+    assert np.allclose(centre[:3], [0.0, 0.0, -5.0], atol=1e-5)
+    assert np.allclose(view[:3, :3] @ view[:3, :3].T, np.identity(3), atol=1e-5)
+
+
+def test_camera_on_its_target_is_a_scene_error():
+    with pytest.raises(SceneError, match=r"camera 'c': position .* must be finite and apart"):
+        Camera((1.0, 2.0, 3.0), (1.0, 2.0, 3.0), name="c").view()

@@ -149,8 +149,16 @@ class Camera:
     def view(self) -> np.ndarray:
         eye, at, up = (np.asarray(v, np.float64) for v in (self.position, self.target, self.up))
         f = at - eye
-        f /= np.linalg.norm(f)
+        length = float(np.linalg.norm(f))
+        if not (np.all(np.isfinite(eye)) and 0.0 < length < np.inf):
+            raise SceneError(f"position {tuple(map(float, eye))} and target "
+                             f"{tuple(map(float, at))} must be finite and apart",
+                             element=f"camera {self.name!r}" if self.name else "camera")
+        f /= length
         s = np.cross(f, up)
+        if not np.linalg.norm(s) > 1e-6 * (np.linalg.norm(up) or 1.0):
+            # looking along 'up' (straight down, say): any other axis gives the image a top
+            s = np.cross(f, np.identity(3)[int(np.argmin(np.abs(f)))])
         s /= np.linalg.norm(s)
         u = np.cross(s, f)
         m = np.identity(4)
