@@ -246,7 +246,8 @@ def _command(job: Job, plan: Plan, out: Path) -> list[str]:
         return [sys.executable, str(PEERS_RUN), job.peer, "--scene", job.scene or "default",
                 "--size", f"{w}x{h}", "--frames", str(plan.peer_frames or plan.frames),
                 "--warmup", str(plan.warmup), "--out", str(out)]
-    cmd = [sys.executable, "-m", "rfw.bench.worker", "--config", job.config, "--size",
+    # -P: the working directory is the user's, and a folder there named rfw must not win
+    cmd = [sys.executable, "-P", "-m", "rfw.bench.worker", "--config", job.config, "--size",
            f"{w}x{h}", "--frames", str(plan.frames), "--warmup", str(max(1, plan.warmup)),
            "--backend", job.backend, "--out", str(out)]
     if job.scene:

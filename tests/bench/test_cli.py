@@ -19,15 +19,19 @@ TINY = ["--size", "64x36", "--frames", "2", "--warmup", "1", "--repeat", "1", "-
 
 
 def bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", "bench", *args], cwd=cwd,
+    # -P as the console script `rfw` has it: the working directory is not on sys.path
+    return subprocess.run([sys.executable, "-P", "-m", "rfw.cli", "bench", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=300, check=False)
 
 
 @pytest.fixture
 def elsewhere(tmp_path) -> Path:
-    """A working directory outside the repository with a config copy and a broken scene."""
+    """A working directory outside the repository with a config copy, a broken scene, and a
+    folder named rfw that the runs, started here, must not import."""
     shutil.copy(ROOT / "configs" / "forward.toml", tmp_path / "fwd.toml")
     (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00 cut short")
+    (tmp_path / "rfw").mkdir()
+    (tmp_path / "rfw" / "__init__.py").write_text("raise SystemExit('the wrong rfw')\n")
     return tmp_path
 
 
@@ -56,9 +60,7 @@ def test_relative_paths_from_another_directory_and_a_failed_run(elsewhere):
     text = (out / "report.md").read_text()
     assert "### fwd@wgpu default" in text and "| fwd@wgpu broken | 1 of 1 |" in text
     # compare resolves its folders from the working directory too
-    same = subprocess.run([sys.executable, "-m", "rfw.cli", "bench", "compare", "results",
-                           "results/results.jsonl"], cwd=elsewhere, capture_output=True,
-                          text=True, timeout=120, check=False)
+    same = bench(elsewhere, "compare", "results", "results/results.jsonl")
     assert same.returncode == 0, same.stderr
     assert "0 regression(s), 0 improvement(s)" in same.stdout
 
