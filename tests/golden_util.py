@@ -131,7 +131,7 @@ def image_diff(actual: np.ndarray, expected: np.ndarray) -> ImageDiff:
                      over1=int((per_pixel > 1).sum()), over2=int((per_pixel > 2).sum()),
                      mean_abs=float(np.abs(d).mean()),
                      mean_signed=float(np.abs(d.reshape(-1, d.shape[-1]).mean(axis=0)).max()),
-                     flip=flip_mean(a, b))
+                     flip=flip_mean(a, b) if d.any() else 0.0)  # FLIP of equal images is 0
 
 
 def mismatch(actual: np.ndarray, expected: np.ndarray, bounds: Bounds = BOUNDS) -> str:

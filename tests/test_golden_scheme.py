@@ -134,11 +134,12 @@ def test_other_cpu_render_matches_the_golden(path):
 def test_other_cpu_renders_are_not_all_identical():
     # the acceptance above means something only if the files differ: they do, up to 42
     # levels on a few shadow-edge pixels of deferred_ssao_shadows
-    diffs = {p.stem: image_diff(read_png(p), read_png(golden_util.GOLDEN / ADAPTER / p.name))
-             for p in other_cpu_files()}
-    worst = diffs["deferred_ssao_shadows__courtyard"]
-    assert worst.largest > 20 and worst.over2 > 0
-    assert sum(d.over1 > 0 for d in diffs.values()) >= 5
+    largest = {}
+    for p in other_cpu_files():
+        d = read_png(p).astype(int) - read_png(golden_util.GOLDEN / ADAPTER / p.name)
+        largest[p.stem] = int(np.abs(d).max())
+    assert largest["deferred_ssao_shadows__courtyard"] > 20
+    assert sum(v > 1 for v in largest.values()) >= 5
 
 
 @pytest.mark.parametrize("field, value", [
