@@ -1,7 +1,7 @@
 """Hypothesis mutates a valid glTF document (deletes, retypes and rescales its fields:
 accessors, bufferViews, nodes' matrix/scale/rotation/translation, meshes, materials, index
-values and counts) and the loader must either load it or raise ``SceneError``; any other
-exception is a loader bug. A loaded scene must also be drawable: every instance has a finite,
+values and counts, float32 extremes, NaN and infinity in the binary buffer) and the loader
+must either load it or raise ``SceneError``; any other exception is a loader bug. A loaded scene must also be drawable: every instance has a finite,
 invertible transform, and the bounds, default camera and instance uniforms are finite.
 
 Derandomized (the same examples on every run and machine), and bounded so it takes seconds;
@@ -65,6 +65,8 @@ def _space() -> list[tuple]:
 PATHS = _space()
 RETYPES = [None, True, "", "x", [], {}, [0], [[1]], {"a": 1}, -1, 0, 7, 1.5, 2 ** 31, 2 ** 63,
            1e308, -1e308, "SCALAR", "VEC4", "MAT4"]
+WORDS = [0x7F7FFFFF, 0xFF7FFFFF, 0x7F800000, 0x7FC00000, 0x00000001, 0x5F000000,
+         0xFFFFFFFF, 0]
 SCALES = [0, -1, 0.5, 3, 1e-30, 1e30, 1e-300, 1e300, 2 ** 20]
 TRANSFORMS = {
     "scale": [[0, 0, 0], [0, 1, 1], [-1, 1, 1], [-1, -1, -1], [1e-30, 1, 1], [1e30, 1e30, 1],
@@ -93,7 +95,7 @@ def _scale(value, factor):
 @st.composite
 def mutation(draw):
     kind = draw(st.sampled_from(["delete", "retype", "rescale", "transform", "count",
-                                 "index"]))
+                                 "index", "word"]))
     if kind == "transform":
         key = draw(st.sampled_from(sorted(TRANSFORMS)))
         return kind, key, draw(st.sampled_from(TRANSFORMS[key]))
@@ -101,6 +103,8 @@ def mutation(draw):
         return kind, None, draw(st.sampled_from([0, 1, 2, 3, 4, 5, 6, 1000, 2 ** 31, -1]))
     if kind == "index":
         return kind, None, draw(st.sampled_from([3, 4, 255, 2 ** 16 - 1, 2 ** 32 - 1]))
+    if kind == "word":  # a 32-bit word of the binary buffer: float32 extremes, NaN, inf
+        return kind, draw(st.integers(0, 10 ** 6)), draw(st.sampled_from(WORDS))
     path = draw(st.sampled_from(PATHS))
     value = draw(st.sampled_from(RETYPES if kind == "retype" else SCALES))
     return kind, path, value
@@ -146,6 +150,9 @@ def apply(g: Gltf, kind: str, path, value, pick: int) -> None:
             size = {5121: 1, 5123: 2, 5125: 4}[acc["componentType"]]
             at = view["byteOffset"] + acc.get("byteOffset", 0) + (acc["count"] - 1) * size
             g.bin[at:at + size] = int(value % (1 << (8 * size))).to_bytes(size, "little")
+        elif kind == "word":
+            at = 4 * (path % (len(g.bin) // 4))
+            g.bin[at:at + 4] = value.to_bytes(4, "little")
     except (KeyError, IndexError, TypeError, ValueError, ZeroDivisionError):
         pass  # an earlier change removed or retyped the place: the document stays as it is
 
