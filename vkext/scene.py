@@ -443,11 +443,12 @@ class VkScene:
 
     def _mirrored_meshes(self, up: _Upload) -> None:
         # a mirrored instance draws with two corners swapped and the tangent sign flipped
-        # (gpu_scene.mirrored_arrays): counter-clockwise front faces again, same pipelines
+        # (scene_data.mirrored_arrays): counter-clockwise front faces again, same pipelines
         scene = self.scene
         self.mirrored = [is_mirrored(i.transform) for i in scene.instances]
         self.mirrored_meshes: dict[int, _MeshBuffers] = {}
-        for k in sorted({i.mesh for i in scene.instances if is_mirrored(i.transform)}):
+        for k in sorted({i.mesh for i, m in zip(scene.instances, self.mirrored, strict=True)
+                         if m}):
             mesh, plain = scene.meshes[k], self.mesh_buffers[k]
             indices, tangents = mirrored_arrays(mesh)
             made = []

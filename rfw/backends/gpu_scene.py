@@ -64,7 +64,8 @@ class GpuScene:
     def _upload_meshes(self) -> None:
         v = wgpu.BufferUsage.VERTEX
         self.mirrored = [is_mirrored(i.transform) for i in self.scene.instances]
-        used_mirrored = {i.mesh for i in self.scene.instances if is_mirrored(i.transform)}
+        used_mirrored = {i.mesh for i, m in zip(self.scene.instances, self.mirrored, strict=True)
+                         if m}
         self.meshes = []
         self.mirrored_meshes: dict[int, tuple[list[Any], Any, int]] = {}
         for k, m in enumerate(self.scene.meshes):
