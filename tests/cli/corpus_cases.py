@@ -38,11 +38,9 @@ class Case:
     @property
     def out(self) -> str | None:
         """The --out folder (relative to the working folder), or None for commands without."""
-        if self.argv[0] != "run":
-            return None
         if "--out" in self.argv:
             return self.argv[self.argv.index("--out") + 1]
-        return "out"
+        return "out" if self.argv[0] == "run" else None
 
     def command(self) -> list[str]:
         argv = list(self.argv)
@@ -776,8 +774,8 @@ def shader_cases() -> list[Case]:
         _shader("glsl-syntax-error", f"{gf}:8", backend="vk",
                 glsl=g.replace("ivec2 p =", "ivec2 p = =").encode()),
         _shader("glsl-missing-binding", gf, copy, "t_src", backend="vk",
-                glsl=g.replace("layout(set = 0, binding = 0) uniform texture2D t_src;\n", "").replace(
-                    "texelFetch(t_src, p, 0)", "vec4(1.0)").encode()),
+                glsl=g.replace("layout(set = 0, binding = 0) uniform texture2D t_src;\n",
+                               "").replace("texelFetch(t_src, p, 0)", "vec4(1.0)").encode()),
         _shader("glsl-wrong-storage-format", gf, copy, "o_dst", backend="vk",
                 glsl=g.replace("rgba8)", "rgba16f)").encode()),
         _shader("glsl-invalid-utf8", f"{gf}:14", backend="vk",
@@ -786,9 +784,76 @@ def shader_cases() -> list[Case]:
     ]
 
 
+# ---------------------------------------------------------------------------------------------
+# the other commands: view, new-pass, meshlets, scenes, bench
+
+
+def _other(id: str, argv: tuple[str, ...], *needles: str, area: str,
+           files: dict[str, bytes] | None = None,
+           setup: Callable[[Path], None] | None = None) -> Case:
+    return Case(id, argv, files or {}, needles, setup, area=area)
+
+
+def other_cases() -> list[Case]:
+    shot = ("--screenshot", "s.png")
+    bench = ("--frames", "1", "--warmup", "0", "--repeat", "1", "--size", "32x18", "--out", "b")
+    return [
+        _other("view-missing-scene", ("view", FORWARD, "--scene", "nope.glb", "--frames", "1"),
+               "nope.glb", area="view"),
+        _other("view-malformed-config", ("view", "c.toml", "--frames", "1"), "c.toml",
+               "line 1", files={"c.toml": b"name = \n"}, area="view"),
+        _other("view-frames-negative", ("view", FORWARD, "--frames", "-1"), "--frames",
+               area="view"),
+        _other("new-pass-dotdot", ("new-pass", "../../evil", "--dir", "passes"), "../../evil",
+               area="new-pass"),
+        _other("new-pass-absolute", ("new-pass", "/tmp/rfw-corpus-evil"), "/tmp/rfw-corpus-evil",
+               area="new-pass"),
+        _other("new-pass-capitals", ("new-pass", "BadName", "--dir", "p"), "BadName",
+               area="new-pass"),
+        _other("new-pass-keyword", ("new-pass", "class", "--dir", "p"), "class", area="new-pass"),
+        _other("new-pass-exists", ("new-pass", "mine", "--dir", "p"), "mine",
+               setup=_mkdir("p/mine"), area="new-pass"),
+        _other("new-pass-dir-is-a-file", ("new-pass", "mine", "--dir", "afile"), "afile",
+               setup=_file("afile"), area="new-pass"),
+        _other("meshlets-missing-mesh", ("meshlets", "show", "nope.obj", *shot), "nope.obj",
+               area="meshlets"),
+        _other("meshlets-broken-mesh", ("meshlets", "show", "m.ply", *shot), "m.ply",
+               files={"m.ply": b"ply\nformat ascii 1.0\n"}, area="meshlets"),
+        _other("meshlets-default-unknown-part", ("meshlets", "show", "default:nothing", *shot),
+               "nothing", area="meshlets"),
+        _other("meshlets-max-triangles-odd", ("meshlets", "show", "default", "--max-triangles",
+                                              "7", *shot), "--max-triangles", area="meshlets"),
+        _other("meshlets-max-vertices-zero", ("meshlets", "show", "default", "--max-vertices",
+                                              "0", *shot), "--max-vertices", area="meshlets"),
+        _other("meshlets-cone-weight-nan", ("meshlets", "show", "default", "--cone-weight",
+                                            "nan", *shot), "--cone-weight", area="meshlets"),
+        _other("meshlets-screenshot-in-missing-folder", ("meshlets", "show", "m.obj",
+                                                         "--screenshot", "afile/s.png"),
+               "afile/s.png", files={"m.obj": TRI_OBJ}, setup=_file("afile"), area="meshlets"),
+        _other("scenes-fetch-unknown", ("scenes", "fetch", "no_such_scene"), "no_such_scene",
+               area="scenes"),
+        _other("bench-missing-config", ("bench", "nope.toml", *bench), "nope.toml",
+               area="bench"),
+        _other("bench-malformed-config", ("bench", "c.toml", *bench), "c.toml", "line 1",
+               files={"c.toml": b"name = \n"}, area="bench"),
+        _other("bench-frames-zero", ("bench", FORWARD, *bench, "--frames", "0"), "--frames",
+               area="bench"),
+        _other("bench-repeat-zero", ("bench", FORWARD, *bench, "--repeat", "0"), "--repeat",
+               area="bench"),
+        _other("bench-timeout-nan", ("bench", FORWARD, *bench, "--timeout", "nan"),
+               "--timeout", area="bench"),
+        _other("bench-vary-malformed", ("bench", FORWARD, *bench, "--vary", "nokey"), "nokey",
+               area="bench"),
+        _other("bench-set-unknown-pass", ("bench", FORWARD, *bench, "--set", "nopass.x=1"),
+               "nopass", area="bench"),
+        _other("bench-compare-missing", ("bench", "compare", "old", "new"), "old",
+               area="bench"),
+    ]
+
+
 def all_cases() -> list[Case]:
     return [*scene_cases(), *config_cases(), *config_path_cases(), *cli_cases(),
-            *graph_cases(), *shader_cases()]
+            *graph_cases(), *shader_cases(), *other_cases()]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -819,7 +884,7 @@ class Accepted:
     env: dict[str, str] = field(default_factory=dict)
 
     def command(self) -> list[str]:
-        return [*self.argv, *SMALL, "--out", "out"]
+        return [*self.argv, *SMALL, "--out", "out"] if self.argv[0] == "run" else list(self.argv)
 
 
 ACCEPTED = [
@@ -838,6 +903,12 @@ ACCEPTED = [
              {"sub/c.toml": BASE.replace('scene = "default"', 'scene = "t.obj"').encode(),
               "sub/t.obj": TRI_OBJ}),
     Accepted("set-boolean-spelling", ("run", FORWARD, "--set", "shadow.enabled=on")),
+    # the README points at these
+    Accepted("graph-plan-of-a-run-config", ("graph", "plan", DEFERRED)),
+    Accepted("readme-rt-shadows-ray-pipeline-ssao",
+             ("run", str(ROOT / "configs" / "rt_shadows.toml"), "--backend", "vk", "--set",
+              "shadows=ray_pipeline", "--set", "ao=ssao", "--scene", "t.obj"),
+             {"t.obj": TRI_OBJ}),
     Accepted("spirv-cache-truncated", ("run", DEFERRED, "--backend", "vk"),
              warm=("run", DEFERRED, "--backend", "vk"), damage=_truncate_one("cache/rfw/spirv"),
              warning=True),
