@@ -20,7 +20,7 @@ from .errors import GraphError, did_you_mean
 from .formats import UnknownFormatError, canonical, format_info, image_bytes
 from .graph import Graph, PassDecl
 from .resources import Binding, ResourceDecl, SizeRule, Slot
-from .sync import State, is_write, merge_states, state_for
+from .sync import State, merge_states, state_for
 
 # step executions (cache misses), so tests and benchmarks can see what a recompile redid
 STATS: Counter[str] = Counter()
@@ -359,13 +359,12 @@ _ROLE = {"reference": "order", "history": "history"}
 
 def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -> Access | None:
     spec = b.spec
-    where = _slot_where(p, b)
     if spec.format and r.format and canonical(spec.format) != canonical(r.format):
-        problems.error(f"{where}: declares format {spec.format} but '{r.name}' is {r.format}")
+        problems.error(f"{_slot_where(p, b)}: declares format {spec.format} but '{r.name}' is {r.format}")
         return None
     if b.direction == "out":
         if spec.type in ("history", "shading_rate"):
-            problems.error(f"{where}: a {spec.type} slot can only be an input")
+            problems.error(f"{_slot_where(p, b)}: a {spec.type} slot can only be an input")
             return None
         role = "modify" if spec.type == "reference" else "produce"
     else:
@@ -376,18 +375,32 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
     slot_kind = {"buffer": "buffer", "accel": "accel"}.get(spec.type, "image")
     if r.kind != slot_kind and spec.type != "reference":
         what = {"image": "an image", "buffer": "a buffer", "accel": "an acceleration structure"}
-        problems.error(f"{where}: '{r.name}' is {what[r.kind]}, not usable as {spec.type}")
+        problems.error(f"{_slot_where(p, b)}: '{r.name}' is {what[r.kind]}, not usable as "
+                       f"{spec.type}")
         return None
     usages = _usages(p, b, r)
-    fmt = format_info(r.format) if r.format else None
-    states = [state_for(u, pass_type=p.type, write=role in ("produce", "modify"),
-                        read=role != "produce" or spec.load == "load",
+    key = (usages, p.type, role, spec.load == "load", r.format, r.kind, spec.stages)
+    state = _STATES.get(key)
+    if state is None:
+        state = _STATES[key] = _state_of(*key)
+    return Access(p.name, r.name, role, usages, state, (b.slot,), spec.load)
+
+
+# big graphs repeat a few kinds of access: their states are worked out once
+_STATES: dict[tuple, State] = {}
+
+
+def _state_of(usages: frozenset[str], pass_type: str, role: str, loads: bool,
+              format: str | None, kind: str, stages: frozenset[str]) -> State:
+    fmt = format_info(format) if format else None
+    states = [state_for(u, pass_type=pass_type, write=role in ("produce", "modify"),
+                        read=role != "produce" or loads,
                         depth=bool(fmt and fmt.depth), stencil=bool(fmt and fmt.stencil),
-                        image=r.kind == "image", stages=spec.stages) for u in sorted(usages)]
+                        image=kind == "image", stages=stages) for u in sorted(usages)]
     state = states[0]
     for s in states[1:]:
         state = merge_states(state, s) or state
-    return Access(p.name, r.name, role, usages, state, (b.slot,), spec.load)
+    return state
 
 
 def _usages(p: PassDecl, b: Binding, r: ResourceDecl) -> frozenset[str]:
@@ -769,32 +782,153 @@ _PLACEMENT_ORDERS = (
 
 
 def _place(items: list[Item]) -> tuple[int, dict[str, int]]:
-    """Best fit: each item takes the smallest gap among live neighbours that holds it."""
-    bucket = 64  # schedule positions per index bucket: finds overlaps without an n^2 scan
+    """Best fit: each item takes the smallest gap among live neighbours that holds it.
+
+    The gaps depend only on the union of the byte ranges of the placed items whose
+    lifetimes overlap the item's, so a segment tree over schedule positions keeps such
+    unions: scanning every overlapping item made graphs with many long-lived resources
+    quadratic.
+    """
+    if any(it.size <= 0 for it in items) or _scan_is_cheaper(items):
+        return _place_buckets(items)  # empty items can sit in zero-byte gaps
+    return _place_tree(items)
+
+
+def _place_tree(items: list[Item]) -> tuple[int, dict[str, int]]:
+    tree = _SpanTree(max((it.last for it in items), default=0) + 1)
+    offsets: dict[str, int] = {}
+    top = 0
+    for it in items:
+        offset = _best_gap(tree.busy(it.first, it.last), it.size)
+        tree.add(it.first, it.last, offset, offset + it.size)
+        offsets[it.name] = offset
+        top = max(top, offset + it.size)
+    return top, offsets
+
+
+def _best_gap(busy: list[tuple[int, int]], size: int) -> int:
+    """The start of the smallest free gap (lowest first on ties) that holds ``size`` bytes
+    below or between ``busy`` ranges (sorted by start); else the top of them."""
+    offset, gap_best, cursor = None, None, 0
+    for start, end in busy:
+        gap = start - cursor
+        if gap >= size and (gap_best is None or gap < gap_best):
+            offset, gap_best = cursor, gap
+        if end > cursor:
+            cursor = end
+    return cursor if offset is None else offset
+
+
+class _SpanTree:
+    """Byte ranges of items keyed by their schedule span [first, last].
+
+    Node ``n`` covers a range of positions; ``here[n]`` unites the items stored at ``n``
+    (their span covers n's range: its canonical pieces) and ``below[n]`` those stored at n or
+    under it. The items overlapping a span are exactly those stored under its canonical
+    nodes or at one of their ancestors.
+    """
+
+    def __init__(self, positions: int):
+        self.leaves = 1 << max(positions - 1, 0).bit_length()
+        self.here: dict[int, _Union] = {}
+        self.below: dict[int, _Union] = {}
+
+    def _nodes(self, first: int, last: int) -> tuple[list[int], set[int]]:
+        canonical: list[int] = []
+        lo, hi = first + self.leaves, last + self.leaves + 1
+        while lo < hi:
+            if lo & 1:
+                canonical.append(lo)
+                lo += 1
+            if hi & 1:
+                hi -= 1
+                canonical.append(hi)
+            lo >>= 1
+            hi >>= 1
+        above: set[int] = set()
+        for n in canonical:
+            n >>= 1
+            while n and n not in above:
+                above.add(n)
+                n >>= 1
+        return canonical, above
+
+    def add(self, first: int, last: int, start: int, end: int) -> None:
+        canonical, above = self._nodes(first, last)
+        for n in canonical:
+            self.here.setdefault(n, _Union()).add(start, end)
+            self.below.setdefault(n, _Union()).add(start, end)
+        for n in above:
+            self.below.setdefault(n, _Union()).add(start, end)
+
+    def busy(self, first: int, last: int) -> list[tuple[int, int]]:
+        canonical, above = self._nodes(first, last)
+        parts = [self.below[n] for n in canonical if n in self.below]
+        parts += [self.here[n] for n in above if n in self.here]
+        if not parts:
+            return []
+        if len(parts) == 1:
+            return list(zip(parts[0].starts, parts[0].ends))
+        return sorted(r for u in parts for r in zip(u.starts, u.ends))
+
+
+class _Union:
+    """Disjoint byte ranges, sorted; touching or overlapping ranges are merged."""
+
+    __slots__ = ("starts", "ends")
+
+    def __init__(self) -> None:
+        self.starts: list[int] = []
+        self.ends: list[int] = []
+
+    def add(self, start: int, end: int) -> None:
+        starts, ends = self.starts, self.ends
+        i = bisect.bisect_left(ends, start)  # first range ending at or after start
+        j = bisect.bisect_right(starts, end)  # past the last range starting at or before end
+        if i < j:
+            start, end = min(start, starts[i]), max(end, ends[j - 1])
+        starts[i:j] = [start]
+        ends[i:j] = [end]
+
+
+_BUCKET = 64  # schedule positions per bucket of the scanning placement
+
+
+def _place_buckets(items: list[Item]) -> tuple[int, dict[str, int]]:
+    """Best fit by scanning the overlapping items themselves, found through buckets of
+    positions: fast when few items overlap, and exact for empty items too."""
     index: dict[int, list[tuple[int, int, int, int]]] = defaultdict(list)
     offsets: dict[str, int] = {}
     top = 0
     for it in items:
         seen: set[tuple[int, int, int, int]] = set()
-        for b in range(it.first // bucket, it.last // bucket + 1):
+        for b in range(it.first // _BUCKET, it.last // _BUCKET + 1):
             for entry in index[b]:
                 if entry[2] <= it.last and it.first <= entry[3]:
                     seen.add(entry)
-        busy = sorted(seen)
-        offset, gap_best, cursor = None, None, 0
-        for start, end, _, _ in busy:
-            gap = start - cursor
-            if gap >= it.size and (gap_best is None or gap < gap_best):
-                offset, gap_best = cursor, gap
-            cursor = max(cursor, end)
-        if offset is None:
-            offset = cursor
+        offset = _best_gap([(s, e) for s, e, _, _ in sorted(seen)], it.size)
         entry = (offset, offset + it.size, it.first, it.last)
-        for b in range(it.first // bucket, it.last // bucket + 1):
+        for b in range(it.first // _BUCKET, it.last // _BUCKET + 1):
             index[b].append(entry)
         offsets[it.name] = offset
         top = max(top, offset + it.size)
     return top, offsets
+
+
+def _scan_is_cheaper(items: list[Item]) -> bool:
+    """Whether scanning overlapping items beats the span tree: the scan costs about the
+    squared bucket occupancy (long-lived items crowd every bucket), the tree a few dozen
+    range updates per item."""
+    last = max((it.last for it in items), default=0) // _BUCKET + 2
+    delta = [0] * last
+    for it in items:
+        delta[it.first // _BUCKET] += 1
+        delta[it.last // _BUCKET + 1] -= 1
+    crowd = live = 0
+    for d in delta:
+        live += d
+        crowd += live * live
+    return crowd // 2 <= 40 * len(items) * max(last.bit_length(), 1)
 
 
 def lower_bound(items: Iterable[Item], positions: int) -> int:
@@ -870,7 +1004,7 @@ def plan_barriers(declared: Declared, schedule: list[int], resolved: dict[str, R
 
 
 def _write_access(s: State | None) -> frozenset[str]:
-    return frozenset(x for x in s.access if is_write(x)) if s else frozenset()
+    return s.write_access if s else frozenset()
 
 
 def _stages_of(s: State | None) -> frozenset[str]:

@@ -16,6 +16,7 @@ from typing import Any
 
 import tomli_w
 
+from ..errors import check_identifier
 from .errors import GraphError, did_you_mean
 from .graph import Graph, GraphBuilder, PassBuilder
 from .resources import LOAD_OPS, PASS_TYPES, SLOT_TYPES, SizeRule, Slot
@@ -44,9 +45,40 @@ def _read(path: Path) -> str:
         raise GraphError(f"cannot read: {e}", file=str(path)) from None
 
 
-def _line_of(text: str, pattern: str) -> int | None:
-    m = re.search(pattern, text)
-    return None if m is None else text.count("\n", 0, m.start()) + 1
+class _Lines:
+    """Where each pass name first appears in a file, indexed in one sweep.
+
+    A regex per pass made loading quadratic in the file size; the sweep records the first
+    ``key = "value"`` (TOML) or ``"key": "value"`` (JSON) line of every quote-free value.
+    """
+
+    def __init__(self, text: str, pattern: str, value: Callable[[str], str]):
+        self.text, self.value = text, value
+        self.first: dict[str, int] = {}
+        line, pos = 1, 0
+        for m in re.finditer(pattern, text):
+            line += text.count("\n", pos, m.start())
+            pos = m.start()
+            self.first.setdefault(m.group(1), line)
+
+    def of(self, name: str) -> int | None:
+        if name in self.first:
+            return self.first[name]
+        if not any(c in name for c in "\"'\\\n"):
+            return None  # the sweep saw every quote-free value
+        # names with quotes or escapes are rare: search for them one by one
+        m = re.search(self.value(re.escape(name)), self.text)
+        return None if m is None else self.text.count("\n", 0, m.start()) + 1
+
+
+def _toml_lines(text: str) -> _Lines:
+    return _Lines(text, r'name\s*=\s*["\']([^"\'\n]*)["\']',
+                  lambda name: r'name\s*=\s*["\']' + name + r'["\']')
+
+
+def _raptor_lines(text: str) -> _Lines:
+    return _Lines(text, r'"name"\s*:\s*"([^"\\\n]*)"',
+                  lambda name: r'"name"\s*:\s*"' + name + '"')
 
 
 class _Checker:
@@ -131,8 +163,9 @@ def loads_toml(text: str, *, source: str = "<toml>", strict: bool | None = None)
     passes = check.type(data.get("pass", []), list, "[[pass]]")
     if not passes:
         check.fail("the graph has no [[pass]] tables")
+    lines = _toml_lines(text)
     for i, table in enumerate(passes):
-        _toml_pass(g, table, i, text, check)
+        _toml_pass(g, table, i, lines, check)
     if "outputs" in data:
         g.output(*check.strings(check.type(data["outputs"], list, "graph 'outputs'"),
                                 "graph 'outputs'"))
@@ -146,16 +179,18 @@ def _with_warnings(graph: Graph, warnings: list[tuple[str, str]]) -> Graph:
     return replace(graph, diagnostics=tuple(warnings)) if warnings else graph
 
 
-def _toml_pass(g: GraphBuilder, table: Any, i: int, text: str, check: _Checker) -> None:
+def _toml_pass(g: GraphBuilder, table: Any, i: int, lines: _Lines, check: _Checker) -> None:
     check.type(table, dict, f"[[pass]] #{i + 1}")
     if "name" not in table:
         check.fail(f"[[pass]] #{i + 1}: missing 'name'")
     name = check.type(table["name"], str, f"[[pass]] #{i + 1} 'name'")
     where = f"pass '{name}'"
-    line = _line_of(text, r'name\s*=\s*["\']' + re.escape(name) + r'["\']')
+    line = lines.of(name)
     origin = f"line {line}" if line else None
     if origin:
         where += f" ({origin})"
+    check_identifier("pass", name, file=check.source,
+                     element=f"[[pass]] #{i + 1}" + (f" ({origin})" if origin else ""))
     check.keys(table, _PASS_KEYS, where)
     ptype = check.type(table.get("type", "graphics"), str, f"{where}: 'type'")
     if ptype not in PASS_TYPES:
@@ -397,17 +432,20 @@ def loads_raptor(text: str, *, source: str = "<json>", strict: bool | None = Non
     passes = check.type(data.get("passes"), list, "graph 'passes'")
     g = GraphBuilder(str(data.get("name", Path(source).stem)), size=RAPTOR_DEFAULT_SIZE,
                      strict=strict, source=source)
+    lines = _raptor_lines(text)
     for i, p in enumerate(passes):
-        _raptor_pass(g, p, i, text, check)
+        _raptor_pass(g, p, i, lines, check)
     return _with_warnings(g.build(), check.warnings)
 
 
-def _raptor_pass(g: GraphBuilder, p: Any, i: int, text: str, check: _Checker) -> None:
+def _raptor_pass(g: GraphBuilder, p: Any, i: int, lines: _Lines, check: _Checker) -> None:
     check.type(p, dict, f"passes[{i}]")
     name = check.type(p.get("name"), str, f"passes[{i}] 'name'")
-    line = _line_of(text, r'"name"\s*:\s*"' + re.escape(name) + '"')
+    line = lines.of(name)
     origin = f"line {line}" if line else None
     where = f"pass '{name}'" + (f" ({origin})" if origin else "")
+    check_identifier("pass", name, file=check.source,
+                     element=f"passes[{i}]" + (f" ({origin})" if origin else ""))
     check.keys(p, _R_PASS_KEYS, where)
     rtype = check.type(p.get("type", ""), str, f"{where}: 'type'")
     if rtype not in _R_PASS_TYPES:

@@ -7,6 +7,7 @@ the ``_BIT`` suffix; vkext maps them back, the wgpu backend only needs the usage
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 # shader stages a pass of each type reads and writes resources in
 SHADER_STAGES = {
@@ -30,7 +31,11 @@ class State:
 
     @property
     def writes(self) -> bool:
-        return any(is_write(a) for a in self.access)
+        return bool(write_access(self.access))
+
+    @property
+    def write_access(self) -> frozenset[str]:
+        return write_access(self.access)
 
     def merge(self, other: State) -> State:
         return State(self.layout, self.stages | other.stages, self.access | other.access)
@@ -43,9 +48,22 @@ class State:
 UNDEFINED = State("UNDEFINED", NONE, NONE)
 
 
+@cache
 def is_write(access: str) -> bool:
     """Whether an access name writes (extension accesses end in _KHR/_EXT)."""
     return access.removesuffix("_KHR").removesuffix("_EXT").endswith("WRITE")
+
+
+# the barrier planner asks this of the same few access sets again and again
+_WRITE_ACCESS: dict[frozenset[str], frozenset[str]] = {}
+
+
+def write_access(access: frozenset[str]) -> frozenset[str]:
+    """The writing part of a set of accesses."""
+    w = _WRITE_ACCESS.get(access)
+    if w is None:
+        w = _WRITE_ACCESS[access] = frozenset(a for a in access if is_write(a))
+    return w
 
 
 def _depth_layout(depth: bool, stencil: bool, read_only: bool) -> str:

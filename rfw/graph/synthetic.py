@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import random
 
 from .graph import Graph, GraphBuilder
@@ -49,3 +50,38 @@ def synthetic_graph(passes: int, *, seed: int = 0, window: int = 8, fan_in: int 
                          else o for o in p.outputs]
     g.output(made[-1][1])
     return g.build()
+
+
+def chain_graph(passes: int, *, format: str = "rgba8unorm") -> Graph:
+    """``passes`` passes in a line, each reading the previous one's colour: the deepest graph
+    of its size, with one live resource at a time."""
+    g = GraphBuilder(f"chain_{passes}", size=(1920, 1080))
+    g.add_pass("p0").output("color", Attachment(format))
+    for i in range(1, passes):
+        g.add_pass(f"p{i}").input("src", f"p{i - 1}.color").output("color", Attachment(format))
+    return g.build()
+
+
+_RAPTOR_OUT = {"texture": "attachment", "attachment": "attachment", "depth": "attachment",
+               "buffer": "buffer"}
+_RAPTOR_IN = {"texture": "texture", "storage": "attachment", "attachment": "attachment",
+              "depth": "attachment", "buffer": "buffer"}
+
+
+def to_raptor_json(graph: Graph) -> str:
+    """A graph as a Raptor engine JSON frame graph, for loader benchmarks: attachments keep
+    their format and output scale, buffers become application-owned, as Raptor has them."""
+    passes = []
+    for p in graph.passes:
+        ins = [{"type": _RAPTOR_IN[b.spec.type], "name": b.resource} for b in p.inputs]
+        outs = []
+        for b in p.outputs:
+            out: dict = {"type": _RAPTOR_OUT[b.spec.type], "name": b.resource}
+            if out["type"] == "attachment":
+                scale = b.spec.size.scale if b.spec.size else (1.0, 1.0)
+                out.update(format=b.spec.format, resolution_scale=list(scale),
+                           load_operation="VK_ATTACHMENT_LOAD_OP_CLEAR")
+            outs.append(out)
+        passes.append({"name": p.name, "type": p.type if p.type == "compute" else "",
+                       "inputs": ins, "outputs": outs})
+    return json.dumps({"name": graph.name, "passes": passes}, indent=4)
