@@ -19,7 +19,7 @@ from .bridges import insert_bridges
 from .errors import GraphError, did_you_mean
 from .formats import UnknownFormatError, canonical, format_info, image_bytes
 from .graph import Graph, PassDecl
-from .resources import Binding, ResourceDecl, SizeRule, Slot
+from .resources import BUFFER_USAGES, IMAGE_USAGES, Binding, ResourceDecl, SizeRule, Slot
 from .sync import State, merge_states, state_for
 
 # step executions (cache misses), so tests and benchmarks can see what a recompile redid
@@ -28,6 +28,7 @@ STATS: Counter[str] = Counter()
 # pass types whose attachments are real render targets (compute writes them as storage)
 RASTER = frozenset({"graphics", "mesh"})
 MAX_DIMENSION = 65536  # beyond any device's image limit: a size rule gone wrong
+KNOWN_USAGES = BUFFER_USAGES | IMAGE_USAGES | {"accel_build", "accel_read"}
 IMPLIED_CAPS = {"mesh": ("VK_EXT_mesh_shader",), "ray_tracing": ("VK_KHR_ray_tracing_pipeline",)}
 
 
@@ -133,6 +134,10 @@ class CompiledGraph:
     accesses: dict[str, tuple[Access, ...]] = field(compare=False)  # per scheduled pass
     edges: tuple[tuple[str, str, str], ...] = ()  # (from, to, "data" | "order")
     outputs: tuple[str, ...] = ()
+    # where the output size came from: "graph" (its own) or "given" (the caller's)
+    size_from: str = field(default="graph", compare=False)
+    # images sized from the output size (directly or through others); 0: all fixed
+    follow_output: int = field(default=0, compare=False)
 
     def resource(self, name: str) -> ResourcePlan:
         for r in self.resources:
@@ -377,6 +382,11 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
         what = {"image": "an image", "buffer": "a buffer", "accel": "an acceleration structure"}
         problems.error(f"{_slot_where(p, b)}: '{r.name}' is {what[r.kind]}, not usable as "
                        f"{spec.type}")
+        return None
+    unknown = sorted(spec.usage - KNOWN_USAGES)
+    if unknown:
+        problems.error(f"{_slot_where(p, b)}: unknown usage '{unknown[0]}'"
+                       + did_you_mean(unknown[0], KNOWN_USAGES))
         return None
     usages = _usages(p, b, r)
     key = (usages, p.type, role, spec.load == "load", r.format, r.kind, spec.stages)
@@ -668,7 +678,8 @@ def resolve(declared: Declared, used: Iterable[str], size: tuple[int, int],
         try:
             raw = image_bytes(r.format, w, h, mips=r.mips, layers=r.layers, samples=r.samples)
         except ValueError as e:
-            problems.error(f"'{name}': {e}")
+            where = f"pass '{r.producer}', slot '{r.slot}': " if r.producer else ""
+            problems.error(f"{where}'{name}': {e}")
             continue
         out[name] = Resolved(name, "image", r.format, w, h, r.mips, r.layers, r.samples, raw)
     return out
@@ -868,14 +879,14 @@ class _SpanTree:
         if not parts:
             return []
         if len(parts) == 1:
-            return list(zip(parts[0].starts, parts[0].ends))
-        return sorted(r for u in parts for r in zip(u.starts, u.ends))
+            return list(zip(parts[0].starts, parts[0].ends, strict=True))
+        return sorted(r for u in parts for r in zip(u.starts, u.ends, strict=True))
 
 
 class _Union:
     """Disjoint byte ranges, sorted; touching or overlapping ranges are merged."""
 
-    __slots__ = ("starts", "ends")
+    __slots__ = ("ends", "starts")
 
     def __init__(self) -> None:
         self.starts: list[int] = []
@@ -1170,6 +1181,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     Pure and deterministic. Results are memoised: compiling an unchanged graph again is a
     dictionary lookup, and a changed graph reuses the memory plan when lifetimes are equal.
     """
+    size_from = "graph" if size is None else "given"
     size = size or graph.size
     if size is None:
         raise GraphError("no output size given (pass size=(w, h) or declare one in the graph)",
@@ -1178,7 +1190,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
         raise GraphError(f"output size {size[0]}x{size[1]} is not positive", file=graph.source)
     caps = None if caps is None else frozenset(caps)
     strict = graph.strict if strict is None else strict
-    key = (graph, tuple(size), caps, strict, cull_passes, memory, backend)
+    key = (graph, tuple(size), size_from, caps, strict, cull_passes, memory, backend)
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
@@ -1188,8 +1200,8 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     gc.disable()
     try:
         graph = insert_bridges(graph, backend)
-        result = _compile(graph, (int(size[0]), int(size[1])), caps, strict, cull_passes,
-                          memory)
+        result = replace(_compile(graph, (int(size[0]), int(size[1])), caps, strict,
+                                  cull_passes, memory), size_from=size_from)
     except GraphError as e:
         raise e.in_file(graph.source) from None
     finally:
@@ -1242,7 +1254,22 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
                     for (a, b), kind in sorted(declared.edges.items())
                     if a in kept and b in kept),
         outputs=declared.outputs,
+        follow_output=sum(_follows_output(n, declared.resources) for n, r in resolved.items()
+                          if r.kind == "image" and r.format),
     )
+
+
+def _follows_output(name: str, resources: dict[str, ResourceDecl]) -> bool:
+    seen: set[str] = set()
+    while name in resources and name not in seen:
+        seen.add(name)
+        rule = resources[name].size
+        if rule is None or rule.mode == "output":
+            return True
+        if rule.mode == "fixed" or rule.of is None:
+            return False
+        name = rule.of
+    return False
 
 
 def _kept_history(declared: Declared, used: set[str]) -> Declared:

@@ -16,9 +16,18 @@ def _table(rows: list[list[str]], header: list[str]) -> list[str]:
             *(fmt.format(*map(str, r)).rstrip() for r in rows)]
 
 
+def _header(c: CompiledGraph) -> str:
+    whose = "its own size" if c.size_from == "graph" else "given size"
+    fixed = sorted({(r.width, r.height) for r in c.resources if r.kind == "image" and r.format})
+    if fixed and not c.follow_output:  # say so when the output size sizes nothing
+        sizes = ", ".join(f"{w}x{h}" for w, h in fixed)
+        whose += f"; no image follows it, all have fixed sizes: {sizes}"
+    return f"graph '{c.name}' at {c.size[0]}x{c.size[1]} ({whose})"
+
+
 def describe(c: CompiledGraph) -> str:
     """The plan as text: order, culled/disabled passes, memory, barriers, totals."""
-    out = [f"graph '{c.name}' at {c.size[0]}x{c.size[1]}", ""]
+    out = [_header(c), ""]
     out.append(f"order ({len(c.order)} passes):")
     out += [f"  {i:>3}  {name}" for i, name in enumerate(c.order)]
     out.append(f"culled:   {', '.join(c.culled) or '-'}")

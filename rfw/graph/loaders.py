@@ -19,7 +19,7 @@ import tomli_w
 from ..errors import check_identifier
 from .errors import GraphError, did_you_mean
 from .graph import Graph, GraphBuilder, PassBuilder
-from .resources import LOAD_OPS, PASS_TYPES, SLOT_TYPES, SizeRule, Slot
+from .resources import BUFFER_USAGES, IMAGE_USAGES, LOAD_OPS, PASS_TYPES, SLOT_TYPES, SizeRule, Slot
 
 # the Raptor engine's samples run in a 1280x800 window: its relative sizes scale that
 RAPTOR_DEFAULT_SIZE = (1280, 800)
@@ -38,11 +38,18 @@ def load_graph(path: str | Path, *, strict: bool | None = None) -> Graph:
 
 def _read(path: Path) -> str:
     try:
-        return path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise GraphError("file not found", file=str(path)) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise GraphError(f"cannot read: {e}", file=str(path)) from None
+    except OSError as e:
+        raise GraphError(f"cannot read: {e.strerror or e}", file=str(path)) from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        column = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        raise GraphError(f"not UTF-8 text: byte 0x{data[e.start]:02x} at line {line}, column "
+                         f"{column}", file=str(path)) from None
 
 
 class _Lines:
@@ -262,6 +269,9 @@ def _toml_slot(spec: Mapping[str, Any], where: str, check: _Checker, *, out: boo
             kw[key] = check.type(spec[key], bool, f"{where}: '{key}'")
     if "usage" in spec:
         kw["usage"] = frozenset(check.strings(spec["usage"], f"{where}: 'usage'"))
+        for u in sorted(kw["usage"] - BUFFER_USAGES - IMAGE_USAGES):
+            check.fail(f"{where}: 'usage': unknown usage '{u}'"
+                       + did_you_mean(u, BUFFER_USAGES | IMAGE_USAGES))
     if "stages" in spec:
         kw["stages"] = frozenset(check.strings(spec["stages"], f"{where}: 'stages'"))
     if "load" in spec:

@@ -161,7 +161,7 @@ def test_pass_lines_come_from_one_sweep():
         line = int(p.origin.removeprefix("line "))
         assert f'"name": "{p.name}"' in lines[line - 1]
     # negative control: the line of another pass does not hold this one's name
-    assert f'"name": "p7"' not in lines[int(g.passes[8].origin.removeprefix("line ")) - 1]
+    assert '"name": "p7"' not in lines[int(g.passes[8].origin.removeprefix("line ")) - 1]
 
 
 def test_a_pass_name_that_is_no_identifier_names_file_and_line(tmp_path):
