@@ -147,11 +147,13 @@ def _cached(path: Path) -> bytes | None:
 def _with_include_extension(path: Path, tmp: Path) -> Path:
     # glslang needs GL_GOOGLE_include_directive for #include; add it after #version so
     # shader files stay plain, and keep line numbers with #line
+    data = path.read_bytes()
     try:
-        text = path.read_text(encoding="utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise ShaderCompileError(f"not UTF-8 text (byte {e.start}: {e.reason})",
-                                 file=str(path)) from None
+        line = data.count(b"\n", 0, e.start) + 1
+        raise ShaderCompileError(f"not UTF-8 text (byte {data[e.start]:#04x}: {e.reason})",
+                                 file=f"{path}:{line}") from None
     if "#include" not in text or "GL_GOOGLE_include_directive" in text:
         return path
     lines = text.splitlines()
