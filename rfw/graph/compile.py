@@ -365,7 +365,8 @@ _ROLE = {"reference": "order", "history": "history"}
 def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -> Access | None:
     spec = b.spec
     if spec.format and r.format and canonical(spec.format) != canonical(r.format):
-        problems.error(f"{_slot_where(p, b)}: declares format {spec.format} but '{r.name}' is {r.format}")
+        problems.error(f"{_slot_where(p, b)}: declares format {spec.format} but '{r.name}' is "
+                       f"{r.format}")
         return None
     if b.direction == "out":
         if spec.type in ("history", "shading_rate"):
@@ -867,10 +868,10 @@ class _SpanTree:
     def add(self, first: int, last: int, start: int, end: int) -> None:
         canonical, above = self._nodes(first, last)
         for n in canonical:
-            self.here.setdefault(n, _Union()).add(start, end)
-            self.below.setdefault(n, _Union()).add(start, end)
+            _union(self.here, n).add(start, end)
+            _union(self.below, n).add(start, end)
         for n in above:
-            self.below.setdefault(n, _Union()).add(start, end)
+            _union(self.below, n).add(start, end)
 
     def busy(self, first: int, last: int) -> list[tuple[int, int]]:
         canonical, above = self._nodes(first, last)
@@ -881,6 +882,13 @@ class _SpanTree:
         if len(parts) == 1:
             return list(zip(parts[0].starts, parts[0].ends, strict=True))
         return sorted(r for u in parts for r in zip(u.starts, u.ends, strict=True))
+
+
+def _union(unions: dict[int, _Union], node: int) -> _Union:
+    u = unions.get(node)
+    if u is None:
+        u = unions[node] = _Union()
+    return u
 
 
 class _Union:
@@ -894,6 +902,10 @@ class _Union:
 
     def add(self, start: int, end: int) -> None:
         starts, ends = self.starts, self.ends
+        if not ends or start > ends[-1]:  # on top of everything: the common case
+            starts.append(start)
+            ends.append(end)
+            return
         i = bisect.bisect_left(ends, start)  # first range ending at or after start
         j = bisect.bisect_right(starts, end)  # past the last range starting at or before end
         if i < j:
