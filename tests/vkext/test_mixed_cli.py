@@ -59,6 +59,20 @@ def test_meshlet_culling_counters_with_and_without_backend(tmp_path):
     assert plain["meshlets_drawn"] == vk["meshlets_drawn"]
 
 
+def test_rt_primary_reports_its_structures_with_and_without_backend(tmp_path):
+    # its passes need Vulkan: without --backend the frame runs through vkext.mixed too
+    runs = {}
+    for label, extra in (("plain", ()), ("vk", ("--backend", "vk"))):
+        done, out = rfw(tmp_path, label, str(CONFIGS / "rt_primary.toml"), "--size", "64x36",
+                        *extra)
+        assert done.returncode == 0, done.stderr
+        runs[label] = timings(out)
+    assert runs["plain"]["backend"] == runs["vk"]["backend"] == "vk"
+    plain, vk = runs["plain"]["accel"], runs["vk"]["accel"]
+    assert plain["pass"] == vk["pass"] == "accel"
+    assert plain["blas"] == vk["blas"] > 0 and plain["instances"] == vk["instances"] > 0
+
+
 def test_readme_ray_pipeline_with_ssao_renders(tmp_path):
     # the README's example: ssao has no GLSL twin, so it runs on wgpu and reads vk's depth
     done, out = rfw(tmp_path, "rt", str(CONFIGS / "rt_shadows.toml"), "--backend", "vk",
