@@ -21,6 +21,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,17 +60,16 @@ def _time_cpu(fn, repeat: int) -> tuple[float, float]:
     return statistics.median(wall), statistics.median(cpu)
 
 
-def _scaling_graphs(sizes: list[int], big_mb: float) -> list[tuple[str, int, str]]:
-    """(kind, passes, Raptor JSON text): chains and random DAGs, and a DAG of about big_mb."""
-    out = []
+def _scaling_graphs(sizes: list[int], big_mb: float) -> Iterator[tuple[str, int, str]]:
+    """(kind, passes, Raptor JSON text): chains and random DAGs, and a DAG of about big_mb;
+    made one at a time, as the big ones take a while and hundreds of MB."""
     for n in sizes:
-        out.append(("chain", n, to_raptor_json(chain_graph(n))))
-        out.append(("dag", n, to_raptor_json(synthetic_graph(n, seed=1))))
+        yield "chain", n, to_raptor_json(chain_graph(n))
+        yield "dag", n, to_raptor_json(synthetic_graph(n, seed=1))
     if big_mb > 0:
         probe = len(to_raptor_json(synthetic_graph(2000, seed=1))) / 2000
         n = int(big_mb * 1e6 / probe)
-        out.append(("dag", n, to_raptor_json(synthetic_graph(n, seed=1))))
-    return out
+        yield "dag", n, to_raptor_json(synthetic_graph(n, seed=1))
 
 
 def scaling(sizes: list[int], big_mb: float, repeat: int, env: dict) -> list[dict]:
