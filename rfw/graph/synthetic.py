@@ -18,10 +18,13 @@ def synthetic_graph(passes: int, *, seed: int = 0, window: int = 8, fan_in: int 
     rng = random.Random(seed)
     g = GraphBuilder(f"synthetic_{passes}_{seed}", size=(1920, 1080))
     made: list[tuple[int, str, str]] = []  # (pass index, resource, kind)
+    oldest = 0  # made[oldest:] were made in the last ``window`` passes (a scan was quadratic)
     for i in range(passes):
         compute = rng.random() < 0.5
         p = g.add_pass(f"p{i}", "compute" if compute else "graphics")
-        recent = [m for m in made if m[0] >= i - window]
+        while oldest < len(made) and made[oldest][0] < i - window:
+            oldest += 1
+        recent = made[oldest:]
         for k, (_, res, kind) in enumerate(rng.sample(recent, min(len(recent),
                                                                   rng.randint(1, fan_in)))):
             if kind == "buffer":
