@@ -811,8 +811,9 @@ def _place_tree(items: list[Item]) -> tuple[int, dict[str, int]]:
     offsets: dict[str, int] = {}
     top = 0
     for it in items:
-        offset = _best_gap(tree.busy(it.first, it.last), it.size)
-        tree.add(it.first, it.last, offset, offset + it.size)
+        nodes = tree.nodes(it.first, it.last)
+        offset = _best_gap(tree.busy(nodes), it.size)
+        tree.add(nodes, offset, offset + it.size)
         offsets[it.name] = offset
         top = max(top, offset + it.size)
     return top, offsets
@@ -845,7 +846,8 @@ class _SpanTree:
         self.here: dict[int, _Union] = {}
         self.below: dict[int, _Union] = {}
 
-    def _nodes(self, first: int, last: int) -> tuple[list[int], set[int]]:
+    def nodes(self, first: int, last: int) -> tuple[list[int], set[int]]:
+        """The canonical nodes of [first, last] and their ancestors."""
         canonical: list[int] = []
         lo, hi = first + self.leaves, last + self.leaves + 1
         while lo < hi:
@@ -865,16 +867,16 @@ class _SpanTree:
                 n >>= 1
         return canonical, above
 
-    def add(self, first: int, last: int, start: int, end: int) -> None:
-        canonical, above = self._nodes(first, last)
+    def add(self, nodes: tuple[list[int], set[int]], start: int, end: int) -> None:
+        canonical, above = nodes
         for n in canonical:
             _union(self.here, n).add(start, end)
             _union(self.below, n).add(start, end)
         for n in above:
             _union(self.below, n).add(start, end)
 
-    def busy(self, first: int, last: int) -> list[tuple[int, int]]:
-        canonical, above = self._nodes(first, last)
+    def busy(self, nodes: tuple[list[int], set[int]]) -> list[tuple[int, int]]:
+        canonical, above = nodes
         parts = [self.below[n] for n in canonical if n in self.below]
         parts += [self.here[n] for n in above if n in self.here]
         if not parts:
