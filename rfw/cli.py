@@ -49,6 +49,15 @@ def _count(lo: int, hi: int) -> typing.Callable[[str], int]:
     return parse
 
 
+def _triangles(text: str) -> int:
+    """``--max-triangles``: meshoptimizer pads triangle runs to 4 bytes."""
+    value = _count(-(1 << 31), 1 << 31)(text)
+    if not 4 <= value <= 512 or value % 4:
+        raise argparse.ArgumentTypeError(f"max_triangles must be a multiple of 4 in [4, 512], "
+                                         f"got {value}")
+    return value
+
+
 def _real(lo: float, hi: float) -> typing.Callable[[str], float]:
     """An argparse type: a finite number in [lo, hi]."""
 
@@ -127,6 +136,25 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from .render import mark_failed
+
+    if not args.out:
+        raise RfwError("the output folder must not be empty", element="--out")
+    done = False
+    try:
+        rc = _run(args)
+        done = True
+        return rc
+    finally:
+        if not done:  # whatever failed: no timings.json, older files marked as such
+            mark_failed(Path(args.out), _why(sys.exc_info()[1]))
+
+
+def _why(error: BaseException | None) -> str:
+    return f"{type(error).__name__}: {error}" if error is not None else ""
+
+
+def _run(args: argparse.Namespace) -> int:
     from .config import apply_overrides, load_config
     from .render import backend_for, clear_outputs, render, table, write_outputs
 
@@ -270,8 +298,8 @@ def parser() -> argparse.ArgumentParser:
                            "in a pyvista window (or --screenshot PNG)")
     show.add_argument("mesh", help="mesh or scene file (.gltf .glb .obj .ply ...), 'default' "
                       "(the courtyard's fountain) or 'default:NAME' (e.g. default:column)")
-    show.add_argument("--max-vertices", type=int, default=64, help="per meshlet (default 64)")
-    show.add_argument("--max-triangles", type=int, default=124,
+    show.add_argument("--max-vertices", type=_count(3, 255), default=64, help="per meshlet (default 64)")
+    show.add_argument("--max-triangles", type=_triangles, default=124,
                       help="per meshlet, a multiple of 4 (default 124)")
     show.add_argument("--cone-weight", type=_real(0.0, 1.0), default=0.25,
                       help="0: compact clusters, towards 1: tighter normal cones (default 0.25)")
@@ -311,7 +339,13 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parser().parse_args(argv)
+    except SystemExit as e:
+        if e.code and argv[:1] == ["run"]:  # a run that failed on its command line
+            _mark_failed_run(argv)
+        raise
     try:
         return args.func(args)
     except RfwError as e:  # every error a user can cause (vkext's included) is one
@@ -323,6 +357,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as e:
         where = f"{e.filename}: " if e.filename else ""
         return _fail(f"{where}{e.strerror or e}")
+
+
+def _mark_failed_run(argv: list[str]) -> None:
+    from .render import mark_failed
+
+    out = "out"
+    for i, arg in enumerate(argv):  # the last --out wins, as in argparse
+        if arg == "--out" and i + 1 < len(argv):
+            out = argv[i + 1]
+        elif arg.startswith("--out="):
+            out = arg[len("--out="):]
+    if out:
+        try:
+            mark_failed(Path(out), "the command line was refused")
+        except (RfwError, OSError):
+            pass  # the argparse error is the one to report
 
 
 def _fail(line: str) -> int:

@@ -104,10 +104,12 @@ def _read_toml(path: Path) -> dict[str, Any]:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         line = raw[:e.start].count(b"\n") + 1
-        raise _fail(source, f"not valid UTF-8 (byte {raw[e.start]:#04x})",
+        raise _fail(source, f"not a TOML file: not valid UTF-8 (byte {raw[e.start]:#04x})",
                     f"line {line}") from None
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise _fail(source, "malformed TOML: nested too deeply") from None
     except tomllib.TOMLDecodeError as e:
         # tomllib ends its message with "(at line L, column C)": that becomes the element
         m = re.search(r"\s*\(at line (\d+), column (\d+)\)$", str(e))
@@ -161,7 +163,8 @@ def _pass_entry(t: Any, i: int, source: str) -> PassEntry:
     name = check_identifier("pass", t["name"], file=source, element=f"[[pass]] #{i + 1}")
     where = f"pass '{name}'"
     _check_keys(t, _PASS_KEYS, where, source)
-    use = check_identifier("pass id", t.get("use", name), file=source, element=where)
+    use = check_identifier("pass id", t.get("use", name), file=source,
+                           element=f"{where}: 'use'")
     inputs = _table(t.get("inputs", {}), f"{where}: 'inputs'", source)
     for slot, feed in inputs.items():
         check_identifier("input slot", slot, file=source, element=f"{where}: inputs")

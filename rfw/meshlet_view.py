@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import colorsys
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import RfwError
 from .meshlets import Meshlets, build_meshlets
 
 DEFAULT_MESH = "fountain"
@@ -195,8 +197,26 @@ def show(mesh: Any, *, max_vertices: int = 64, max_triangles: int = 124,
         plotter.close()
 
 
+def _check_screenshot(path: str | None) -> None:
+    # a bad target fails before meshlets are built and a renderer starts
+    if path is None:
+        if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise RfwError("no display for a window (use --screenshot PNG, or run under "
+                           "xvfb-run -a)", element="meshlets show")
+        return
+    out = Path(path)
+    if out.is_dir():
+        raise RfwError("is a folder, not a PNG file", file=path, element="--screenshot")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RfwError(f"cannot make its folder ({e.strerror})", file=path,
+                       element="--screenshot") from None
+
+
 def cmd_show(args: argparse.Namespace) -> int:
     try:
+        _check_screenshot(args.screenshot)
         out = show(args.mesh, max_vertices=args.max_vertices, max_triangles=args.max_triangles,
                    cone_weight=args.cone_weight, screenshot=args.screenshot,
                    size=tuple(getattr(args, "size", None) or (1024, 768)))

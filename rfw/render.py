@@ -30,7 +30,12 @@ def load_scene_for(cfg: Config, scene: Any = None) -> Any:
         return scene
     from .scene import default_scene, load_scene
 
-    return default_scene() if cfg.scene == "default" else load_scene(cfg.scene)
+    if cfg.scene == "default":
+        return default_scene()
+    if not Path(cfg.scene).exists():  # say which config (or --scene) asked for it
+        raise RfwError(f"scene file not found: {cfg.scene}", file=cfg.source,
+                       element="scene")
+    return load_scene(cfg.scene)
 
 
 def camera_for(cfg: Config, scene: Any) -> Any:
@@ -195,6 +200,25 @@ def clear_outputs(out_dir: Path, names: Any) -> None:
             path.unlink()
 
 
+FAILED_MARK = "RUN-FAILED.txt"  # beside outputs a failed run could not replace
+
+
+def mark_failed(out_dir: Path, reason: str = "") -> None:
+    """After a failed run into ``out_dir``: remove ``timings.json`` (it marks a complete run)
+    and, if anything else is left, say in ``RUN-FAILED.txt`` that it is from an earlier run.
+    A folder that does not exist is not created."""
+    if not out_dir.is_dir():
+        return
+    inside(out_dir, "timings.json").unlink(missing_ok=True)
+    mark = inside(out_dir, FAILED_MARK)
+    if any(p.name != FAILED_MARK for p in out_dir.iterdir()):
+        text = ("the last 'rfw run' into this folder failed: the other files here are from "
+                f"an earlier run\n{reason}\n")
+        atomic_write(mark, lambda f: f.write(text.encode("utf-8", "replace")))
+    else:
+        mark.unlink(missing_ok=True)
+
+
 def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -> list[Path]:
     """``<output>.png`` per graph output, then ``timings.json`` (last: it marks a complete
     run), each written atomically inside ``out_dir``."""
@@ -205,6 +229,7 @@ def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -
     for path, (name, image) in zip(images, result.images.items(), strict=True):
         rgba = to_png_array(image, plan_formats[name])
         atomic_write(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+    inside(out_dir, FAILED_MARK).unlink(missing_ok=True)
     atomic_write(timings, lambda f: f.write(json.dumps(result.timings, indent=2).encode()
                                             + b"\n"))
     return [*images, timings]

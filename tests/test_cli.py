@@ -486,7 +486,8 @@ BAD_RAPTOR = [
     pytest.param({"passes": [{"name": "draw", "enabled": "no"}]}, "enabled", id="enabled-str"),
     pytest.param({"passes": [{"name": "draw", "outputs": [{"type": "image", "name": "c"}]}]},
                  "image", id="resource-type"),
-    pytest.param({"passes": [{"name": "a\nb", "type": "bogus"}]}, "bogus", id="newline-name"),
+    pytest.param({"passes": [{"name": "a\nb", "type": "bogus"}]}, "'a\\nb' is not an identifier",
+                 id="newline-name"),
 ]
 
 
