@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shutil
 import subprocess
@@ -298,7 +299,8 @@ def parser() -> argparse.ArgumentParser:
                            "in a pyvista window (or --screenshot PNG)")
     show.add_argument("mesh", help="mesh or scene file (.gltf .glb .obj .ply ...), 'default' "
                       "(the courtyard's fountain) or 'default:NAME' (e.g. default:column)")
-    show.add_argument("--max-vertices", type=_count(3, 255), default=64, help="per meshlet (default 64)")
+    show.add_argument("--max-vertices", type=_count(3, 255), default=64,
+                      help="per meshlet (default 64)")
     show.add_argument("--max-triangles", type=_triangles, default=124,
                       help="per meshlet, a multiple of 4 (default 124)")
     show.add_argument("--cone-weight", type=_real(0.0, 1.0), default=0.25,
@@ -369,10 +371,8 @@ def _mark_failed_run(argv: list[str]) -> None:
         elif arg.startswith("--out="):
             out = arg[len("--out="):]
     if out:
-        try:
+        with contextlib.suppress(RfwError, OSError):  # the argparse error is the one to report
             mark_failed(Path(out), "the command line was refused")
-        except (RfwError, OSError):
-            pass  # the argparse error is the one to report
 
 
 def _fail(line: str) -> int:
