@@ -3,6 +3,7 @@
 import pytest
 
 from rfw.config import apply_overrides, build, load_config
+from rfw.errors import RfwError
 from rfw.graph import GraphError, compile
 
 from ..conftest import ROOT
@@ -125,3 +126,54 @@ inputs = { depth = "gbuffer.depth", pyramid = "hiz.pyramid" }
     plan = compile(built.graph)
     assert {a.resource: a.role for a in plan.accesses["reader"]}[pyramid] == "history"
 
+
+
+_MINIMAL = '[[pass]]\nname = "tonemap"\ninputs = { hdr = "x.hdr" }\n'
+
+
+def test_config_scene_is_relative_to_the_config(tmp_path):
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    (sub / "c.toml").write_text('scene = "meshes/a.glb"\n' + _MINIMAL)
+    (sub / "d.toml").write_text('scene = "default"\n' + _MINIMAL)
+    assert load_config(sub / "c.toml").scene == str(sub / "meshes" / "a.glb")
+    assert load_config(sub / "d.toml").scene == "default"  # the embedded scene stays a name
+
+
+@pytest.mark.parametrize("head,needle", [
+    ("frames = 0", "frames: 'frames' must be between 1 and"),
+    ("frames = 100001", "frames: 'frames' must be between 1 and 100000"),
+    ("frames = 2.0", "'frames' must be an integer"),
+    ("size = [64, true]", "size: 'size' must be an integer"),
+    ("size = [16385, 8]", "between 1 and 16384"),
+    ("outputs = \"tonemap.ldr\"", "outputs: must be a list"),
+    ("scene = []", "scene: must be a string"),
+    ("camera = { znear = 2.0, zfar = 1.0 }", "camera: 'znear' must be smaller than 'zfar'"),
+    ("camera = { position = [0, inf, 0] }", "camera.position: 'camera.position' must be finite"),
+])
+def test_bad_config_values_name_file_and_key(tmp_path, head, needle):
+    path = tmp_path / "c.toml"
+    path.write_text(head + "\n" + _MINIMAL)
+    with pytest.raises(RfwError) as e:
+        load_config(path)
+    assert str(e.value).startswith(f"{path}: ") and needle in str(e.value)
+
+
+@pytest.mark.parametrize("head", ["frames = 100000", "size = [16384, 1]",
+                                  "camera = { znear = 0.5, zfar = 1.0, yfov = 179 }"])
+def test_config_values_at_the_bounds_are_kept(tmp_path, head):
+    # control for the test above: the same keys at their limits load
+    path = tmp_path / "c.toml"
+    path.write_text(head + "\n" + _MINIMAL)
+    load_config(path)
+
+
+def test_run_configs_and_graph_files_are_told_apart(tmp_path):
+    from rfw.config import is_run_config
+
+    assert all(is_run_config(p) for p in CONFIGS)
+    assert not is_run_config(ROOT / "tests" / "data" / "default_graph.toml")
+    assert not is_run_config(ROOT / "tests" / "data" / "three_ways" / "deferred.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b"\xff")
+    assert not is_run_config(bad)  # left to the loader, which names the problem
