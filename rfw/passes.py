@@ -37,6 +37,23 @@ class SettingsError(GraphError):
 _SCALARS = {float: "f32", int: "i32", bool: "u32"}
 
 
+class Range(typing.NamedTuple):
+    """Bounds of a number setting, declared with ``typing.Annotated``; either may be None."""
+
+    lo: float | None = None
+    hi: float | None = None
+
+    def check(self, value: Any, where: str) -> None:
+        if (self.lo is not None and value < self.lo) or (self.hi is not None
+                                                         and value > self.hi):
+            raise SettingsError(f"{where}: {value!r} is outside {self.lo}..{self.hi}")
+
+
+def _base(hint: Any) -> Any:
+    # Annotated[int, Range(...)] is an int to convert and pack
+    return typing.get_args(hint)[0] if hasattr(hint, "__metadata__") else hint
+
+
 class Settings:
     """Typed settings with defaults, declared as annotated class attributes.
 
@@ -51,18 +68,37 @@ class Settings:
             if key not in fields:
                 raise SettingsError(f"{_owner or type(self).__qualname__}: unknown setting "
                                     f"'{key}'" + did_you_mean(key, fields))
+        bounds = self.bounds()
         for name, (kind, default) in fields.items():
-            object.__setattr__(self, name, _convert(values.get(name, default), kind,
-                                                    f"{_owner}: setting '{name}'"))
+            where = f"{_owner}: setting '{name}'"
+            value = _convert(values.get(name, default), kind, where)
+            if name in bounds:
+                bounds[name].check(value, where)
+            object.__setattr__(self, name, value)
 
     @classmethod
-    def fields(cls) -> dict[str, tuple[Any, Any]]:
-        hints = typing.get_type_hints(cls)
+    def _hints(cls) -> dict[str, Any]:
+        hints = typing.get_type_hints(cls, include_extras=True)
         out = {}
         for klass in reversed(cls.__mro__):
             for name in getattr(klass, "__annotations__", {}):
                 if not name.startswith("_"):
-                    out[name] = (hints[name], getattr(cls, name, None))
+                    out[name] = hints[name]
+        return out
+
+    @classmethod
+    def fields(cls) -> dict[str, tuple[Any, Any]]:
+        return {name: (_base(hint), getattr(cls, name, None))
+                for name, hint in cls._hints().items()}
+
+    @classmethod
+    def bounds(cls) -> dict[str, Range]:
+        """Declared bounds: ``resolution: Annotated[int, Range(1, 16384)] = 2048``."""
+        out = {}
+        for name, hint in cls._hints().items():
+            for extra in getattr(hint, "__metadata__", ()):
+                if isinstance(extra, Range):
+                    out[name] = extra
         return out
 
     def as_dict(self) -> dict[str, Any]:

@@ -1,7 +1,10 @@
 """Directional shadow map: scene depth from the sun's orthographic camera."""
 
+from typing import Annotated
+
 from rfw import RenderPass, Settings, register_pass
 from rfw.graph import DepthAttachment, SizeRule
+from rfw.passes import Range
 
 
 @register_pass("shadow_map")
@@ -12,7 +15,7 @@ class ShadowMapPass(RenderPass):
     outputs = {"depth": DepthAttachment("depth32float", desc="sun depth, 0 near 1 far")}
 
     class Params(Settings):
-        resolution: int = 2048  # texels per side
+        resolution: Annotated[int, Range(1, 16384)] = 2048  # texels per side
 
     def declare(self):
         size = SizeRule.fixed(self.params.resolution, self.params.resolution)

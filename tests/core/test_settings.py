@@ -1,10 +1,12 @@
 """Typed pass settings: conversion, suggestions and the WGSL uniform layout."""
 
 import struct
+from typing import Annotated
 
 import pytest
 
 from rfw import Settings, SettingsError
+from rfw.passes import Range
 
 
 class Params(Settings):
@@ -84,3 +86,22 @@ def test_bad_values_are_refused_naming_the_setting(key, value, needle):
 @pytest.mark.parametrize("key,value,expected", GOOD, ids=[f"{k}={v!r}" for k, v, _ in GOOD])
 def test_values_at_the_bounds_are_kept(key, value, expected):
     assert getattr(Params(**{key: value}), key) == expected
+
+
+class Bounded(Settings):
+    size: Annotated[int, Range(1, 16)] = 4
+    gain: Annotated[float, Range(lo=0.0)] = 1.0
+
+
+@pytest.mark.parametrize("key,value", [("size", 0), ("size", 17), ("size", "-4"),
+                                       ("gain", -0.001)])
+def test_declared_bounds_refuse_values_outside(key, value):
+    with pytest.raises(SettingsError, match=rf"pass 'p': setting '{key}': .* is outside"):
+        Bounded("pass 'p'", **{key: value})
+
+
+def test_declared_bounds_keep_values_inside_and_pack_as_their_type():
+    b = Bounded(size="16", gain=0)
+    assert (b.size, b.gain) == (16, 0.0) and Bounded(size=1).size == 1
+    assert struct.unpack_from("<if", b.pack(), 0) == (16, 0.0)
+    assert Bounded.fields()["size"] == (int, 4)
