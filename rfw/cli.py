@@ -25,7 +25,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one error line (``rfw: error: ...``, exit 2) like every other error."""
 
     def error(self, message: str) -> typing.NoReturn:
-        self.exit(2, f"rfw: error: {self.prog}: {message} (usage: {self.prog} --help)\n")
+        line = RfwError(f"{message} (usage: {self.prog} --help)", element=self.prog)
+        self.exit(2, f"rfw: error: {line}\n")  # RfwError escapes control characters
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -52,10 +53,9 @@ def _count(lo: int, hi: int) -> typing.Callable[[str], int]:
 
 def _triangles(text: str) -> int:
     """``--max-triangles``: meshoptimizer pads triangle runs to 4 bytes."""
-    value = _count(-(1 << 31), 1 << 31)(text)
-    if not 4 <= value <= 512 or value % 4:
-        raise argparse.ArgumentTypeError(f"max_triangles must be a multiple of 4 in [4, 512], "
-                                         f"got {value}")
+    value = _count(4, 512)(text)
+    if value % 4:
+        raise argparse.ArgumentTypeError(f"max_triangles must be a multiple of 4, got {value}")
     return value
 
 
@@ -148,7 +148,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return rc
     finally:
         if not done:  # whatever failed: no timings.json, older files marked as such
-            mark_failed(Path(args.out), _why(sys.exc_info()[1]))
+            with contextlib.suppress(RfwError, OSError):  # the first error is the one to tell
+                mark_failed(Path(args.out), _why(sys.exc_info()[1]))
 
 
 def _why(error: BaseException | None) -> str:

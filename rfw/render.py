@@ -209,7 +209,7 @@ def mark_failed(out_dir: Path, reason: str = "") -> None:
     A folder that does not exist is not created."""
     if not out_dir.is_dir():
         return
-    inside(out_dir, "timings.json").unlink(missing_ok=True)
+    (out_dir / "timings.json").unlink(missing_ok=True)  # a link goes, not what it points at
     mark = inside(out_dir, FAILED_MARK)
     if any(p.name != FAILED_MARK for p in out_dir.iterdir()):
         text = ("the last 'rfw run' into this folder failed: the other files here are from "
