@@ -261,6 +261,28 @@ def test_only_zero_scale_nodes_is_one_error_line(tmp_path):
 
 
 
+def test_degenerate_instances_in_a_built_scene_draw_nothing(capsys):
+    # scenes built in code reach the backends without a loader: they drop the same instances
+    scene = tiny_scene()
+    cube = scene.instances[1]
+    nan = cube.transform.copy()
+    nan[0, 0] = np.nan
+    flat = cube.transform.copy()
+    flat[:3, 1] = 0.0
+    scene.instances += [replace(cube, transform=nan, name="nan"),
+                        replace(cube, transform=flat, name="flat")]
+    plain = image("forward", tiny_scene(), "wgpu")
+    assert np.array_equal(image("forward", scene, "wgpu"), plain)
+    err = capsys.readouterr().err
+    assert "instance 'nan' skipped: transform has NaN" in err
+    assert "instance 'flat' skipped: transform is singular" in err
+    # the control: a third, valid cube elsewhere does change the image
+    moved = cube.transform.copy()
+    moved[0, 3] = -1.5
+    scene.instances.append(replace(cube, transform=moved, name="moved"))
+    assert not np.array_equal(image("forward", scene, "wgpu"), plain)
+
+
 # ---------------------------------------------------------------------------------------------
 # degenerate cameras
 
