@@ -873,6 +873,14 @@ def _truncate_one(folder: str) -> Callable[[Path], None]:
     return cut
 
 
+def _scratch(rel: str, data: bytes) -> Callable[[Path], None]:
+    """Write ``data`` at ``rel`` under the scratch root (cache/, home/)."""
+    def write(root: Path) -> None:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_bytes(data)
+    return write
+
+
 @dataclass(frozen=True)
 class Accepted:
     id: str
@@ -918,4 +926,10 @@ ACCEPTED = [
              warm=("run", str(ROOT / "configs" / "meshlet.toml"), "--backend", "vk",
                    "--scene", "t.obj"),
              damage=_truncate_one("home/.cache/rfw/meshlets"), warning=True),
+    # a damaged fetched scene is listed as not cached (a fetch would rebuild it)
+    Accepted("scenes-list-with-damaged-entries", ("scenes", "fetch", "--list"),
+             damage=lambda root: [_scratch(f"cache/rfw-scenes/{name}", data)(root) for name, data
+                                  in (("dragon.json", b"\xff{not json"),
+                                      ("dragon.glb", b"glTF"),
+                                      ("boxtextured.json", b"[1, 2]"))]),
 ]

@@ -174,7 +174,7 @@ def test_valid_input_renders(case: Accepted, tmp_path: Path) -> None:
     if case.warm:
         first = _run([*case.warm, "--size", "32x18", "--frames", "1", "--out", "warm"], cwd, env)
         assert first.returncode == 0, first.stderr
-        assert case.damage is not None
+    if case.damage is not None:
         case.damage(tmp_path)
     done = _run(case.command(), cwd, env)
     problems = []
