@@ -153,6 +153,8 @@ def loads_toml(text: str, *, source: str = "<toml>", strict: bool | None = None)
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise GraphError(f"malformed TOML: {e}", file=source) from None
+    except RecursionError:
+        raise GraphError("malformed TOML: nested too deeply", file=source) from None
     if strict is None:
         strict = data.get("strict", True) is not False
     check = _Checker(source, strict)
@@ -435,11 +437,15 @@ def loads_raptor(text: str, *, source: str = "<json>", strict: bool | None = Non
     except json.JSONDecodeError as e:
         raise GraphError(f"malformed JSON: {e.msg} (line {e.lineno}, column {e.colno})",
                          file=source) from None
+    except RecursionError:
+        raise GraphError("malformed JSON: nested too deeply", file=source) from None
     strict = False if strict is None else strict
     check = _Checker(source, strict)
     check.type(data, dict, "graph")
     check.keys(data, _R_GRAPH_KEYS, "graph")
     passes = check.type(data.get("passes"), list, "graph 'passes'")
+    if not passes:
+        check.fail("graph 'passes': the graph has no passes")
     g = GraphBuilder(str(data.get("name", Path(source).stem)), size=RAPTOR_DEFAULT_SIZE,
                      strict=strict, source=source)
     lines = _raptor_lines(text)

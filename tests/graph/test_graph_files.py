@@ -87,6 +87,11 @@ TOML_HEAD = 'name = "g"\nsize = [64, 64]\n\n[[pass]]\nname = "a"\ntype = "comput
      "'.', '-'; starting with a letter or '_')"),
     ("mips.toml", (TOML_HEAD + 'outputs.c = { format = "rgba8unorm", mips = 99 }\n').encode(),
      "pass 'a', slot 'c': 'a.c': mips=99 exceeds the full chain of 7 for 64x64"),
+    ("empty.json", b'{"name": "g", "passes": []}', "graph 'passes': the graph has no passes"),
+    ("deep.json", b'{"passes": ' + b"[" * 100000 + b"]" * 100000 + b"}",
+     "malformed JSON: nested too deeply"),
+    ("deep.toml", b"a = " + b"[" * 100000 + b"]" * 100000 + b"\n",
+     "malformed TOML: nested too deeply"),
     ("type.json", b'{"passes": [{"name": "a", "outputs": [{"type": "attachment", '
                   b'"name": "c", "format": "rgba8unorm", "resolution": [0, 4]}]}]}',
      "pass 'a' (line 1), output 'c': 'resolution': a size must be two positive integers, "
