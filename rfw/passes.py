@@ -157,6 +157,9 @@ def _convert(value: Any, kind: Any, where: str) -> Any:
     if kind is float:
         return _to_float(value, where)
     if kind is str:
+        # a whole number stands for its digits (mode = 3 picks a mode by number)
+        if isinstance(value, int) and not isinstance(value, bool):
+            return str(value)
         if not isinstance(value, str):
             raise SettingsError(f"{where}: expected a string, got {value!r}")
         return value

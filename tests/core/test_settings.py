@@ -62,7 +62,9 @@ BAD = [
     ("tint", "1,nan,0", "must be finite"),
     ("tint", (1.0, 2.0), "expected 3 numbers"),
     ("tint", 5, "expected 3 numbers"),
-    ("label", 5, "expected a string"),
+    ("label", 2.5, "expected a string"),
+    ("label", True, "expected a string"),
+    ("label", ["a"], "expected a string"),
 ]
 GOOD = [
     ("curve", (1 << 31) - 1, (1 << 31) - 1),
@@ -73,6 +75,7 @@ GOOD = [
     ("enabled", "ON", True),
     ("tint", [0, 1, 2], (0.0, 1.0, 2.0)),
     ("label", "y", "y"),
+    ("label", 3, "3"),
 ]
 
 
