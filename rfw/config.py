@@ -109,7 +109,12 @@ def _read_toml(path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except RecursionError:
-        raise _fail(source, "malformed TOML: nested too deeply") from None
+        # tomllib cannot say where: the line with the most brackets is the one
+        no, line = max(enumerate(text.splitlines() or [""], 1),
+                       key=lambda t: t[1].count("[") + t[1].count("{"))
+        key = line.partition("=")[0].strip()[:40] if "=" in line else "a value"
+        raise _fail(source, f"malformed TOML: {key} is nested too deeply", f"line {no}") \
+            from None
     except tomllib.TOMLDecodeError as e:
         # tomllib ends its message with "(at line L, column C)": that becomes the element
         m = re.search(r"\s*\(at line (\d+), column (\d+)\)$", str(e))
