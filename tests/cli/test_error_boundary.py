@@ -118,6 +118,8 @@ BAD_RUNS = [
     ("invalid-utf8", b'name = "\xff"\n' + BASE.encode(), [], ["c.toml", "line 1", "UTF-8"]),
     ("bad-toml-line", BASE + "\n[[pass]\n", [], ["c.toml", f"line {BASE.count(chr(10)) + 2},",
                                                      "malformed TOML"]),
+    ("nested-too-deep", "frames = " + "[" * 2000 + "]" * 2000 + "\n" + BASE, [],
+     ["c.toml", "line 1", "frames is nested too deeply"]),
     ("scene-missing", 'scene = "nope.glb"\n' + BASE, [], ["c.toml", "scene", "nope.glb"]),
     ("frames-negative", None, ["--frames", "-2"], ["--frames", "-2"]),
     ("frames-zero", None, ["--frames", "0"], ["--frames", "between 1 and"]),
