@@ -12,7 +12,8 @@ import difflib
 import math
 import re
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 # pass, resource, output and variant names: they become file names and labels
@@ -64,6 +65,23 @@ class RfwError(ValueError):
             self.file = _one_line(str(file))
             self.args = (self.line(),)
         return self
+
+    def about(self, element: str) -> RfwError:
+        """Name ``element`` (``pass 'ssao'``) unless the error names one or mentions it."""
+        if not self.element and element not in self.message:
+            self.element = _one_line(element)
+            self.args = (self.line(),)
+        return self
+
+
+@contextmanager
+def naming(element: str) -> Iterator[None]:
+    """RfwErrors raised inside name ``element`` (see ``RfwError.about``)."""
+    try:
+        yield
+    except RfwError as e:
+        e.about(element)
+        raise
 
 
 def check_identifier(kind: str, name: Any, *, file: str | None = None,

@@ -90,7 +90,9 @@ def run(tmp: Path, fmt: str, backend: str) -> subprocess.CompletedProcess:
     site = plugin(tmp, fmt)
     config = tmp / "fmt.toml"
     config.write_text(CONFIG)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT)]),
+    # extended, not replaced: on the GPU machine rfw's dependencies come through PYTHONPATH
+    path = [str(site), str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path),
            "RFW_CACHE_SPIRV": str(tmp / "spirv")}
     return subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(config),
                            "--backend", backend, "--frames", "1", "--out", str(tmp / "out")],

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.base import FrameExecutor, SlotContext
+from rfw.errors import naming
 from rfw.graph import CompiledGraph
 from rfw.graph.compile import MemoryOptions, compile
 from rfw.graph.formats import format_info
@@ -1208,7 +1209,8 @@ class VkExecutor(FrameExecutor):
                         ts.write(cmd, TIMESTAMP_STAGE, 2 * len(self.plan.order) + k)
                 ctx = VkPassContext(self, p, cmd, self.slots[name])
                 t = time.perf_counter()
-                p.record(ctx)
+                with naming(f"pass '{name}'"):
+                    p.record(ctx)
                 self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
                 if ts is not None:
                     ts.write(cmd, TIMESTAMP_STAGE, 2 * k + 1)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import wgpu
 
+from ..errors import naming
 from ..graph import CompiledGraph
 from ..graph.compile import ResourcePlan
 from ..graph.formats import format_info
@@ -578,7 +579,8 @@ class Executor(FrameExecutor):
         ctx = PassContext(self, p, encoder, self.slots[name])
         encoder.push_debug_group(name)
         t = time.perf_counter()
-        p.record(ctx)
+        with naming(f"pass '{name}'"):
+            p.record(ctx)
         self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
         encoder.pop_debug_group()
         self._recorded.append(name)
