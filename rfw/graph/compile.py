@@ -9,6 +9,7 @@ from __future__ import annotations
 import bisect
 import gc
 import heapq
+import itertools
 import math
 from collections import Counter, OrderedDict, defaultdict
 from collections.abc import Iterable
@@ -801,9 +802,56 @@ def _place(items: list[Item]) -> tuple[int, dict[str, int]]:
     unions: scanning every overlapping item made graphs with many long-lived resources
     quadratic.
     """
-    if any(it.size <= 0 for it in items) or _scan_is_cheaper(items):
+    if any(it.size <= 0 for it in items):
         return _place_buckets(items)  # empty items can sit in zero-byte gaps
+    if all(a.first <= b.first for a, b in itertools.pairwise(items)):
+        return _place_sweep(items)
+    if _scan_is_cheaper(items):
+        return _place_buckets(items)
     return _place_tree(items)
+
+
+def _place_sweep(items: list[Item]) -> tuple[int, dict[str, int]]:
+    """Best fit for items in order of first use: the placed items an item overlaps are
+    exactly those still alive, which share no bytes, so their gaps are kept sorted by
+    (length, offset) and the best one is a bisection away."""
+    starts: list[int] = []  # live ranges, by offset
+    end_at: dict[int, int] = {}
+    gaps: list[tuple[int, int]] = []  # (length, offset) of the holes below and between them
+    expiry: list[tuple[int, int]] = []  # (last position, offset)
+    offsets: dict[str, int] = {}
+    top = 0
+    for it in items:
+        while expiry and expiry[0][0] < it.first:
+            _sweep_remove(heapq.heappop(expiry)[1], starts, end_at, gaps)
+        k = bisect.bisect_left(gaps, (it.size, -1))
+        if k < len(gaps):
+            length, offset = gaps.pop(k)
+            if length > it.size:
+                bisect.insort(gaps, (length - it.size, offset + it.size))
+        else:
+            offset = end_at[starts[-1]] if starts else 0
+        bisect.insort(starts, offset)
+        end_at[offset] = offset + it.size
+        heapq.heappush(expiry, (it.last, offset))
+        offsets[it.name] = offset
+        top = max(top, offset + it.size)
+    return top, offsets
+
+
+def _sweep_remove(start: int, starts: list[int], end_at: dict[int, int],
+                  gaps: list[tuple[int, int]]) -> None:
+    i = bisect.bisect_left(starts, start)
+    end = end_at.pop(start)
+    below = end_at[starts[i - 1]] if i > 0 else 0
+    if start > below:
+        gaps.pop(bisect.bisect_left(gaps, (start - below, below)))
+    if i + 1 < len(starts):
+        after = starts[i + 1]
+        if after > end:
+            gaps.pop(bisect.bisect_left(gaps, (after - end, end)))
+        bisect.insort(gaps, (after - below, below))
+    del starts[i]
 
 
 def _place_tree(items: list[Item]) -> tuple[int, dict[str, int]]:

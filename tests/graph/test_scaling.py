@@ -90,6 +90,8 @@ def test_span_tree_and_bucket_placements_equal_a_plain_best_fit(spans, long_live
             last = 200  # graph outputs live to the end of the frame
         items.append(Item(f"r{k}", size * 256, first, last))
     expected = _scan(items)
+    by_first = sorted(items, key=lambda it: (it.first, -it.size, it.name))
+    assert compile_module._place_sweep(by_first) == _scan(by_first)
     assert compile_module._place_tree(items) == expected
     assert compile_module._place_buckets(items) == expected
     assert compile_module._place(items) == expected
