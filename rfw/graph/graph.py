@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
-from ..errors import check_identifier
+from ..errors import IDENTIFIER, check_identifier
 from .errors import GraphError
 from .resources import PASS_TYPES, Binding, Slot, Texture
 
@@ -97,6 +97,11 @@ class Graph:
         return replace(self, outputs=None if outputs is None else tuple(outputs))
 
 
+def is_identifier(name: Any) -> bool:
+    """What ``check_identifier`` accepts, without making its message."""
+    return name.__class__ is str and IDENTIFIER.fullmatch(name) is not None and ".." not in name
+
+
 class PassBuilder:
     """Collects the slots of one pass; returned by ``GraphBuilder.add_pass``."""
 
@@ -110,6 +115,8 @@ class PassBuilder:
 
     def _name(self, kind: str, name: Any, slot: str | None = None) -> str:
         # slot and resource names become labels and file names: identifiers only
+        if is_identifier(name):
+            return name  # checked before any message is made: big graphs have many names
         where = f"pass '{self.name}'" + (f", slot '{slot}'" if slot is not None else "")
         return check_identifier(kind, name, file=self._graph.source, element=where)
 
