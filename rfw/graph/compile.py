@@ -365,6 +365,25 @@ _ROLE = {"reference": "order", "history": "history"}
 
 def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -> Access | None:
     spec = b.spec
+    # big graphs repeat a few kinds of slot: each kind is checked and worked out once
+    key = (spec.type, spec.format, spec.usage, spec.read_only, spec.load, spec.stages,
+           b.direction, p.type, r.kind, r.format)
+    known = _KINDS.get(key)
+    if known is None:
+        known = _access_kind(p, b, r, problems)
+        if known is None:
+            return None
+        _KINDS[key] = known
+    role, usages, state = known
+    if role == "order":
+        return Access(p.name, r.name, role, usages, None, (b.slot,))
+    return Access(p.name, r.name, role, usages, state, (b.slot,), spec.load)
+
+
+def _access_kind(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems
+                 ) -> tuple[str, frozenset[str], State | None] | None:
+    """(role, usages, state) of a slot on a resource, or None after reporting an error."""
+    spec = b.spec
     if spec.format and r.format and canonical(spec.format) != canonical(r.format):
         problems.error(f"{_slot_where(p, b)}: declares format {spec.format} but '{r.name}' is "
                        f"{r.format}")
@@ -378,7 +397,7 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
         role = _ROLE.get(spec.type, "modify" if spec.type in ("attachment", "depth", "storage")
                          and not spec.read_only else "read")
     if role == "order":
-        return Access(p.name, r.name, role, frozenset(), None, (b.slot,))
+        return role, frozenset(), None
     slot_kind = {"buffer": "buffer", "accel": "accel"}.get(spec.type, "image")
     if r.kind != slot_kind and spec.type != "reference":
         what = {"image": "an image", "buffer": "a buffer", "accel": "an acceleration structure"}
@@ -395,11 +414,12 @@ def _access_for(p: PassDecl, b: Binding, r: ResourceDecl, problems: _Problems) -
     state = _STATES.get(key)
     if state is None:
         state = _STATES[key] = _state_of(*key)
-    return Access(p.name, r.name, role, usages, state, (b.slot,), spec.load)
+    return role, usages, state
 
 
 # big graphs repeat a few kinds of access: their states are worked out once
 _STATES: dict[tuple, State] = {}
+_KINDS: dict[tuple, tuple[str, frozenset[str], State | None]] = {}
 
 
 def _state_of(usages: frozenset[str], pass_type: str, role: str, loads: bool,
@@ -677,14 +697,22 @@ def resolve(declared: Declared, used: Iterable[str], size: tuple[int, int],
             problems.error(f"{where}: '{name}' resolves to {shape} texels "
                            f"(size rule {r.size.describe()}; 1..{MAX_DIMENSION} allowed)")
             continue
-        try:
-            raw = image_bytes(r.format, w, h, mips=r.mips, layers=r.layers, samples=r.samples)
-        except ValueError as e:
-            where = f"pass '{r.producer}', slot '{r.slot}': " if r.producer else ""
-            problems.error(f"{where}'{name}': {e}")
-            continue
+        shape = (r.format, w, h, r.mips, r.layers, r.samples)
+        raw = _IMAGE_BYTES.get(shape)
+        if raw is None:
+            try:
+                raw = _IMAGE_BYTES[shape] = image_bytes(r.format, w, h, mips=r.mips,
+                                                        layers=r.layers, samples=r.samples)
+            except ValueError as e:
+                where = f"pass '{r.producer}', slot '{r.slot}': " if r.producer else ""
+                problems.error(f"{where}'{name}': {e}")
+                continue
         out[name] = Resolved(name, "image", r.format, w, h, r.mips, r.layers, r.samples, raw)
     return out
+
+
+# (format, width, height, mips, layers, samples) -> bytes: big graphs repeat a few shapes
+_IMAGE_BYTES: dict[tuple, int] = {}
 
 
 def _resolve_size(name: str, resources: dict[str, ResourceDecl], size: tuple[int, int],
@@ -916,12 +944,12 @@ class _SpanTree:
         return canonical, above
 
     def add(self, nodes: tuple[list[int], set[int]], start: int, end: int) -> None:
-        canonical, above = nodes
-        for n in canonical:
+        for n in nodes[0]:
             _union(self.here, n).add(start, end)
-            _union(self.below, n).add(start, end)
-        for n in above:
-            _union(self.below, n).add(start, end)
+            # an ancestor's union holds its children's: once a node already covers the
+            # range, every node above it does too
+            while n and _union(self.below, n).add(start, end):
+                n >>= 1
 
     def busy(self, nodes: tuple[list[int], set[int]]) -> list[tuple[int, int]]:
         canonical, above = nodes
@@ -950,18 +978,22 @@ class _Union:
         self.starts: list[int] = []
         self.ends: list[int] = []
 
-    def add(self, start: int, end: int) -> None:
+    def add(self, start: int, end: int) -> bool:
+        """Unite [start, end) in; False if it was covered already."""
         starts, ends = self.starts, self.ends
         if not ends or start > ends[-1]:  # on top of everything: the common case
             starts.append(start)
             ends.append(end)
-            return
+            return True
         i = bisect.bisect_left(ends, start)  # first range ending at or after start
+        if starts[i] <= start and end <= ends[i]:
+            return False
         j = bisect.bisect_right(starts, end)  # past the last range starting at or before end
         if i < j:
             start, end = min(start, starts[i]), max(end, ends[j - 1])
         starts[i:j] = [start]
         ends[i:j] = [end]
+        return True
 
 
 _BUCKET = 64  # schedule positions per bucket of the scanning placement

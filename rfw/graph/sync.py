@@ -7,7 +7,7 @@ the ``_BIT`` suffix; vkext maps them back, the wgpu backend only needs the usage
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 # shader stages a pass of each type reads and writes resources in
 SHADER_STAGES = {
@@ -29,11 +29,12 @@ class State:
     stages: frozenset[str]
     access: frozenset[str]
 
-    @property
+    # cached: the barrier planner asks these of every access, twice
+    @cached_property
     def writes(self) -> bool:
         return bool(write_access(self.access))
 
-    @property
+    @cached_property
     def write_access(self) -> frozenset[str]:
         return write_access(self.access)
 
