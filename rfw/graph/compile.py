@@ -1119,6 +1119,8 @@ def _stages_of(s: State | None) -> frozenset[str]:
 class _Track:
     """Synchronization state of one resource while walking the schedule."""
 
+    __slots__ = ("aliased", "layout", "reads", "visible", "write")
+
     def __init__(self, layout: str | None, write: State | None = None,
                  reads: State | None = None, visible: State | None = None,
                  aliased: tuple[str, ...] = ()):
@@ -1167,7 +1169,10 @@ def _final_states(declared: Declared, schedule: list[int]) -> dict[str, _Track]:
     for i in schedule:
         for a in declared.accesses[declared.passes[i].name]:
             if a.state is not None:
-                tracks.setdefault(a.resource, _Track(a.state.layout)).visit(a.state)
+                t = tracks.get(a.resource)
+                if t is None:
+                    t = tracks[a.resource] = _Track(a.state.layout)
+                t.visit(a.state)
     return tracks
 
 

@@ -39,12 +39,20 @@ class State:
         return write_access(self.access)
 
     def merge(self, other: State) -> State:
-        return State(self.layout, self.stages | other.stages, self.access | other.access)
+        key = (self, other)
+        merged = _MERGED.get(key)
+        if merged is None:
+            merged = _MERGED[key] = State(self.layout, self.stages | other.stages,
+                                          self.access | other.access)
+        return merged
 
     def to_json(self) -> dict[str, str]:
         return {"layout": self.layout or "-", "stages": "|".join(sorted(self.stages)) or "NONE",
                 "access": "|".join(sorted(self.access)) or "NONE"}
 
+
+# a graph merges the same few states again and again: each merge is made once
+_MERGED: dict[tuple[State, State], State] = {}
 
 UNDEFINED = State("UNDEFINED", NONE, NONE)
 
