@@ -11,6 +11,7 @@ import gc
 import heapq
 import itertools
 import math
+from bisect import bisect_left, bisect_right
 from collections import Counter, OrderedDict, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
@@ -914,13 +915,13 @@ class _SpanTree:
     Node ``n`` covers a range of positions; ``here[n]`` unites the items stored at ``n``
     (their span covers n's range: its canonical pieces) and ``below[n]`` those stored at n or
     under it. The items overlapping a span are exactly those stored under its canonical
-    nodes or at one of their ancestors.
+    nodes or at one of their ancestors. Nodes index flat lists (None: nothing stored).
     """
 
     def __init__(self, positions: int):
         self.leaves = 1 << max(positions - 1, 0).bit_length()
-        self.here: dict[int, _Union] = {}
-        self.below: dict[int, _Union] = {}
+        self.here: list[_Union | None] = [None] * (2 * self.leaves)
+        self.below: list[_Union | None] = [None] * (2 * self.leaves)
 
     def nodes(self, first: int, last: int) -> tuple[list[int], set[int]]:
         """The canonical nodes of [first, last] and their ancestors."""
@@ -944,29 +945,42 @@ class _SpanTree:
         return canonical, above
 
     def add(self, nodes: tuple[list[int], set[int]], start: int, end: int) -> None:
+        here, below, leaves = self.here, self.below, self.leaves
         for n in nodes[0]:
-            _union(self.here, n).add(start, end)
+            if n < leaves:  # a leaf is nobody's ancestor: its own items are read as below
+                u = here[n]
+                if u is None:
+                    u = here[n] = _Union()
+                u.add(start, end)
             # an ancestor's union holds its children's: once a node already covers the
             # range, every node above it does too
-            while n and _union(self.below, n).add(start, end):
+            while n:
+                u = below[n]
+                if u is None:
+                    u = below[n] = _Union()
+                if not u.add(start, end):
+                    break
                 n >>= 1
 
     def busy(self, nodes: tuple[list[int], set[int]]) -> list[tuple[int, int]]:
         canonical, above = nodes
-        parts = [self.below[n] for n in canonical if n in self.below]
-        parts += [self.here[n] for n in above if n in self.here]
+        below, here = self.below, self.here
+        parts = []
+        for n in canonical:
+            if below[n] is not None:
+                parts.append(below[n])
+        for n in above:
+            if here[n] is not None:
+                parts.append(here[n])
         if not parts:
             return []
         if len(parts) == 1:
             return list(zip(parts[0].starts, parts[0].ends, strict=True))
-        return sorted(r for u in parts for r in zip(u.starts, u.ends, strict=True))
-
-
-def _union(unions: dict[int, _Union], node: int) -> _Union:
-    u = unions.get(node)
-    if u is None:
-        u = unions[node] = _Union()
-    return u
+        busy: list[tuple[int, int]] = []
+        for u in parts:
+            busy += zip(u.starts, u.ends, strict=True)
+        busy.sort()
+        return busy
 
 
 class _Union:
@@ -985,12 +999,16 @@ class _Union:
             starts.append(start)
             ends.append(end)
             return True
-        i = bisect.bisect_left(ends, start)  # first range ending at or after start
-        if starts[i] <= start and end <= ends[i]:
+        i = bisect_left(ends, start)  # first range ending at or after start
+        first = starts[i]
+        if first <= start and end <= ends[i]:
             return False
-        j = bisect.bisect_right(starts, end)  # past the last range starting at or before end
-        if i < j:
-            start, end = min(start, starts[i]), max(end, ends[j - 1])
+        j = bisect_right(starts, end, i)  # past the last range starting at or before end
+        if i < j:  # it touches ranges i..j-1: one range replaces them
+            if first < start:
+                start = first
+            if ends[j - 1] > end:
+                end = ends[j - 1]
         starts[i:j] = [start]
         ends[i:j] = [end]
         return True
