@@ -3,7 +3,7 @@
 Each bad input must give exit code 2 and exactly one non-empty stderr line, starting
 ``rfw: error:`` and naming the file and the element (pass, slot, key, line); no traceback;
 nothing written outside ``--out`` (the whole scratch folder is compared before and after,
-the caches and ~/.config aside); and no stale outputs: ``--out`` is seeded with an old
+the caches, ~/.config and the NVIDIA driver's ~/.nv aside); and no stale outputs: ``--out`` is seeded with an old
 ``tonemap.ldr.png`` and ``timings.json``, and after the failed run ``timings.json`` is gone
 and the old image is gone or marked (a file named ``*stale*``, ``*failed*`` or
 ``*incomplete*`` beside it).
@@ -141,7 +141,9 @@ def check_case(case: Case, root: Path) -> list[str]:
         (cwd / out / "tonemap.ldr.png").write_bytes(OLD_PNG)
         (cwd / out / "timings.json").write_bytes(OLD_TIMINGS)
     # caches, and the per-user config folder third-party libraries create (matplotlib's)
-    skip = [root / "cache", root / "home" / ".cache", root / "home" / ".config"]
+    # ~/.nv: the NVIDIA driver's own shader cache (ComputeCache), written by the driver
+    skip = [root / "cache", root / "home" / ".cache", root / "home" / ".config",
+            root / "home" / ".nv"]
     if out:  # an empty --out is the working folder itself: nothing is skipped then
         skip.append(cwd / out)
     before = snapshot(root, skip)

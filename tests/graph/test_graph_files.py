@@ -73,7 +73,7 @@ def _one_error_line(done: subprocess.CompletedProcess) -> str:
 TOML_HEAD = 'name = "g"\nsize = [64, 64]\n\n[[pass]]\nname = "a"\ntype = "compute"\n'
 
 
-@pytest.mark.parametrize("name, content, expected", [
+BAD_FILES = [
     ("bad.toml", TOML_HEAD.encode() + b"# caf\xc3\x28\n",
      "not UTF-8 text: byte 0xc3 at line 7, column 6"),
     ("bad.json", b'{"name": "g",\n "passes": [{"name": "\xff"}]}',
@@ -96,7 +96,12 @@ TOML_HEAD = 'name = "g"\nsize = [64, 64]\n\n[[pass]]\nname = "a"\ntype = "comput
                   b'"name": "c", "format": "rgba8unorm", "resolution": [0, 4]}]}]}',
      "pass 'a' (line 1), output 'c': 'resolution': a size must be two positive integers, "
      "got [0, 4]"),
-])
+]
+
+
+# ids by file name: the deep files' contents would make a node id (and the
+# PYTEST_CURRENT_TEST variable a subprocess inherits) longer than exec allows
+@pytest.mark.parametrize("name, content, expected", BAD_FILES, ids=[f[0] for f in BAD_FILES])
 def test_bad_graph_files_give_one_line_naming_file_and_element(tmp_path, name, content,
                                                                expected):
     path = tmp_path / name
