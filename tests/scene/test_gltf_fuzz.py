@@ -25,7 +25,7 @@ from rfw.backends.scene_data import instance_bytes, lights_bytes, main_camera_by
 from rfw.scene import SceneError, load_gltf
 from rfw.scene.model import transform_problem
 
-from .test_gltf import U8, U32, Gltf, kitchen_sink
+from .test_gltf import U8, U32, Gltf, _paths, kitchen_sink
 
 FUZZ = settings(max_examples=int(os.environ.get("RFW_FUZZ_EXAMPLES", 300)), deadline=None,
                 derandomize=True, suppress_health_check=list(HealthCheck))
@@ -44,16 +44,6 @@ def fuzz_doc(folder: Path) -> Gltf:
     small = g.primitive(pos=pos, idx=np.array([3, 2, 1]), uv=None, index_type=U8)
     g.node(mesh=g.mesh(small), rotation=[0, 0.6, 0, 0.8], scale=[-1, 1, 1])
     return g
-
-
-def _paths(obj, prefix=()):
-    yield prefix
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            yield from _paths(v, (*prefix, k))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            yield from _paths(v, (*prefix, i))
 
 
 def _space() -> list[tuple]:
