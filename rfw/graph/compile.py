@@ -884,11 +884,15 @@ def _sweep_remove(start: int, starts: list[int], end_at: dict[int, int],
 
 
 def _place_tree(items: list[Item]) -> tuple[int, dict[str, int]]:
-    tree = _SpanTree(max((it.last for it in items), default=0) + 1)
+    end = max((it.last for it in items), default=0)
+    tree = _SpanTree(end + 1)
+    # items alive to the end overlap the same items if they reach the tree's last leaf
+    # instead, and such a span splits into fewer nodes
+    right = tree.leaves - 1
     offsets: dict[str, int] = {}
     top = 0
     for it in items:
-        nodes = tree.nodes(it.first, it.last)
+        nodes = tree.nodes(it.first, right if it.last == end else it.last)
         offset = _best_gap(tree.busy(nodes), it.size)
         tree.add(nodes, offset, offset + it.size)
         offsets[it.name] = offset
