@@ -1302,6 +1302,21 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     Pure and deterministic. Results are memoised: compiling an unchanged graph again is a
     dictionary lookup, and a changed graph reuses the memory plan when lifetimes are equal.
     """
+    # compile builds many small acyclic objects, and hashing a new graph for the cache makes
+    # many tuples: the cycle collector, sweeping the whole heap, would dominate its time
+    paused = gc.isenabled()
+    gc.disable()
+    try:
+        return _compile_cached(graph, size, caps, strict=strict, cull_passes=cull_passes,
+                               memory=memory, backend=backend)
+    finally:
+        if paused:
+            gc.enable()
+
+
+def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[str] | None, *,
+                    strict: bool | None, cull_passes: bool, memory: MemoryOptions,
+                    backend: str | None) -> CompiledGraph:
     size_from = "graph" if size is None else "given"
     size = size or graph.size
     if size is None:
@@ -1316,18 +1331,12 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
         _CACHE.move_to_end(key)
         return _CACHE[key]
     STATS["compile"] += 1
-    # compile builds many small acyclic objects: the cycle collector would dominate its time
-    paused = gc.isenabled()
-    gc.disable()
     try:
         graph = insert_bridges(graph, backend)
         result = replace(_compile(graph, (int(size[0]), int(size[1])), caps, strict,
                                   cull_passes, memory), size_from=size_from)
     except GraphError as e:
         raise e.in_file(graph.source) from None
-    finally:
-        if paused:
-            gc.enable()
     return _remember(_CACHE, key, result)
 
 
@@ -1443,14 +1452,15 @@ def _raptor_reuse_bytes(declared: Declared, items: list[Item], resolved: dict[st
         for a in declared.accesses[declared.passes[i].name]:
             if a.role in ("read", "modify", "order"):
                 readers.add(a.resource)
-    keys = {it.name: (resolved[it.name].kind, resolved[it.name].format, resolved[it.name].width,
-                      resolved[it.name].height, resolved[it.name].mips,
-                      resolved[it.name].layers, resolved[it.name].samples,
-                      resolved[it.name].raw_bytes if resolved[it.name].kind == "buffer" else 0)
-            for it in items}
+    keys = {it.name: _reuse_key(resolved[it.name]) for it in items}
     # Raptor only recycles textures; every buffer is its own allocation
     freed = {it.name for it in items if it.name in readers and resolved[it.name].kind == "image"}
     return raptor_reuse(items, keys, freed, len(schedule))
+
+
+def _reuse_key(r: Resolved) -> tuple:
+    return (r.kind, r.format, r.width, r.height, r.mips, r.layers, r.samples,
+            r.raw_bytes if r.kind == "buffer" else 0)
 
 
 def _resource_plans(declared: Declared, used: list[str], resolved: dict[str, Resolved],
@@ -1464,6 +1474,7 @@ def _resource_plans(declared: Declared, used: list[str], resolved: dict[str, Res
     for copy, name in declared.history.items():  # ping-pong pairs swap roles each frame
         usages[copy] |= usages[name]
         usages[name] |= usages[copy]
+    paired = {*declared.history, *declared.history.values()}
     plans = []
     for name in used:
         r, d = resolved.get(name), declared.resources[name]
@@ -1477,6 +1488,5 @@ def _resource_plans(declared: Declared, used: list[str], resolved: dict[str, Res
             bytes=align.get(name, r.raw_bytes), usages=frozenset(usages[name]),
             producer=d.producer, first=None if first is None else names[first],
             last=None if last is None else names[last], transient=name in transient,
-            external=d.external, history=name in declared.history
-            or name in declared.history.values(), heap=heap, offset=offset))
+            external=d.external, history=name in paired, heap=heap, offset=offset))
     return plans
