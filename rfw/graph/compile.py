@@ -701,6 +701,8 @@ def resolve(declared: Declared, used: Iterable[str], size: tuple[int, int],
         shape = (r.format, w, h, r.mips, r.layers, r.samples)
         raw = _IMAGE_BYTES.get(shape)
         if raw is None:
+            if len(_IMAGE_BYTES) > 4096:  # many output sizes over a long session
+                _IMAGE_BYTES.clear()
             try:
                 raw = _IMAGE_BYTES[shape] = image_bytes(r.format, w, h, mips=r.mips,
                                                         layers=r.layers, samples=r.samples)
