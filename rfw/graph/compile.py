@@ -1167,14 +1167,12 @@ class _Track:
             else:  # read after write: make the write visible to these stages
                 # the stages it was made visible to chain to these: a layout transition
                 # made for earlier readers is ordered only before their stages
-                src = State(self.layout, _stages_of(self.write) | _stages_of(self.visible),
-                            _write_access(self.write))
+                src = _source(self.layout, self.write, self.visible)
             self.reads = s if self.reads is None else self.reads.merge(s)
             self.visible = s if self.visible is None else self.visible.merge(s)
             return None if src is None or not (src.stages or src.access) else src
         # a write or a layout change waits for the last write and every read since (WAR)
-        src = State(self.layout, _stages_of(self.write) | _stages_of(self.reads),
-                    _write_access(self.write))
+        src = _source(self.layout, self.write, self.reads)
         self.layout = s.layout
         if s.writes:
             # nothing has seen this write yet, not even reads in the writer's own stages
@@ -1185,6 +1183,20 @@ class _Track:
         if same_layout and not src.stages:
             return None  # nothing earlier to wait for and no transition
         return src
+
+
+def _source(layout: str | None, write: State | None, seen: State | None) -> State:
+    """A barrier's source: ``write``'s stages and write access, and the stages of the
+    accesses ``seen`` since; a schedule repeats a few of these, so each is made once."""
+    key = (layout, write, seen)
+    src = _SOURCES.get(key)
+    if src is None:
+        src = _SOURCES[key] = State(layout, _stages_of(write) | _stages_of(seen),
+                                    _write_access(write))
+    return src
+
+
+_SOURCES: dict[tuple, State] = {}
 
 
 def _final_states(declared: Declared, schedule: list[int]) -> dict[str, _Track]:
