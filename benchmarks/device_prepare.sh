@@ -39,7 +39,7 @@ wheels=(
     wgpu==0.32.0 rendercanvas==2.7.2 cffi==2.1.1 pycparser==3.12
     vulkan==1.3.275.1 glfw==2.11.0 trimesh==5.2.0 tomli-w==1.2.0
     pygltflib==1.16.5 dataclasses-json==0.6.7 marshmallow==3.26.2 deprecated==1.3.1
-    flip-evaluator==1.7 embreex==4.4.0.post1
+    flip-evaluator==1.7 embreex==4.4.0.post1 rtoml==0.14.0
 )
 platforms=()
 for n in 17 27 28 31 34 35; do platforms+=(--platform "manylinux_2_${n}_x86_64"); done
