@@ -674,6 +674,12 @@ def _check_storage_format(what: str, d: DescriptorInfo, view: ImageView, resourc
                       f"'{resource}' is {have.wgpu or have.name} ({have.vk})")
 
 
+# one dispatch's shader writes, made visible to the next dispatch of the same pass
+_SHADER_WRITE = State(None, frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_WRITE"}))
+_SHADER_RW = State(None, frozenset({"COMPUTE_SHADER"}),
+                   frozenset({"SHADER_READ", "SHADER_WRITE"}))
+
+
 class VkPassContext(SlotContext):
     """What ``Pass.record`` sees on Vulkan: the wgpu ``PassContext``'s interface."""
 
@@ -685,6 +691,7 @@ class VkPassContext(SlotContext):
         self.scene = executor.scene
         self.device = executor.device
         self.frame = executor.frame_index
+        self._dispatched = False
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:
@@ -850,6 +857,11 @@ class VkPassContext(SlotContext):
         vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
         self.bind(prog, values, point)
         self._push(prog, push_constants)
+        # a pass's dispatches run in order, as on wgpu: each sees the shader writes of the
+        # ones before it (the plan's barriers only order passes)
+        if self._dispatched:
+            barrier(self.cmd, memory_barriers=[(_SHADER_WRITE, _SHADER_RW)])
+        self._dispatched = True
         t = (*threads, 1, 1)[:3]
         vk.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
                                      for i in range(3)))
