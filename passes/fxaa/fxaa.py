@@ -2,6 +2,8 @@
 
 from typing import ClassVar
 
+import wgpu
+
 from rfw import ComputePass, Settings, Tex2D, register_pass
 from rfw.graph import Slot
 
@@ -26,12 +28,17 @@ class FXAAPass(ComputePass):
         search_steps: int = 12  # edge-walk iterations per side (1-12)
 
     def setup(self, executor) -> None:
-        # clamped bilinear reads: the edge walk samples between texels
-        self.sampler = executor.device.device.create_sampler(
-            mag_filter="linear", min_filter="linear", address_mode_u="clamp-to-edge",
-            address_mode_v="clamp-to-edge", label=f"{self.name}:linear")
+        # clamped bilinear reads: the edge walk samples between texels. a wgpu device makes
+        # its own; vk uses the scene's linear sampler (also clamped and bilinear; its linear
+        # mip filter is moot at lod 0 of a one-level image)
+        self.sampler = None
+        device = getattr(executor.device, "device", None)
+        if isinstance(device, wgpu.GPUDevice):
+            self.sampler = device.create_sampler(
+                mag_filter="linear", min_filter="linear", address_mode_u="clamp-to-edge",
+                address_mode_v="clamp-to-edge", label=f"{self.name}:linear")
 
     def record(self, ctx) -> None:
         ctx.dispatch(threads=ctx.extent("color"), t_ldr=ctx.sampled("ldr"),
-                     s_linear=self.sampler, o_color=ctx.storage("color"),
-                     u_params=self.params)
+                     s_linear=self.sampler or ctx.scene.linear_sampler,
+                     o_color=ctx.storage("color"), u_params=self.params)
