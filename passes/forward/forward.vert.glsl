@@ -1,0 +1,24 @@
+#version 460
+// twin of forward.wgsl (vs_main)
+//
+// invariant: the same expression as depth_prepass.vert.glsl (vk_clip included), so
+// less-equal against the prepass depth passes exactly where this surface is nearest. y is
+// flipped to Vulkan's ndc (vk_clip in scene.glsl); the pipeline keeps WebGPU's front face.
+#define MESH_VERTEX_INPUT
+#include "mesh.glsl"
+
+invariant gl_Position;
+
+layout(location = 0) out vec3 o_world;
+layout(location = 1) out vec3 o_normal;
+layout(location = 2) out vec2 o_uv;
+layout(location = 3) out vec4 o_tangent;
+
+void main() {
+    vec4 w = instance.model * vec4(v_position, 1.0);
+    gl_Position = vk_clip(camera.view_proj * w);
+    o_world = w.xyz;
+    o_normal = (instance.normal * vec4(v_normal, 0.0)).xyz;
+    o_tangent = vec4((instance.model * vec4(v_tangent.xyz, 0.0)).xyz, v_tangent.w);
+    o_uv = v_uv;
+}
