@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from passes.fxaa.fxaa import FXAAPass
 from passes.tonemap.tonemap import TonemapPass
 from rfw import ComputePass, Settings
 from rfw.config import apply_overrides, load_config
@@ -178,7 +179,12 @@ def test_glsl_compile_error_names_file_and_line(vk_device, tmp_path, monkeypatch
     assert vk_device.live_objects() == before  # the half-built frame was torn down
 
 
-def test_missing_glsl_twin_is_a_clear_error(vk_device):
+def test_missing_glsl_twin_is_a_clear_error(vk_device, tmp_path, monkeypatch):
+    # fxaa has a twin now: a copy of its folder without it stands in
+    folder = tmp_path / "fxaa"
+    shutil.copytree(ROOT / "passes" / "fxaa", folder)
+    (folder / "fxaa.comp.glsl").unlink()
+    monkeypatch.setattr(FXAAPass, "folder", classmethod(lambda cls: folder))
     cfg = apply_overrides(load_config(ROOT / "configs" / "deferred_ssao_shadows.toml"),
                           ["ao=off", "size=64x36"])
     before = live(vk_device)
