@@ -74,7 +74,7 @@ def test_rt_primary_reports_its_structures_with_and_without_backend(tmp_path):
 
 
 def test_readme_ray_pipeline_with_ssao_renders(tmp_path):
-    # the README's example: ssao has no GLSL twin, so it runs on wgpu and reads vk's depth
+    # the README's example: the config pins ssao to wgpu, so it reads vk's depth over a bridge
     done, out = rfw(tmp_path, "rt", str(CONFIGS / "rt_shadows.toml"), "--backend", "vk",
                     "--set", "shadows=ray_pipeline", "--set", "ao=ssao", "--size", "64x36")
     assert done.returncode == 0, done.stderr
