@@ -12,7 +12,8 @@ import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from .config import MAX_FRAMES, is_run_config, parse_size
+from . import argtypes
+from .config import MAX_FRAMES, is_run_config
 from .errors import RfwError
 from .fileio import atomic_write
 from .graph import CompiledGraph, Graph, GraphError, MemoryOptions, compile, load_graph, to_toml
@@ -27,51 +28,6 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> typing.NoReturn:
         line = RfwError(f"{message} (usage: {self.prog} --help)", element=self.prog)
         self.exit(2, f"rfw: error: {line}\n")  # RfwError escapes control characters
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        return parse_size(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def _count(lo: int, hi: int) -> typing.Callable[[str], int]:
-    """An argparse type: an integer in [lo, hi] (``--frames 0`` is an error, not 1)."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
-        return value
-
-    return parse
-
-
-def _triangles(text: str) -> int:
-    """``--max-triangles``: meshoptimizer pads triangle runs to 4 bytes."""
-    value = _count(4, 512)(text)
-    if value % 4:
-        raise argparse.ArgumentTypeError(f"max_triangles must be a multiple of 4, got {value}")
-    return value
-
-
-def _real(lo: float, hi: float) -> typing.Callable[[str], float]:
-    """An argparse type: a finite number in [lo, hi]."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not lo <= value <= hi:  # nan fails both comparisons
-            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {text}")
-        return value
-
-    return parse
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -238,7 +194,7 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
 
 def _graph_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="graph file: .toml (rfw graph or run config) or .json (Raptor)")
-    p.add_argument("--size", type=_size, help="output size WxH (default: the graph's own)")
+    p.add_argument("--size", type=argtypes.size, help="output size WxH (default: the graph's own)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--strict", dest="strict", action="store_true", default=None,
                       help="inputs that no pass produces are errors (default for TOML)")
@@ -260,8 +216,8 @@ def parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="render a config headless: images and per-pass timings")
     run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
     run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...) or 'default'")
-    run.add_argument("--size", type=_size, help="output size WxH")
-    run.add_argument("--frames", type=_count(1, MAX_FRAMES),
+    run.add_argument("--size", type=argtypes.size, help="output size WxH")
+    run.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES),
                      help="frames to time (after one warm-up)")
     run.add_argument("--backend", choices=["wgpu", "vk"],
                      help="backend of unpinned passes (default: vk when every pass is pinned "
@@ -277,9 +233,9 @@ def parser() -> argparse.ArgumentParser:
     v = sub.add_parser("view", help="a live window: camera, pass toggles, timings")
     v.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
     v.add_argument("--scene")
-    v.add_argument("--size", type=_size)
+    v.add_argument("--size", type=argtypes.size)
     v.add_argument("--set", action="append", metavar="KEY=VALUE")
-    v.add_argument("--frames", type=_count(1, MAX_FRAMES), help="close after this many frames")
+    v.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES), help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
     v.set_defaults(func=cmd_view)
     scenes = sub.add_parser("scenes", help="real test scenes from package registries")
@@ -300,14 +256,14 @@ def parser() -> argparse.ArgumentParser:
                            "in a pyvista window (or --screenshot PNG)")
     show.add_argument("mesh", help="mesh or scene file (.gltf .glb .obj .ply ...), 'default' "
                       "(the courtyard's fountain) or 'default:NAME' (e.g. default:column)")
-    show.add_argument("--max-vertices", type=_count(3, 255), default=64,
+    show.add_argument("--max-vertices", type=argtypes.count(3, 255), default=64,
                       help="per meshlet (default 64)")
-    show.add_argument("--max-triangles", type=_triangles, default=124,
+    show.add_argument("--max-triangles", type=argtypes.triangles, default=124,
                       help="per meshlet, a multiple of 4 (default 124)")
-    show.add_argument("--cone-weight", type=_real(0.0, 1.0), default=0.25,
+    show.add_argument("--cone-weight", type=argtypes.real(0.0, 1.0), default=0.25,
                       help="0: compact clusters, towards 1: tighter normal cones (default 0.25)")
     show.add_argument("--screenshot", metavar="PNG", help="render off screen to PNG and exit")
-    show.add_argument("--size", type=_size, default=(1024, 768), help="window size WxH")
+    show.add_argument("--size", type=argtypes.size, default=(1024, 768), help="window size WxH")
     show.set_defaults(func=cmd_meshlets)
     from .bench.cli import add_arguments as bench_arguments
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from .config import Config, apply_overrides, build
 from .errors import RfwError
+from .frame import camera_for, load_scene_for
 from .graph import GraphError, compile
-from .render import camera_for, load_scene_for
 
 _BLIT = """
 @group(0) @binding(0) var t: texture_2d<f32>;

@@ -42,10 +42,9 @@ from rfw.graph.sync import State
 from rfw.scene.model import Scene
 
 from .commands import TimestampPool, barrier, one_time, upload_buffer
-from .consts import const, ffi, vk
+from .consts import const, ffi, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, MiB
-from .scene import new
 
 # TLAS instance mask bits by material alpha mode (cull masks of rays test against them)
 MASK_OPAQUE, MASK_ALPHA_TEST, MASK_BLEND = 0x1, 0x2, 0x4

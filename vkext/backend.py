@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from rfw.config import Config, build, resolve_auto
-from rfw.render import (
+from rfw.frame import (
     Result,
     camera_for,
     frame_record,
@@ -16,6 +16,8 @@ from rfw.render import (
 
 from .device import VkDevice
 from .executor import VkExecutor, check_passes, fit_plan
+from .frame_stats import accel_stats, culling_counters
+from .mixed import render_mixed
 from .scene import VkScene
 
 
@@ -46,8 +48,6 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
             device.destroy()
         raise
     if pinned_elsewhere(cfg, "vk"):
-        from .mixed import render_mixed
-
         if own:  # the mixed frame makes and counts its own
             device.destroy()
         result = render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend="vk",
@@ -101,42 +101,3 @@ def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
         timings["validation"] = {"messages": len(device.messages),
                                  "texts": [m.text for m in device.messages[:20]]}
     return Result(cfg, images, timings, ex)
-
-
-def accel_stats(ex: Any) -> dict[str, Any] | None:
-    """The acceleration structures the frame's builder pass made: counts, bytes before and
-    after compaction, build times and the frame builds (rebuilds or refits)."""
-    for name, p in ex.passes.items():
-        accel = getattr(p, "accel", None)
-        if accel is not None and hasattr(accel, "stats"):
-            return {"pass": name, **accel.stats()}
-    return None
-
-
-def culling_counters(ex: Any) -> dict[str, Any] | None:
-    """The last frame's GPU culling counters of the meshlet passes, in timings.json's
-    names. ``culled_occlusion`` is None where no pass runs the occlusion test (no late
-    phase), ``triangles_culled_backface`` where no pass culls triangles."""
-    meshlets = [p for p in ex.passes.values() if getattr(p, "meshlets", None) is not None]
-    last = next((p.meshlets.last for p in meshlets if p.meshlets.last), None)
-    if not last:
-        return None
-    params = [getattr(p, "params", None) for p in meshlets]
-    occlusion = any(getattr(q, "phase", None) == "late" and not getattr(q, "freeze", False)
-                    for q in params)
-    triangles = any(getattr(q, "triangles", False) for q in params)
-    return {
-        "meshlets_total": last["meshlets_total"], "meshlets_drawn": last["drawn"],
-        "culled_cone": last["cone_culled"], "culled_frustum": last["frustum_culled"],
-        "culled_occlusion": last["occlusion_culled"] if occlusion else None,
-        "triangles_drawn": last["triangles_in_drawn"] - last["triangles_backface"],
-        "meshlets_considered": last["considered"],
-        "meshlets_drawn_late": last["drawn_late"] if occlusion else None,
-        "instances_culled": last["instances_culled"],
-        "triangles_total": last["triangles_total"],
-        "triangles_considered": last["triangles"],
-        "triangles_culled_cone": last["triangles_cone"],
-        "triangles_culled_frustum": last["triangles_frustum"],
-        "triangles_culled_occlusion": last["triangles_occlusion"] if occlusion else None,
-        "triangles_culled_backface": last["triangles_backface"] if triangles else None,
-    }

@@ -26,6 +26,7 @@ This module also holds the guarded import: without a loader, ``vk`` is ``None`` 
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 try:  # the package dlopens libvulkan at import and raises OSError without a loader
@@ -170,6 +171,25 @@ def const(name: str) -> int:
             pass
     raise KeyError(f"unknown Vulkan constant {name} (not in the vulkan package, nor in "
                    "vkext.consts.SPEC: add its value from the registry there)")
+
+
+def _snake(struct: str) -> str:
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", struct.removeprefix("Vk")).upper()
+
+
+def new(struct: str, count: int | None = None, **fields: Any) -> Any:
+    """``ffi.new`` of a Vulkan struct (or an array of ``count``) with ``sType`` set."""
+    stype = const(f"VK_STRUCTURE_TYPE_{_snake(struct)}")
+    if count is not None:
+        arr = ffi.new(f"{struct}[]", max(1, count))
+        for i in range(count):
+            arr[i].sType = stype
+        return arr
+    p = ffi.new(f"{struct}*")
+    p.sType = stype
+    for k, v in fields.items():
+        setattr(p, k, v)
+    return p
 
 
 def flag_name(prefix: str, name: str) -> str:

@@ -43,15 +43,16 @@ from typing import Any
 import numpy as np
 
 from rfw.config import Built, Config, build
+from rfw.frame import Result, camera_for, frame_record, load_scene_for, median
 from rfw.graph import CompiledGraph, compile
 from rfw.graph.bridges import backend_of, insert_bridges
 from rfw.graph.formats import format_info
 from rfw.graph.graph import Graph
 from rfw.graph.resources import Binding, SizeRule
-from rfw.render import Result, camera_for, frame_record, load_scene_for, median
 from rfw.shaders import ShaderError
 
 from .commands import read_buffer, read_image, upload_buffer, upload_image
+from .frame_stats import accel_stats, culling_counters
 
 BACKENDS = ("wgpu", "vk")
 
@@ -409,7 +410,6 @@ def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
     backend of unpinned passes. Devices not given are made here (the Vulkan one with the
     validation layer when ``validation``) and destroyed; ``timings["validation"]`` counts
     the Vulkan side's messages; ``timings["memory"]`` is the Vulkan side's transients."""
-    from .backend import accel_stats, culling_counters
     from .device import VkDevice
 
     built = build(cfg)

@@ -13,7 +13,6 @@ it and ``VkDevice.destroy()`` reaches anything left behind.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -32,8 +31,9 @@ from rfw.backends.scene_data import (
 from rfw.graph.sync import State
 from rfw.scene.model import Camera, Scene, is_mirrored
 
+from .accel import SceneAccel
 from .commands import TRANSFER_DST, ImageBarrier, barrier, one_time
-from .consts import const, ffi, lib, vk
+from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
 
@@ -86,25 +86,6 @@ def _flags(names: Iterable[str]) -> int:
     for n in names:
         out |= const(n)
     return out
-
-
-def _snake(struct: str) -> str:
-    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", struct.removeprefix("Vk")).upper()
-
-
-def new(struct: str, count: int | None = None, **fields: Any) -> Any:
-    """``ffi.new`` of a Vulkan struct (or an array of ``count``) with ``sType`` set."""
-    stype = const(f"VK_STRUCTURE_TYPE_{_snake(struct)}")
-    if count is not None:
-        arr = ffi.new(f"{struct}[]", max(1, count))
-        for i in range(count):
-            arr[i].sType = stype
-        return arr
-    p = ffi.new(f"{struct}*")
-    p.sType = stype
-    for k, v in fields.items():
-        setattr(p, k, v)
-    return p
 
 
 # ---------------------------------------------------------------------------------------------
@@ -540,8 +521,6 @@ class VkScene:
         """The scene's :class:`vkext.accel.SceneAccel` built with ``options`` (``prefer``,
         ``allow_update``, ``compact``): made on first use, kept and destroyed with the
         scene, so every executor and frame on this scene shares its BLAS and TLAS."""
-        from .accel import SceneAccel  # accel imports this module
-
         cache = self.__dict__.setdefault("_accels", {})
         key = tuple(sorted(options.items()))
         if key not in cache:

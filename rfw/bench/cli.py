@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..cli import _size
+from .. import argtypes
 from ..errors import RfwError, check_number
 
 PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rfw_raycast")
@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "'report DIR'")
     p.add_argument("--scene", action="append", help="scene file or 'default' (repeatable: "
                    "a matrix axis)")
-    p.add_argument("--size", type=_size, help="output size WxH (default: the first config's)")
+    p.add_argument("--size", type=argtypes.size, help="output size WxH (default: the first config's)")
     p.add_argument("--frames", type=int, default=10, help="timed frames per run (default 10)")
     p.add_argument("--warmup", type=int, default=2, help="untimed frames first (default 2)")
     p.add_argument("--repeat", type=int, default=3,

@@ -8,6 +8,7 @@ cone (``cone_cutoff < 1``) get an arrow from ``cone_apex`` along ``cone_axis``, 
 The mesh is any file ``rfw.scene.load_scene`` reads (every instance's mesh, placed by its
 transform, merged into one), ``default`` (the courtyard's fountain) or ``default:NAME`` (the
 courtyard mesh of that name, e.g. ``default:column``).
+``python -m rfw.meshlet_view`` runs the command (see ``__main__``).
 """
 
 from __future__ import annotations
@@ -16,14 +17,13 @@ import argparse
 import colorsys
 import os
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .errors import RfwError
-from .meshlets import Meshlets, build_meshlets
+from ..errors import RfwError
+from ..meshlets import Meshlets, build_meshlets
 
 DEFAULT_MESH = "fountain"
 CONE_LENGTH = 0.8  # arrow length in bounding radii
@@ -44,7 +44,7 @@ def load_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, str]:
                 getattr(spec, "name", "mesh"))
     text = str(spec)
     if text == "default" or text.startswith("default:"):
-        from .scene import default_scene
+        from ..scene import default_scene
 
         name = text.partition(":")[2] or DEFAULT_MESH
         meshes = default_scene().meshes
@@ -53,7 +53,7 @@ def load_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, str]:
                 return m.positions, m.indices.astype(np.uint32), f"courtyard {name}"
         names = ", ".join(sorted({m.name for m in meshes}))
         raise ValueError(f"the courtyard has no mesh '{name}' (it has: {names})")
-    from .scene import load_scene
+    from ..scene import load_scene
 
     scene = load_scene(text)
     placed = [(scene.meshes[i.mesh], np.asarray(i.transform, np.float64))
@@ -226,14 +226,3 @@ def cmd_show(args: argparse.Namespace) -> int:
     if out is not None:
         print(f"wrote {out}")
     return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    # the arguments live with the other commands in rfw.cli (which imports no numpy)
-    from .cli import main as rfw_main
-
-    return rfw_main(["meshlets", "show", *(argv if argv is not None else sys.argv[1:])])
-
-
-if __name__ == "__main__":
-    sys.exit(main())
