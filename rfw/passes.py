@@ -114,13 +114,13 @@ class Settings:
             value = getattr(self, name)
             if kind in _SCALARS:
                 fmt = {"f32": "f", "i32": "i", "u32": "I"}[_SCALARS[kind]]
-                _align(out, 4)
+                _pad(out, 4)
                 out += struct.pack("<" + fmt, int(value) if fmt != "f" else float(value))
             elif _is_vec(kind):
                 n = len(typing.get_args(kind))
-                _align(out, 8 if n == 2 else 16)
+                _pad(out, 8 if n == 2 else 16)
                 out += struct.pack(f"<{n}f", *value)
-        _align(out, 16)
+        _pad(out, 16)
         return bytes(out or b"\0" * 16)
 
     def __repr__(self) -> str:
@@ -136,7 +136,7 @@ def _is_vec(kind: Any) -> bool:
         all(a is float for a in args)
 
 
-def _align(buf: bytearray, n: int) -> None:
+def _pad(buf: bytearray, n: int) -> None:
     buf += b"\0" * (-len(buf) % n)
 
 

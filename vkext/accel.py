@@ -40,11 +40,12 @@ import numpy as np
 
 from rfw.graph.sync import State
 from rfw.scene.model import Scene
+from rfw.units import MiB, align_up
 
 from .commands import TimestampPool, barrier, one_time, upload_buffer
 from .consts import const, ffi, new, vk
 from .device import VkDevice
-from .memory import BlockAllocator, Buffer, MiB
+from .memory import BlockAllocator, Buffer
 
 # TLAS instance mask bits by material alpha mode (cull masks of rays test against them)
 MASK_OPAQUE, MASK_ALPHA_TEST, MASK_BLEND = 0x1, 0x2, 0x4
@@ -70,10 +71,6 @@ _INPUT_READ = State(None, _BUILD, frozenset({"SHADER_READ"}))
 # any later use: ray queries in any stage, ray-tracing pipelines, copies
 _ANY_READ = State(None, frozenset({"ALL_COMMANDS"}),
                   frozenset({"ACCELERATION_STRUCTURE_READ_KHR"}))
-
-
-def _align(x: int, a: int) -> int:
-    return -(-x // a) * a
 
 
 class AccelerationStructure:
@@ -376,13 +373,13 @@ class SceneAccel:
         batches: list[list[tuple]] = []
         used = self.scratch_budget + 1
         for job in jobs:
-            need = _align(job[5], align)
+            need = align_up(job[5], align)
             if used + need > self.scratch_budget:
                 batches.append([])
                 used = 0
             batches[-1].append(job)
             used += need
-        blas_scratch = max((sum(_align(j[5], align) for j in b) for b in batches), default=0)
+        blas_scratch = max((sum(align_up(j[5], align) for j in b) for b in batches), default=0)
         self.blas_batches = len(batches)
 
         # the TLAS: instance records in a host-visible buffer (written again by update())
@@ -411,7 +408,7 @@ class SceneAccel:
 
         scratch = self._scratch(max(blas_scratch, tscratch), align, "build")
         try:
-            base = _align(scratch.address, align)
+            base = align_up(scratch.address, align)
             tinfo.scratchData.deviceAddress = base  # the BLAS are done with it by then
             tinfo.dstAccelerationStructure = self.tlas.handle
 
@@ -431,7 +428,7 @@ class SceneAccel:
                         info.scratchData.deviceAddress = base + offset
                         infos[i] = info[0]
                         ranges[i] = rng
-                        offset += _align(s, align)
+                        offset += align_up(s, align)
                     keep += [infos, ranges]
                     dev.fn.vkCmdBuildAccelerationStructuresKHR(cmd, len(batch), infos, ranges)
                 self._timer.mark(cmd, 1)
@@ -559,7 +556,7 @@ class SceneAccel:
         if update:
             info.srcAccelerationStructure = self.tlas.handle
         info.dstAccelerationStructure = self.tlas.handle
-        info.scratchData.deviceAddress = _align(self._frame_scratch.address, align)
+        info.scratchData.deviceAddress = align_up(self._frame_scratch.address, align)
         # the scratch is reused frame after frame: the last build's use of it comes first
         barrier(cmd, memory_barriers=[(_AS_RW, _AS_RW)])
         dev.fn.vkCmdBuildAccelerationStructuresKHR(cmd, 1, info, ranges)
@@ -606,7 +603,7 @@ class SceneAccel:
         info.srcAccelerationStructure = info.dstAccelerationStructure = self.tlas.handle
         align = int(dev.extension_properties["VK_KHR_acceleration_structure"]
                     ["minAccelerationStructureScratchOffsetAlignment"])
-        info.scratchData.deviceAddress = _align(self._update_scratch.address, align)
+        info.scratchData.deviceAddress = align_up(self._update_scratch.address, align)
         with one_time(dev, label=f"{self.label}: update") as cmd:
             # earlier readers of the TLAS (any stage) finish before it is rewritten
             barrier(cmd, memory_barriers=[(_ANY_READ, _AS_RW)])

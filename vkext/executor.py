@@ -31,6 +31,7 @@ from rfw.graph.graph import Graph
 from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError
+from rfw.units import MiB, align_up
 
 from .commands import (
     GLOBAL,
@@ -74,7 +75,6 @@ from .scene import (
 )
 from .spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 
-MiB = 1 << 20
 TIMESTAMP_STAGE = "ALL_COMMANDS"
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
@@ -621,14 +621,14 @@ class UniformRing:
         self.index, self.offset = 0, 0
 
     def push(self, data: bytes) -> BufferRange:
-        size = max(16, -(-len(data) // 16) * 16)
+        size = max(16, align_up(len(data), 16))
         while True:
             if self.index >= len(self.chunks):
                 self.chunks.append(self.allocator.create_buffer(
                     max(self.chunk, size), ("uniform",), host_visible=True,
                     label=f"rfw:uniforms{len(self.chunks)}"))
             buf = self.chunks[self.index]
-            offset = -(-self.offset // self.alignment) * self.alignment
+            offset = align_up(self.offset, self.alignment)
             if offset + size <= buf.bytes:
                 break
             self.index, self.offset = self.index + 1, 0

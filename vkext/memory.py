@@ -17,11 +17,10 @@ import numpy as np
 from rfw.errors import RfwError
 from rfw.graph.compile import CompiledGraph, MemoryOptions, ResourcePlan
 from rfw.graph.formats import FormatInfo, format_info
+from rfw.units import GiB, KiB, MiB, align_up
 
 from .consts import const, ffi, vk
 from .device import VkDevice
-
-MiB = 1 << 20
 
 
 class VkOutOfMemoryError(RfwError, MemoryError):
@@ -76,10 +75,6 @@ HOST_COHERENT = "VK_MEMORY_PROPERTY_HOST_COHERENT_BIT"
 HOST_CACHED = "VK_MEMORY_PROPERTY_HOST_CACHED_BIT"
 
 
-def _align(x: int, a: int) -> int:
-    return -(-x // a) * a
-
-
 def _flags(names: Iterable[str]) -> int:
     out = 0
     for n in names:
@@ -88,7 +83,7 @@ def _flags(names: Iterable[str]) -> int:
 
 
 def _size(n: int) -> str:
-    for unit, scale in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+    for unit, scale in (("GiB", GiB), ("MiB", MiB), ("KiB", KiB)):
         if n >= scale:
             return f"{n / scale:.4g} {unit}"
     return f"{n} B"
@@ -837,9 +832,9 @@ class _Block:
             nxt = self.allocs[i] if i < len(self.allocs) else None
             start = prev.end if prev else 0
             stop = nxt.offset if nxt else self.memory.size
-            o = _align(start, alignment)
+            o = align_up(start, alignment)
             if prev and prev.linear != linear and page(prev.end - 1) == page(o):
-                o = _align(o, max(alignment, granularity))
+                o = align_up(o, max(alignment, granularity))
             fits = o + size <= stop
             if fits and nxt and nxt.linear != linear and page(o + size - 1) == page(nxt.offset):
                 fits = False
@@ -876,7 +871,7 @@ class BlockAllocator:
             if o is not None:
                 break
         else:
-            block_bytes = max(self.block_size, _align(size, self.granularity))
+            block_bytes = max(self.block_size, align_up(size, self.granularity))
             mem = DeviceMemory(self.device, block_bytes, 1 << type_index,
                                host_visible=host_visible,
                                label=f"{self.label}:block{sum(map(len, self.blocks.values()))}")

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from rfw.graph.sync import State
+from rfw.units import align_up
 
 from .accel import AccelerationStructure
 from .commands import upload_buffer
@@ -49,10 +50,6 @@ KINDS = {**DESCRIPTOR_TYPES,
 # who reads a shader binding table
 SBT_READ = State(None, frozenset({"RAY_TRACING_SHADER_KHR"}),
                  frozenset({"SHADER_BINDING_TABLE_READ_KHR"}))
-
-
-def _align(x: int, a: int) -> int:
-    return -(-x // a) * a
 
 
 class ShaderModule(VkObject):
@@ -446,16 +443,16 @@ class ShaderBindingTable:
                                  f"pipeline has {n} {kind} group(s)")
         data = dict(data or {})
         extra = max((len(v) for v in data.values()), default=0)
-        stride = _align(hsize + extra, halign)
+        stride = align_up(hsize + extra, halign)
         if stride > props["maxShaderGroupStride"]:
             raise ValueError(f"{self.label}: record stride {stride} exceeds "
                              f"maxShaderGroupStride {props['maxShaderGroupStride']}")
         handles = pipeline.group_handles()
         # (kind, group of each record, stride, region size)
-        raygen_stride = _align(stride, balign)
+        raygen_stride = align_up(stride, balign)
         kinds = [("raygen", [0], raygen_stride, raygen_stride),
-                 ("miss", [1 + m for m in miss], stride, _align(len(miss) * stride, balign)),
-                 ("hit", [1 + n_miss + h for h in hit], stride, _align(len(hit) * stride,
+                 ("miss", [1 + m for m in miss], stride, align_up(len(miss) * stride, balign)),
+                 ("hit", [1 + n_miss + h for h in hit], stride, align_up(len(hit) * stride,
                                                                          balign))]
         total = sum(size for *_, size in kinds)
         blob = np.zeros(total, np.uint8)
@@ -477,7 +474,7 @@ class ShaderBindingTable:
                              label=self.label)
         try:
             self.buffer.allocate()
-            base = _align(self.buffer.address, balign)
+            base = align_up(self.buffer.address, balign)
             upload_buffer(dev, self.buffer, blob, SBT_READ, offset=base - self.buffer.address)
         except BaseException:
             self.buffer.destroy()

@@ -30,14 +30,13 @@ from rfw.backends.scene_data import (
 )
 from rfw.graph.sync import State
 from rfw.scene.model import Camera, Scene, is_mirrored
+from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
 from .commands import TRANSFER_DST, ImageBarrier, barrier, one_time
 from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
-
-MiB = 1 << 20
 
 # descriptor kinds as vkext.spirv.reflect names them
 DESCRIPTOR_TYPES = {
@@ -392,8 +391,8 @@ class VkScene:
 
         # camera (main, sun) and lights: host-visible, written by set_viewport
         lights, self.sun_matrix, self.default_light = lights_bytes(scene)
-        self._cam_offsets = (0, _align(CAMERA_BYTES, align))
-        self._lights_offset = _align(self._cam_offsets[1] + CAMERA_BYTES, align)
+        self._cam_offsets = (0, align_up(CAMERA_BYTES, align))
+        self._lights_offset = align_up(self._cam_offsets[1] + CAMERA_BYTES, align)
         self.dynamic_uniforms = self.allocator.create_buffer(
             self._lights_offset + LIGHTS_BYTES, ("uniform",), host_visible=True,
             label="scene:camera+lights")
@@ -572,7 +571,3 @@ class VkScene:
         if self.allocator is not None:
             self.allocator.destroy()  # buffers, images (and their views), blocks
             self.allocator = None
-
-
-def _align(x: int, a: int) -> int:
-    return -(-x // a) * a

@@ -23,6 +23,7 @@ from ..graph.compile import ResourcePlan
 from ..graph.formats import format_info
 from ..passes import Pass, Settings
 from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, reflect
+from ..units import align_up
 from .base import FrameExecutor, SlotContext
 
 # wgpu features rfw asks for when the adapter has them
@@ -500,7 +501,7 @@ class Executor(FrameExecutor):
         for r in self.plan.resources:
             if r.kind == "buffer" and r.raw_bytes > 0:
                 self._buffers[r.name] = self.device.device.create_buffer(
-                    size=-(-r.raw_bytes // 4) * 4, usage=buffer_usage(r), label=r.name)
+                    size=align_up(r.raw_bytes, 4), usage=buffer_usage(r), label=r.name)
 
     def texture(self, resource: str) -> Any:
         return self._textures[self.owner[resource]]

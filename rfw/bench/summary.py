@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..units import MiB
 from .stats import summarize
 
 RAYCAST_PEERS = ("open3d", "mitsuba", "embree", "rfw_raycast")  # benchmarks/peers
@@ -88,4 +89,4 @@ def _fold_peer(v: VariantSummary) -> None:
 
 
 def mib(n: Any) -> str:
-    return "-" if n is None else f"{n / (1 << 20):.2f}"
+    return "-" if n is None else f"{n / MiB:.2f}"

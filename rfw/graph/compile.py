@@ -17,6 +17,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from ..units import align_up
 from .bridges import insert_bridges
 from .errors import GraphError, did_you_mean
 from .formats import UnknownFormatError, canonical, format_info, image_bytes
@@ -1452,7 +1453,7 @@ def _memory_items(declared: Declared, resolved: dict[str, Resolved],
             continue
         r = resolved[name]
         a = memory.image_alignment if r.kind == "image" else memory.buffer_alignment
-        align[name] = -(-max(r.raw_bytes, device_sizes.get(name, 0)) // a) * a
+        align[name] = align_up(max(r.raw_bytes, device_sizes.get(name, 0)), a)
         groups[r.kind].append(Item(name, align[name], *spans[name]))
     kinds = [k for k in ("image", "buffer") if groups[k]]
     heap_of = {it.name: h for h, k in enumerate(kinds) for it in groups[k]}

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from ..units import MiB
 from .compile import CompiledGraph
 
 
 def _mib(n: int) -> str:
-    return f"{n / (1 << 20):.2f} MiB"
+    return f"{n / MiB:.2f} MiB"
 
 
 def _table(rows: list[list[str]], header: list[str]) -> list[str]:

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import warn
+from ..units import MiB
 from .gltf import _Loader, load_gltf
 from .meshfile import load_meshfile
 from .model import Instance, Material, Mesh, Scene, SceneError
@@ -183,7 +184,7 @@ def _summary(stderr: str, stdout: str) -> str:
 def sha256_file(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
+        for chunk in iter(lambda: f.read(MiB), b""):
             h.update(chunk)
     return h.hexdigest()
 
@@ -680,7 +681,7 @@ def convert_dragon(root: Path, work: Path, spec: SceneSpec) -> Built:
     ply = work / "dragon_vrip.ply"
     try:
         with gzip.open(src, "rb") as f, open(ply, "wb") as out:
-            shutil.copyfileobj(f, out, 1 << 20)
+            shutil.copyfileobj(f, out, MiB)
     except (OSError, EOFError) as e:
         raise FetchError(f"scene '{spec.name}': cannot gunzip {rel}: {e}") from None
     scene = _load(load_meshfile, ply, spec.name)
