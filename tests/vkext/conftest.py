@@ -24,3 +24,9 @@ def _validation_silent(request):
     yield
     if "vk_device" in request.fixturenames:
         request.getfixturevalue("vk_device").check_validation()
+
+
+@pytest.fixture
+def private_spirv_cache(tmp_path, monkeypatch):
+    """A SPIR-V cache of the test's own: shaders compile afresh, nothing shared is touched."""
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))

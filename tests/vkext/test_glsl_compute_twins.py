@@ -24,7 +24,6 @@ from passes.fxaa.fxaa import FXAAPass
 from passes.ssao.ssao import SSAOPass
 from rfw.config import apply_overrides, load_config
 from rfw.render import render
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 
 from ..conftest import tiny_scene
@@ -57,13 +56,8 @@ CASES = [pytest.param(cls, d, id=f"{cls.__name__}-{'+'.join(f'{k}{v}' for k, v i
 
 
 @pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
+def private_cache(private_spirv_cache):
+    pass
 
 
 def config(size: str, *sets: str):
@@ -117,11 +111,9 @@ def test_debug_view_settings_pack_lands_on_glsl_offsets(tmp_path):
 
 @pytest.mark.parametrize("cls", list(VARIANTS))
 def test_variants_cover_every_define(cls):
-    text = parity.wgsl_path(cls).read_text()
-    if cls in (SSAOPass, SSAOBlur):  # their #ifdefs live in the shared include
-        text += (parity.wgsl_path(cls).parent / "ssao_common.wgsl").read_text()
-    used = set(parity.re.findall(r"^\s*#\s*ifn?def\s+(\w+)", text, parity.re.M))
-    assert used <= {k for d in VARIANTS[cls] for k in d}
+    # ssao's #ifdefs live in its shared include
+    includes = ("ssao_common.wgsl",) if cls in (SSAOPass, SSAOBlur) else ()
+    parity.assert_variants_cover(cls, VARIANTS[cls], *includes)
 
 
 # ---------------------------------------------------------------------------------------------

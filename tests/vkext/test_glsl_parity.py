@@ -53,8 +53,8 @@ IMAGE_FORMAT = {"rgba16float": "Rgba16f", "rgba8unorm": "Rgba8", "rgba32float": 
 
 
 @pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+def private_cache(private_spirv_cache):
+    pass
 
 
 # ---------------------------------------------------------------------------------------------
@@ -409,3 +409,12 @@ def test_settings_pack_lands_on_glsl_offsets(cls, tmp_path):
         want = tuple(value) if isinstance(value, tuple) else (int(value) if fmt == "I"
                                                               else value,)
         assert got == pytest.approx(want), f"{cls.__name__}.Params.{name} at offset {off}"
+
+
+def assert_variants_cover(cls, variants: list[dict], *includes: str) -> None:
+    """Every ``#ifdef`` of ``cls``'s WGSL (and of ``includes`` beside it) is set by one of
+    ``variants``, so the define combinations checked are all the shader has."""
+    path = wgsl_path(cls)
+    text = path.read_text() + "".join((path.parent / n).read_text() for n in includes)
+    used = set(re.findall(r"^\s*#\s*ifn?def\s+(\w+)", text, re.M))
+    assert used <= {k for d in variants for k in d}

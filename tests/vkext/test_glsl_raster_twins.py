@@ -23,7 +23,6 @@ from passes.forward.forward import ForwardPass
 from passes.overdraw.overdraw import OverdrawPass
 from rfw.config import apply_overrides, load_config
 from rfw.render import render, to_png_array
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 
 from ..conftest import tiny_scene
@@ -41,8 +40,8 @@ VARIANTS = {
 CASES = [pytest.param(cls, d, id=f"{cls.__name__}-{'+'.join(d) or 'base'}")
          for cls, variants in VARIANTS.items() for d in variants]
 
-# overdraw on its own: its count target is the output (the config's debug view needs
-# debug_view's twin, another part of issue 12)
+# overdraw on its own: its count target is the output (the config's view=overdraw goes
+# through debug_view too, tested below)
 OVERDRAW_TOML = """\
 name = "overdraw_only"
 scene = "default"
@@ -55,13 +54,8 @@ name = "overdraw"
 
 
 @pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
+def private_cache(private_spirv_cache):
+    pass
 
 
 def config(name: str, size: str, *sets: str):
@@ -117,9 +111,7 @@ def test_forward_settings_pack_lands_on_glsl_offsets(tmp_path):
 
 @pytest.mark.parametrize("cls", list(VARIANTS))
 def test_variants_cover_every_define(cls):
-    text = parity.wgsl_path(cls).read_text()
-    used = set(parity.re.findall(r"^\s*#\s*ifn?def\s+(\w+)", text, parity.re.M))
-    assert used <= {k for d in VARIANTS[cls] for k in d}
+    parity.assert_variants_cover(cls, VARIANTS[cls])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -18,8 +18,8 @@ pytestmark = pytest.mark.skipif(shutil.which("glslangValidator") is None,
 
 
 @pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+def private_cache(private_spirv_cache):
+    pass
 
 
 def write(folder, name, text):
