@@ -25,7 +25,7 @@ from rfw.backends.scene_data import instance_bytes, lights_bytes, main_camera_by
 from rfw.scene import SceneError, load_gltf
 from rfw.scene.model import transform_problem
 
-from .test_gltf import U8, U32, Gltf, _paths, kitchen_sink
+from .test_gltf import U8, U32, Gltf, _check_scene, _paths, kitchen_sink
 
 FUZZ = settings(max_examples=int(os.environ.get("RFW_FUZZ_EXAMPLES", 300)), deadline=None,
                 derandomize=True, suppress_health_check=list(HealthCheck))
@@ -148,12 +148,7 @@ def apply(g: Gltf, kind: str, path, value, pick: int) -> None:
 
 
 def check_drawable(scene) -> None:
-    for mesh in scene.meshes:
-        assert len(mesh.indices) % 3 == 0
-        if len(mesh.indices):
-            assert int(mesh.indices.max()) < len(mesh.positions)
-        for a in (mesh.positions, mesh.normals, mesh.uvs, mesh.tangents):
-            assert a.dtype == np.float32 and np.all(np.isfinite(a))
+    _check_scene(scene)  # meshes and material references, as test_gltf's fuzz checks them
     for inst in scene.instances:
         assert transform_problem(inst.transform) is None, inst.name
         assert np.all(np.isfinite(np.frombuffer(instance_bytes(inst.transform), np.float32)))
