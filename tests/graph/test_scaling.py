@@ -9,7 +9,6 @@ random lifetimes. No test times anything: growth is counted in operations.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -17,11 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rfw.errors import RfwError
-from rfw.graph import compile, load_graph, loads_raptor, loads_toml, to_toml
+from rfw.graph import compile, load_graph, loads_raptor, loads_toml, placement, to_toml
 from rfw.graph.synthetic import chain_graph, synthetic_graph, to_raptor_json
 
-compile_module = sys.modules["rfw.graph.compile"]  # the package's compile() shadows it
-Item = compile_module.Item
+Item = placement.Item
 
 DATA = Path(__file__).parent.parent / "data"
 RECORDED = json.loads((Path(__file__).parent / "data" / "raptor_memory_plans.json").read_text())
@@ -91,10 +89,10 @@ def test_span_tree_and_bucket_placements_equal_a_plain_best_fit(spans, long_live
         items.append(Item(f"r{k}", size * 256, first, last))
     expected = _scan(items)
     by_first = sorted(items, key=lambda it: (it.first, -it.size, it.name))
-    assert compile_module._place_sweep(by_first) == _scan(by_first)
-    assert compile_module._place_tree(items) == expected
-    assert compile_module._place_buckets(items) == expected
-    assert compile_module._place(items) == expected
+    assert placement._place_sweep(by_first) == _scan(by_first)
+    assert placement._place_tree(items) == expected
+    assert placement._place_buckets(items) == expected
+    assert placement._place(items) == expected
 
 
 def test_the_plain_best_fit_rejects_an_overlap():
@@ -108,18 +106,18 @@ def test_the_plain_best_fit_rejects_an_overlap():
 def _union_updates(items: list) -> int:
     """Range updates the span tree makes for these items (a count, not a time)."""
     calls = 0
-    real = compile_module._Union.add
+    real = placement._Union.add
 
     def counting(self, start, end):
         nonlocal calls
         calls += 1
         real(self, start, end)
 
-    compile_module._Union.add = counting
+    placement._Union.add = counting
     try:
-        compile_module._place_tree(items)
+        placement._place_tree(items)
     finally:
-        compile_module._Union.add = real
+        placement._Union.add = real
     return calls
 
 
@@ -137,8 +135,8 @@ def test_span_tree_work_grows_near_linearly_with_long_lived_items():
 def test_scan_is_chosen_for_short_lives_and_the_tree_for_long_ones():
     short = [Item(f"r{k}", 256, k, k + 2) for k in range(5000)]
     long = [Item(f"r{k}", 256, k, 5000) for k in range(5000)]
-    assert compile_module._scan_is_cheaper(short)
-    assert not compile_module._scan_is_cheaper(long)
+    assert placement._scan_is_cheaper(short)
+    assert not placement._scan_is_cheaper(long)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,198 @@
+"""Where passes go: dependency edges, cull, order, lifetimes and parallel levels."""
+
+
+from __future__ import annotations
+
+import heapq
+from collections import defaultdict
+from collections.abc import Iterable
+
+from .errors import GraphError
+from .graph import PassDecl
+from .plan import Access, Declared
+from .resources import ResourceDecl
+
+
+def _producer_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ...]],
+                    resources: dict[str, ResourceDecl]) -> dict[tuple[int, int], str]:
+    """Hard edges: whoever touches a resource runs after the pass that creates it."""
+    index = {p.name: i for i, p in enumerate(passes)}
+    edges: dict[tuple[int, int], str] = {}
+    for p in passes:
+        for a in accesses[p.name]:
+            producer = resources[a.resource].producer
+            if a.role in ("produce", "history") or producer is None or producer not in index:
+                continue
+            edges[(index[producer], index[p.name])] = "order" if a.role == "order" else "data"
+    return edges
+
+
+def _stable_toposort(n: int, edges: Iterable[tuple[int, int]], passes: list[PassDecl],
+                     keep: Iterable[int] | None = None) -> list[int]:
+    """Kahn's algorithm, smallest declaration index first; a cycle raises with its path."""
+    nodes = set(range(n) if keep is None else keep)
+    succ: dict[int, list[int]] = defaultdict(list)
+    indeg = dict.fromkeys(nodes, 0)
+    for a, b in edges:
+        if a in nodes and b in nodes:
+            succ[a].append(b)
+            indeg[b] += 1
+    ready = [i for i in nodes if indeg[i] == 0]
+    heapq.heapify(ready)
+    order: list[int] = []
+    while ready:
+        i = heapq.heappop(ready)
+        order.append(i)
+        for j in succ[i]:
+            indeg[j] -= 1
+            if indeg[j] == 0:
+                heapq.heappush(ready, j)
+    if len(order) != len(nodes):
+        raise GraphError(_cycle_message(nodes - set(order), succ, passes))
+    return order
+
+
+def _cycle_message(stuck: set[int], succ: dict[int, list[int]], passes: list[PassDecl]) -> str:
+    # walk inside the unsorted remainder until a node repeats: that loop is a cycle
+    start = min(stuck)
+    path, seen = [start], {start: 0}
+    while True:
+        nxt = min(j for j in succ[path[-1]] if j in stuck)
+        if nxt in seen:
+            loop = [*path[seen[nxt]:], nxt]
+            break
+        seen[nxt] = len(path)
+        path.append(nxt)
+    names = " -> ".join(passes[i].name for i in loop)
+    return f"cycle between passes: {names}"
+
+
+def _hazard_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ...]],
+                  natural: list[int], hard: dict[tuple[int, int], str]
+                  ) -> dict[tuple[int, int], str]:
+    """Order every write against the other accesses of its resource.
+
+    Where producer edges leave two accesses unordered, the natural order (producer edges,
+    then declaration order) decides which version a reader sees; these edges freeze that.
+    """
+    position = {i: k for k, i in enumerate(natural)}
+    index = {p.name: i for i, p in enumerate(passes)}
+    per_resource: dict[str, list[tuple[int, Access]]] = defaultdict(list)
+    for p in passes:
+        for a in accesses[p.name]:
+            per_resource[a.resource].append((index[p.name], a))
+    edges = dict(hard)
+
+    def add(a: int, b: int, kind: str) -> None:
+        if edges.get((a, b)) != "data":
+            edges[(a, b)] = kind
+
+    for items in per_resource.values():
+        items.sort(key=lambda item: position[item[0]])
+        writer: int | None = None
+        writers: list[int] = []
+        readers: list[int] = []
+        for i, a in items:
+            if a.role == "history":
+                continue
+            if a.writes:
+                if writer is not None:
+                    add(writer, i, "data")  # in-place writes build on the previous value
+                for r in readers:
+                    add(r, i, "order")  # write after read
+                writer, readers = i, []
+                writers.append(i)
+            elif a.role == "order":
+                # ordering only: no data edge keeps the last writer alive, so order after
+                # every writer, or culling one would lose the order against the others
+                for w in writers:
+                    add(w, i, "order")
+            else:
+                if writer is not None:
+                    add(writer, i, "data")
+                readers.append(i)
+    return edges
+
+
+# ---------------------------------------------------------------------------------------------
+# step 2: cull
+
+
+def cull(declared: Declared) -> tuple[list[int], list[str]]:
+    """Keep passes that feed a graph output through data edges, or that have side effects."""
+    passes = declared.passes
+    preds: dict[int, list[int]] = defaultdict(list)
+    for (a, b), kind in declared.edges.items():
+        if kind == "data":
+            preds[b].append(a)
+    # reading last frame's value needs its writers to run every frame (no ordering edge)
+    writers: dict[str, list[int]] = defaultdict(list)
+    for i, p in enumerate(passes):
+        for a in declared.accesses[p.name]:
+            if a.writes:
+                writers[a.resource].append(i)
+    for i, p in enumerate(passes):
+        for a in declared.accesses[p.name]:
+            if a.role == "history":
+                preds[i].extend(writers[declared.history[a.resource]])
+    outputs = set(declared.outputs)
+    live = [i for i, p in enumerate(passes)
+            if p.side_effect or not any(a.writes for a in declared.accesses[p.name])
+            or any(a.writes and a.resource in outputs for a in declared.accesses[p.name])]
+    keep = set(live)
+    while live:
+        for j in preds[live.pop()]:
+            if j not in keep:
+                keep.add(j)
+                live.append(j)
+    culled = [p.name for i, p in enumerate(passes) if i not in keep]
+    return sorted(keep), culled
+
+
+# ---------------------------------------------------------------------------------------------
+# step 3: order
+
+
+def order(declared: Declared, keep: list[int]) -> list[int]:
+    """Stable topological order of the kept passes (ties: declaration order)."""
+    return _stable_toposort(len(declared.passes), declared.edges, declared.passes, keep)
+
+
+# ---------------------------------------------------------------------------------------------
+# step 5: lifetimes
+
+
+def lifetimes(declared: Declared, schedule: list[int]) -> dict[str, tuple[int, int]]:
+    """First and last schedule position at which each resource's memory is touched."""
+    span: dict[str, tuple[int, int]] = {}
+    for pos, i in enumerate(schedule):
+        for a in declared.accesses[declared.passes[i].name]:
+            if a.role == "order":
+                continue
+            first, _ = span.get(a.resource, (pos, pos))
+            span[a.resource] = (first, pos)
+    end = len(schedule) - 1
+    for name in declared.outputs:  # outputs are read after the frame
+        if name in span:
+            span[name] = (span[name][0], end)
+    return span
+
+
+# ---------------------------------------------------------------------------------------------
+# step 8: parallel levels
+
+
+def parallel_levels(declared: Declared, schedule: list[int]) -> list[list[str]]:
+    """Passes at the same longest-path depth have no path between them."""
+    preds: dict[int, list[int]] = defaultdict(list)
+    kept = set(schedule)
+    for a, b in declared.edges:
+        if a in kept and b in kept:
+            preds[b].append(a)
+    level: dict[int, int] = {}
+    for i in schedule:
+        level[i] = 1 + max((level[j] for j in preds[i]), default=-1)
+    out: list[list[str]] = [[] for _ in range(max(level.values(), default=-1) + 1)]
+    for i in schedule:
+        out[level[i]].append(declared.passes[i].name)
+    return out
