@@ -113,6 +113,52 @@ def load_gltf(path: str | Path) -> Scene:
     return _Loader(Path(path)).load()
 
 
+def split_glb(data: bytes, path: str | Path) -> tuple[bytes, bytes | None]:
+    """The JSON and binary chunks of a GLB file, checked as ``load_gltf`` checks them.
+
+    Parameters
+    ----------
+    data : bytes
+        The whole file.
+    path : str or Path
+        The file, named in errors.
+
+    Returns
+    -------
+    (bytes, bytes or None)
+        The JSON chunk (not decoded), and the binary chunk, or None when there is none.
+
+    Raises
+    ------
+    SceneError
+        For a truncated or malformed container, naming the file.
+    """
+    loader = _Loader(Path(path))
+    text = loader.split_glb(data)
+    return bytes(text), None if loader.glb_bin is None else bytes(loader.glb_bin)
+
+
+def read_uri(path: str | Path, uri: str, where: str) -> bytes:
+    """The bytes a ``uri`` of the glTF file ``path`` names, by ``load_gltf``'s rules.
+
+    Parameters
+    ----------
+    path : str or Path
+        The glTF file; relative URIs are resolved against its folder.
+    uri : str
+        A ``data:`` URI, or a relative path that must resolve (symlinks followed) inside
+        that folder; other schemes and absolute paths are refused.
+    where : str
+        The element that holds the URI (``"buffers[0]"``), named in errors.
+
+    Raises
+    ------
+    SceneError
+        For a refused, missing or unreadable URI, naming the file and ``where``.
+    """
+    return _Loader(Path(path)).read_uri(uri, where)
+
+
 # ---------------------------------------------------------------------------------------------
 # JSON to pygltflib's document classes. pygltflib's own from_json (dataclasses_json) takes
 # seconds on large files and fails on wrong types with messages that name no element, so

@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from rfw.scene import SceneError, load_gltf, load_scene
+from rfw.scene.gltf import read_uri, split_glb
 
 F32, U8, U16, U32, I8, I16 = 5126, 5121, 5123, 5125, 5120, 5122
 DTYPES = {F32: "<f4", U8: "u1", U16: "<u2", U32: "<u4", I8: "i1", I16: "<i2"}
@@ -929,3 +930,45 @@ def test_fuzzed_glb_bytes_load_or_raise_scene_error(flips, cut):
         with warnings.catch_warnings(), contextlib.suppress(SceneError):
             warnings.simplefilter("ignore")
             _check_scene(load_gltf(path))
+
+
+# ---------------------------------------------------------------------------------------------
+# split_glb and read_uri: the loader's container and URI rules, public for packing
+
+
+def test_split_glb_returns_both_chunks(tmp_path):
+    g = quad_scene()
+    path = g.glb(tmp_path)
+    text, blob = split_glb(path.read_bytes(), path)
+    assert json.loads(text) == g.doc
+    assert blob == bytes(g.bin)
+
+
+def test_split_glb_without_a_binary_chunk(tmp_path):
+    text = b'{"asset":{"version":"2.0"}}'
+    data = struct.pack("<4sII", b"glTF", 2, 20 + len(text)) \
+        + struct.pack("<I4s", len(text), b"JSON") + text
+    assert split_glb(data, tmp_path / "x.glb") == (text, None)
+
+
+def test_split_glb_refuses_a_truncated_file(tmp_path):
+    path = quad_scene().glb(tmp_path)
+    data = path.read_bytes()
+    with pytest.raises(SceneError, match=r"scene\.glb: GLB: truncated: the header says"):
+        split_glb(data[:-4], path)
+
+
+def test_read_uri_reads_data_uris_and_files_in_the_folder(tmp_path):
+    (tmp_path / "a.bin").write_bytes(b"abc")
+    gltf = tmp_path / "s.gltf"
+    assert read_uri(gltf, "a.bin", "buffers[0]") == b"abc"
+    assert read_uri(gltf, "data:application/octet-stream;base64,"
+                    + base64.b64encode(b"xyz").decode(), "buffers[1]") == b"xyz"
+
+
+@pytest.mark.parametrize("uri", ["../secret.bin", "/etc/hostname", "file:///etc/hostname"])
+def test_read_uri_refuses_what_lies_outside_the_folder(tmp_path, uri):
+    (tmp_path / "secret.bin").write_bytes(b"secret")
+    (tmp_path / "s").mkdir()
+    with pytest.raises(SceneError, match=r"s\.gltf: images\[2\]: uri .* (outside|relative)"):
+        read_uri(tmp_path / "s" / "s.gltf", uri, "images[2]")

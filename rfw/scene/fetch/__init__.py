@@ -21,6 +21,12 @@ loaded back with rfw's own glTF loader and compared with the source before it is
 A fetch is idempotent (a scene whose JSON names the pinned archive and whose GLB has the
 recorded hash is left alone) and atomic (everything is built in a temporary folder inside
 the cache and renamed into place, the JSON last; a failure removes what it had renamed).
+
+Modules, each using only those listed before it: ``download`` (pinned archives, the registry
+clients, unpacking), ``glb`` (writing and packing GLB, comparing it with its source),
+``mitsuba`` (the Mitsuba XML loader), ``convert`` (one converter per kind of package),
+``catalogue`` (the pins and ``SCENES``), ``cache`` (what is up to date, the atomic fetch,
+``--list``) and ``cli`` (``rfw scenes fetch``).
 """
 
 from __future__ import annotations

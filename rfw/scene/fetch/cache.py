@@ -18,7 +18,7 @@ from ...errors import warn
 from ..gltf import load_gltf
 from ..model import SceneError
 from .catalogue import SCENES
-from .convert import SceneSpec, _load
+from .convert import SceneSpec, load_file
 from .download import Downloads, FetchError, sha256_file
 from .glb import GENERATOR, compare_scenes
 
@@ -121,7 +121,7 @@ def fetch_one(spec: SceneSpec, cache: Path, downloads: Downloads, work: Path) ->
         built = spec.convert(fetched.root, scene_work, spec)
         glb_tmp = scene_work / f"{spec.name}.glb"
         glb_tmp.write_bytes(built.glb)
-        out = _load(load_gltf, glb_tmp, spec.name)
+        out = load_file(load_gltf, glb_tmp, spec.name)
     for w in caught:
         # the same warning comes from the source and from the GLB: say it once
         text = str(w.message).split(": ", 1)[-1]

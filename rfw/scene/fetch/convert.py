@@ -97,7 +97,7 @@ def convert_dragon(root: Path, work: Path, spec: SceneSpec) -> Built:
             shutil.copyfileobj(f, out, MiB)
     except (OSError, EOFError) as e:
         raise FetchError(f"scene '{spec.name}': cannot gunzip {rel}: {e}") from None
-    scene = _load(load_meshfile, ply, spec.name)
+    scene = load_file(load_meshfile, ply, spec.name)
     if len(scene.meshes) != 1:
         raise FetchError(f"scene '{spec.name}': {rel} holds {len(scene.meshes)} meshes, "
                          "expected one")
@@ -130,7 +130,8 @@ def convert_dragon(root: Path, work: Path, spec: SceneSpec) -> Built:
                  scene, "".join(texts), rel)
 
 
-def _load(loader: Callable[[Path], Scene], path: Path, scene: str) -> Scene:
+def load_file(loader: Callable[[Path], Scene], path: Path, scene: str) -> Scene:
+    """``loader(path)``, its SceneError turned into a FetchError naming ``scene``."""
     try:
         return loader(path)
     except SceneError as e:
@@ -167,7 +168,7 @@ def convert_khronos(rel: str) -> Callable[[Path, Path, SceneSpec], Built]:
 
     def convert(root: Path, work: Path, spec: SceneSpec) -> Built:
         src = _find(root, f"{ASSIMP_GLTF2}/{rel}", spec.name)
-        reference = _load(load_gltf, src, spec.name)
+        reference = load_file(load_gltf, src, spec.name)
         try:
             glb = pack_gltf(src)
         except (SceneError, ValueError, KeyError, TypeError) as e:
@@ -196,7 +197,7 @@ def convert_monastery(root: Path, work: Path, spec: SceneSpec) -> Built:
     rel = "pybullet_data/samurai_monastry.obj"
     src = _find(root, rel, spec.name)
     _find(root, "pybullet_data/samurai_monastry.mtl", spec.name)
-    scene = _load(load_meshfile, src, spec.name)
+    scene = load_file(load_meshfile, src, spec.name)
     scene.name = spec.name
     dist = next(iter(sorted(root.glob("*.dist-info"))), None)
     texts = [_header(spec, rel), _rule("The model's own notes"),
@@ -222,7 +223,7 @@ def convert_city(root: Path, work: Path, spec: SceneSpec) -> Built:
     """PyPI ``sionna-rt``: the Munich scene (Mitsuba XML + PLY), Z up turned to Y up."""
     rel = "sionna/rt/scenes/munich/munich.xml"
     src = _find(root, rel, spec.name)
-    scene = _load(load_mitsuba, src, spec.name)
+    scene = load_file(load_mitsuba, src, spec.name)
     scene.name = spec.name
     texts = [_header(spec, rel), _rule("OpenStreetMap data: ODbL"),
              "The scene's geometry was made from OpenStreetMap data. OpenStreetMap data is\n"

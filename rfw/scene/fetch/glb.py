@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..gltf import _Loader
+from ..gltf import read_uri, split_glb
 from ..model import Scene, SceneError
 from ..util import normalize
 
@@ -253,10 +253,9 @@ def pack_gltf(path: Path) -> bytes:
     the one binary chunk and images with a ``uri`` point at buffer views. A ``.glb`` that
     references nothing outside itself is returned unchanged.
     """
-    loader = _Loader(path)  # the same URI rules as the loader: only the scene's folder
     data = path.read_bytes()
     if data[:4] == b"glTF":
-        text = bytes(loader.split_glb(data))
+        text, _ = split_glb(data, path)
         doc = json.loads(text.decode("utf-8-sig"))
         external = [b for b in doc.get("buffers", []) + doc.get("images", []) if "uri" in b]
         if external:
@@ -268,7 +267,7 @@ def pack_gltf(path: Path) -> bytes:
     for i, buf in enumerate(doc.get("buffers", [])):
         if "uri" not in buf:
             raise SceneError(f"{path}: buffers[{i}] has no uri")
-        raw = loader.read_uri(buf["uri"], f"buffers[{i}]")
+        raw = read_uri(path, buf["uri"], f"buffers[{i}]")  # only the scene's folder
         length = int(buf["byteLength"])
         if len(raw) < length:
             raise SceneError(f"{path}: buffers[{i}] is shorter than its byteLength")
@@ -281,7 +280,7 @@ def pack_gltf(path: Path) -> bytes:
     for i, img in enumerate(doc.get("images", [])):
         if "uri" not in img:
             continue
-        raw = loader.read_uri(img["uri"], f"images[{i}]")
+        raw = read_uri(path, img["uri"], f"images[{i}]")
         _pad(blob, 8)
         doc.setdefault("bufferViews", []).append(
             {"buffer": 0, "byteOffset": len(blob), "byteLength": len(raw)})
