@@ -58,11 +58,13 @@ def _remember(cache: OrderedDict, key: tuple, value: Any) -> Any:
 def compile(graph: Graph, size: tuple[int, int] | None = None,
             caps: Iterable[str] | None = None, *, strict: bool | None = None,
             cull_passes: bool = True, memory: MemoryOptions = MemoryOptions(),  # noqa: B008 (frozen)
-            backend: str | None = None) -> CompiledGraph:
+            backend: str | None = None, order_seed: int | None = None) -> CompiledGraph:
     """Compile a declared graph for an output size and a device's capabilities.
 
     Pure and deterministic. Results are memoised: compiling an unchanged graph again is a
     dictionary lookup, and a changed graph reuses the memory plan when lifetimes are equal.
+    ``order_seed`` breaks ties in the pass order at random (seeded): another valid order,
+    with the lifetimes, aliasing and barriers that follow from it (schedule fuzzing).
     """
     # compile builds many small acyclic objects, and hashing a new graph for the cache makes
     # many tuples: the cycle collector, sweeping the whole heap, would dominate its time
@@ -70,7 +72,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     gc.disable()
     try:
         return _compile_cached(graph, size, caps, strict=strict, cull_passes=cull_passes,
-                               memory=memory, backend=backend)
+                               memory=memory, backend=backend, order_seed=order_seed)
     finally:
         if paused:
             gc.enable()
@@ -78,7 +80,7 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
 
 def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[str] | None, *,
                     strict: bool | None, cull_passes: bool, memory: MemoryOptions,
-                    backend: str | None) -> CompiledGraph:
+                    backend: str | None, order_seed: int | None) -> CompiledGraph:
     size_from = "graph" if size is None else "given"
     size = size or graph.size
     if size is None:
@@ -88,7 +90,8 @@ def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[s
         raise GraphError(f"output size {size[0]}x{size[1]} is not positive", file=graph.source)
     caps = None if caps is None else frozenset(caps)
     strict = graph.strict if strict is None else strict
-    key = (graph, tuple(size), size_from, caps, strict, cull_passes, memory, backend)
+    key = (graph, tuple(size), size_from, caps, strict, cull_passes, memory, backend,
+           order_seed)
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
@@ -96,14 +99,15 @@ def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[s
     try:
         graph = insert_bridges(graph, backend)
         result = replace(_compile(graph, (int(size[0]), int(size[1])), caps, strict,
-                                  cull_passes, memory), size_from=size_from)
+                                  cull_passes, memory, order_seed), size_from=size_from)
     except GraphError as e:
         raise e.in_file(graph.source) from None
     return _remember(_CACHE, key, result)
 
 
 def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, strict: bool,
-             cull_passes: bool, memory: MemoryOptions) -> CompiledGraph:
+             cull_passes: bool, memory: MemoryOptions,
+             order_seed: int | None = None) -> CompiledGraph:
     declared = validate(graph, caps, strict)
     problems = _Problems(graph, strict)
     problems.diagnostics = list(declared.diagnostics)
@@ -111,7 +115,7 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         keep, culled = cull(declared)
     else:
         keep, culled = list(range(len(declared.passes))), []
-    schedule = order(declared, keep)
+    schedule = order(declared, keep, order_seed)
     used = _used_resources(declared, schedule)
     declared = _kept_history(declared, set(used))
     resolved = resolve(declared, used, size, problems)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import heapq
+import random
 from collections import defaultdict
 from collections.abc import Iterable
 
@@ -28,8 +29,12 @@ def _producer_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ..
 
 
 def _stable_toposort(n: int, edges: Iterable[tuple[int, int]], passes: list[PassDecl],
-                     keep: Iterable[int] | None = None) -> list[int]:
-    """Kahn's algorithm, smallest declaration index first; a cycle raises with its path."""
+                     keep: Iterable[int] | None = None, seed: int | None = None) -> list[int]:
+    """Kahn's algorithm, smallest declaration index first; a cycle raises with its path.
+
+    With a ``seed``, each step takes a ready pass at random instead: every valid order can
+    come out (schedule fuzzing, ``vkext.poison``), and the same seed gives the same order.
+    """
     nodes = set(range(n) if keep is None else keep)
     succ: dict[int, list[int]] = defaultdict(list)
     indeg = dict.fromkeys(nodes, 0)
@@ -39,17 +44,26 @@ def _stable_toposort(n: int, edges: Iterable[tuple[int, int]], passes: list[Pass
             indeg[b] += 1
     ready = [i for i in nodes if indeg[i] == 0]
     heapq.heapify(ready)
+    rng = None if seed is None else random.Random(seed)
+    push = heapq.heappush if rng is None else list.append
     order: list[int] = []
     while ready:
-        i = heapq.heappop(ready)
+        i = heapq.heappop(ready) if rng is None else _pop_random(ready, rng)
         order.append(i)
         for j in succ[i]:
             indeg[j] -= 1
             if indeg[j] == 0:
-                heapq.heappush(ready, j)
+                push(ready, j)
     if len(order) != len(nodes):
         raise GraphError(_cycle_message(nodes - set(order), succ, passes))
     return order
+
+
+def _pop_random(ready: list[int], rng: random.Random) -> int:
+    # any ready pass may go next: swap a random one to the end and take it
+    k = rng.randrange(len(ready))
+    ready[k], ready[-1] = ready[-1], ready[k]
+    return ready.pop()
 
 
 def _cycle_message(stuck: set[int], succ: dict[int, list[int]], passes: list[PassDecl]) -> str:
@@ -153,9 +167,10 @@ def cull(declared: Declared) -> tuple[list[int], list[str]]:
 # step 3: order
 
 
-def order(declared: Declared, keep: list[int]) -> list[int]:
-    """Stable topological order of the kept passes (ties: declaration order)."""
-    return _stable_toposort(len(declared.passes), declared.edges, declared.passes, keep)
+def order(declared: Declared, keep: list[int], seed: int | None = None) -> list[int]:
+    """Stable topological order of the kept passes (ties: declaration order; with a
+    ``seed``, ties broken at random: another valid order, for schedule fuzzing)."""
+    return _stable_toposort(len(declared.passes), declared.edges, declared.passes, keep, seed)
 
 
 # ---------------------------------------------------------------------------------------------
