@@ -1,0 +1,375 @@
+"""The per-pass recording context on Vulkan: what ``Pass.record`` sees (slots by name,
+dispatch, draw_scene, trace_rays); image descriptors are written in the layout the plan puts
+the image in for the pass."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from rfw.backends.base import SlotContext
+from rfw.graph.formats import format_info
+from rfw.graph.sync import State
+from rfw.passes import Pass, Settings
+from rfw.shaders import ShaderError
+
+from .commands import barrier, image_layout
+from .consts import const, ffi, lib, vk
+from .fitting import twin_paths
+from .memory import Buffer, Image, ImageView
+from .programs import Program
+from .scene import BufferRange, Sampler, new, update_descriptors
+from .spirv import DescriptorInfo
+
+_COLOR_ATTACHMENT_LAYOUTS = {"COLOR_ATTACHMENT_OPTIMAL", "GENERAL", "ATTACHMENT_OPTIMAL"}
+
+
+@dataclass(frozen=True)
+class ImageBinding:
+    """An image slot bound to a descriptor: written in the layout the plan gives the image
+    in the recording pass (sampled, storage and attachment alike)."""
+
+    resource: str
+    image: Image
+    view: ImageView
+
+
+def _check_storage_format(what: str, d: DescriptorInfo, view: ImageView, resource: str) -> None:
+    """A storage image's declared format (``layout(rgba8)``) must be the view's: Vulkan
+    leaves a mismatch undefined and no validation message reports it."""
+    have = format_info(view.format)
+    if d.format is None or have.vk is None or have.vk == d.format:
+        return
+    declared = format_info(d.format)
+    raise ShaderError(f"{what} declared {declared.wgpu or declared.name} ({d.format}), but "
+                      f"'{resource}' is {have.wgpu or have.name} ({have.vk})")
+
+
+# one dispatch's shader writes, made visible to the next dispatch of the same pass
+_SHADER_WRITE = State(None, frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_WRITE"}))
+_SHADER_RW = State(None, frozenset({"COMPUTE_SHADER"}),
+                   frozenset({"SHADER_READ", "SHADER_WRITE"}))
+
+
+class VkPassContext(SlotContext):
+    """What ``Pass.record`` sees on Vulkan: the wgpu ``PassContext``'s interface."""
+
+    # executor: the vkext.executor.VkExecutor recording the frame (it imports this module)
+    def __init__(self, executor: Any, pass_: Pass, cmd: Any, slots: dict[str, str]):
+        self.executor = executor
+        self.pass_ = pass_
+        self.cmd = cmd
+        self.slots = slots
+        self.scene = executor.scene
+        self.device = executor.device
+        self.frame = executor.frame_index
+        self._dispatched = False
+
+    # resources ----------------------------------------------------------------------------
+    def texture(self, slot: str) -> Image:
+        return self.executor.image(self.resource(slot))
+
+    def extent(self, slot: str) -> tuple[int, int]:
+        r = self.executor.plan.resource(self.resource(slot))
+        return r.width, r.height
+
+    def view(self, slot: str, *, mip: int | None = None) -> ImageBinding:
+        """The slot's image view; ``mip``: a view of that one mip level only."""
+        name = self.resource(slot)
+        return ImageBinding(name, self.executor.image(name), self.executor.view(name, mip=mip))
+
+    def sampled(self, slot: str) -> ImageBinding:
+        name = self.resource(slot)
+        return ImageBinding(name, self.executor.image(name),
+                            self.executor.view(name, sampled=True))
+
+    storage = view
+
+    def buffer(self, slot: str) -> Buffer:
+        return self.executor.buffer(self.resource(slot))
+
+    def accel(self, slot: str) -> Any:
+        """The acceleration structures behind an ``AccelStructure`` slot (the
+        ``vkext.accel.SceneAccel`` its builder published), to bind or to read mesh data of."""
+        name = self.resource(slot)
+        acc = self.executor.accels.get(name)
+        if acc is None:
+            raise ShaderError(f"pass '{self.pass_.name}': '{name}' has no acceleration "
+                              "structure yet (its builder publishes one with set_accel)")
+        return acc
+
+    def set_accel(self, slot: str, accel: Any) -> None:
+        """Publish the structures this pass builds for its ``AccelStructure`` output."""
+        self.executor.accels[self.resource(slot)] = accel
+
+    def format(self, slot: str) -> str:
+        """The format's WebGPU name where it has one (as the wgpu backend answers)."""
+        name = self.executor.plan.resource(self.resource(slot)).format
+        return format_info(name).wgpu or name
+
+    # recording ----------------------------------------------------------------------------
+    def program(self, kind: str, *, shader: str | None = None,
+                defines: dict[str, object] | None = None) -> Program:
+        paths = twin_paths(self.pass_, shader, kind)
+        return self.executor.programs.get(self.pass_, paths, defines or {}, kind)
+
+    def _check_extra(self, prog: Program, values: dict[str, Any]) -> None:
+        extra = [k for k in values if k not in prog.descriptors]
+        if extra:
+            raise ShaderError(f"pass '{self.pass_.name}': {prog.name} has no binding named "
+                              f"{', '.join(extra)} (it declares "
+                              f"{', '.join(sorted(prog.descriptors)) or 'none'})")
+
+    def bind(self, prog: Program, values: dict[str, Any], point: int,
+             sets: Sequence[int] | None = None) -> None:
+        """Bind ``sets`` (default: every set of ``prog``), matching binding names to
+        ``values``; the scene's own sets are bound as they are."""
+        ex = self.executor
+        for s in prog.sets() if sets is None else sets:
+            wanted = sorted((d for d in prog.descriptors.values() if d.set == s),
+                            key=lambda d: d.binding)
+            if not wanted:
+                continue
+            missing = [d.name for d in wanted if d.name not in values]
+            if missing:
+                raise ShaderError(f"pass '{self.pass_.name}': shader {prog.name} binds "
+                                  f"{', '.join(missing)} but the pass gives "
+                                  f"{', '.join(sorted(values)) or 'nothing'}")
+            handle = self._scene_set(prog, s, values, wanted)
+            if handle is None:
+                entries = [(d.binding, d.kind, max(1, d.count)) for d in wanted]
+                arr = ex.descriptors.allocate(prog.set_layouts[s], entries)
+                update_descriptors(ex.device, [
+                    (arr[0], d.binding, d.kind, self._payload(prog, d, values[d.name]))
+                    for d in wanted])
+                handle = arr
+            lib.vkCmdBindDescriptorSets(self.cmd, point, prog.pipeline_layout.handle, s, 1,
+                                        handle, 0, ffi.NULL)
+
+    def _scene_set(self, prog: Program, s: int, values: dict[str, Any],
+                   wanted: list[DescriptorInfo]) -> Any:
+        scene = self.scene
+        if scene is None or s != 1 or s not in prog.scene_sets:
+            return None
+        lights = values.get("lights")
+        for cam in ("main", "sun"):
+            if values.get("camera") == scene.camera_range(cam) and \
+                    lights in (None, scene.lights_range):
+                return scene.camera_sets[cam]
+        return None
+
+    def _payload(self, prog: Program, d: DescriptorInfo, value: Any) -> tuple | list:
+        ex, kind = self.executor, d.kind
+        what = f"pass '{self.pass_.name}': binding '{d.name}' of {prog.name} is a {kind}"
+        if isinstance(value, list):
+            # an array binding: one payload per element, the last repeated to fill it
+            if not value:
+                raise ShaderError(f"{what} array, but the pass gives no element")
+            items = [self._payload(prog, replace(d, count=1), v) for v in value]
+            return (items + items[-1:] * d.count)[:d.count]
+        if kind == "acceleration_structure":
+            handle = getattr(getattr(value, "tlas", value), "handle", None)
+            if handle is None:
+                raise ShaderError(f"{what}, but the pass gives {type(value).__name__} (give "
+                                  "ctx.accel(slot), a SceneAccel or its tlas)")
+            return (handle,)
+        if kind in ("uniform_buffer", "storage_buffer"):
+            if kind == "uniform_buffer" and isinstance(value, Settings):
+                r = ex.ring.push(value.pack())
+            elif kind == "uniform_buffer" and isinstance(value, bytes | bytearray | np.ndarray):
+                data = value.tobytes() if isinstance(value, np.ndarray) else bytes(value)
+                r = ex.ring.push(data)
+            elif isinstance(value, BufferRange):
+                r = value
+            elif isinstance(value, Buffer):
+                r = BufferRange(value.handle, 0, value.bytes)
+            else:
+                raise ShaderError(f"{what}, but the pass gives {type(value).__name__}")
+            return (r.buffer, r.offset, r.size)
+        if kind == "sampler":
+            if not isinstance(value, Sampler):
+                raise ShaderError(f"{what}, but the pass gives {type(value).__name__}")
+            return (value.handle,)
+        sampler = None
+        if kind == "combined_image_sampler":
+            if not (isinstance(value, tuple) and len(value) == 2
+                    and isinstance(value[1], Sampler)):
+                raise ShaderError(f"{what}: give (image, sampler), not "
+                                  f"{type(value).__name__}")
+            value, sampler = value
+        if isinstance(value, ImageBinding):
+            state = ex.state_in(self.pass_.name, value.resource)
+            if state is None or state.layout is None:
+                raise ShaderError(f"{what}, but '{value.resource}' is not a resource of "
+                                  "this pass in the plan")
+            layout = state.layout
+            if kind == "storage_image" and layout != "GENERAL":
+                raise ShaderError(f"{what}, but the plan has '{value.resource}' in {layout} "
+                                  "in this pass (declare the slot as a storage output)")
+            view, resource = value.view, value.resource
+        elif isinstance(value, ImageView):
+            layout = "GENERAL" if kind == "storage_image" else "SHADER_READ_ONLY_OPTIMAL"
+            view, resource = value, value.image.label
+        else:
+            raise ShaderError(f"{what}, but the pass gives {type(value).__name__}")
+        if kind == "storage_image":
+            _check_storage_format(what, d, view, resource)
+        payload = (view.handle, image_layout(layout))
+        return (*payload, sampler.handle) if sampler is not None else payload
+
+    def dispatch(self, *, threads: tuple[int, ...], shader: str | None = None,
+                 entry: str = "main", defines: dict[str, object] | None = None,
+                 push_constants: bytes | None = None, **bindings: Any) -> None:
+        """Run a compute shader over ``threads`` (rounded up to whole workgroups)."""
+        prog = self.program("compute", shader=shader, defines=defines)
+        self._check_extra(prog, bindings)
+        values = {**self.executor.scene_bindings(), **bindings}
+        pipe = self.executor.programs.compute_pipeline(prog)
+        point = const("VK_PIPELINE_BIND_POINT_COMPUTE")
+        vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+        self.bind(prog, values, point)
+        self._push(prog, push_constants)
+        # a pass's dispatches run in order, as on wgpu: each sees the shader writes of the
+        # ones before it (the plan's barriers only order passes)
+        if self._dispatched:
+            barrier(self.cmd, memory_barriers=[(_SHADER_WRITE, _SHADER_RW)])
+        self._dispatched = True
+        t = (*threads, 1, 1)[:3]
+        vk.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
+                                     for i in range(3)))
+
+    def trace_rays(self, *, size: tuple[int, ...], shader: str | None = None,
+                   miss: str | None = None, closest_hit: str | None = None,
+                   any_hit: str | None = None, defines: dict[str, object] | None = None,
+                   max_recursion: int = 1, push_constants: bytes | None = None,
+                   **bindings: Any) -> None:
+        """``vkCmdTraceRaysKHR`` over ``size`` launches: ``shader`` (default: the pass's) is
+        the raygen shader, ``miss``/``closest_hit``/``any_hit`` the files of the other
+        stages beside it; bindings as for ``dispatch`` (scene camera and lights by name)."""
+        raygen = shader or self.pass_.shader
+        names = [raygen, *(n for n in (miss, closest_hit, any_hit) if n)]
+        paths = [twin_paths(self.pass_, n, "compute")[0] for n in names]
+        prog = self.executor.programs.get(self.pass_, paths, defines or {}, "ray_tracing")
+        self._check_extra(prog, bindings)
+        values = {**self.executor.scene_bindings(), **bindings}
+        pipe = self.executor.programs.ray_pipeline(prog, max_recursion=max_recursion)
+        point = const("VK_PIPELINE_BIND_POINT_RAY_TRACING_KHR")
+        vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+        self.bind(prog, values, point)
+        self._push(prog, push_constants)
+        pipe.sbt.trace(self.cmd, *(*size, 1, 1)[:3])
+
+    def _push(self, prog: Program, data: bytes | None) -> None:
+        if data is None:
+            return
+        if len(data) > prog.push_size:
+            raise ShaderError(f"pass '{self.pass_.name}': {len(data)} bytes of push constants, "
+                              f"{prog.name} declares {prog.push_size}")
+        buf = ffi.new("char[]", bytes(data))
+        lib.vkCmdPushConstants(self.cmd, prog.pipeline_layout.handle, prog.stage_flags, 0,
+                               len(data), buf)
+
+    def draw_scene(self, *, color: Sequence[tuple[str, Any]] = (),
+                   depth: tuple[str, Any] | None = None, shader: str | None = None,
+                   defines: dict[str, object] | None = None, depth_compare: str = "less",
+                   depth_write: bool = True, cull: str = "back", camera: str = "main",
+                   blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
+                   push_constants: bytes | None = None, **bindings: Any) -> int:
+        """Draw the scene's instances into ``color`` targets (and ``depth``) with dynamic
+        rendering; set 0 takes ``bindings``, sets 1-3 are the scene's. Returns the draws."""
+        if self.scene is None:
+            raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
+        ex = self.executor
+        prog = self.program("render", shader=shader, defines=defines)
+        self._check_extra(prog, {**bindings, "camera": 0, "lights": 0})
+        colors = [(self.resource(slot), clear) for slot, clear in color]
+        targets = [ex.image(r) for r, _ in colors]
+        dimage = ex.image(self.resource(depth[0])) if depth is not None else None
+        first = (targets or [dimage])[0]
+        if first is None:
+            raise ShaderError(f"pass '{self.pass_.name}': draw_scene needs a color or depth "
+                              "target")
+        dinfo = dimage.info if dimage is not None else None
+        pipe = ex.programs.graphics_pipeline(
+            prog, colors=[t.vk_format for t in targets],
+            depth=dimage.vk_format if dimage is not None else None,
+            stencil=bool(dinfo and dinfo.stencil), samples=first.samples,
+            depth_compare=depth_compare, depth_write=depth_write, cull=cull, blend=blend)
+        point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+        own = [s for s in prog.sets() if s not in prog.scene_sets]
+        self._begin_rendering(colors, depth, depth_write, (first.width, first.height))
+        try:
+            vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+            vp = ffi.new("VkViewport*")
+            vp.width, vp.height, vp.maxDepth = float(first.width), float(first.height), 1.0
+            sc = ffi.new("VkRect2D*")
+            sc.extent.width, sc.extent.height = first.width, first.height
+            lib.vkCmdSetViewport(self.cmd, 0, 1, vp)
+            lib.vkCmdSetScissor(self.cmd, 0, 1, sc)
+            self.bind(prog, bindings, point, own)
+            self._push(prog, push_constants)
+            return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
+                                   alpha=alpha)
+        finally:
+            vk.vkCmdEndRendering(self.cmd)
+
+    def _begin_rendering(self, colors: list[tuple[str, Any]], depth: tuple[str, Any] | None,
+                         depth_write: bool, extent: tuple[int, int]) -> None:
+        ex = self.executor
+        atts = new("VkRenderingAttachmentInfo", len(colors))
+        for i, (name, clear) in enumerate(colors):
+            layout = self._attachment_layout(name)
+            if layout not in _COLOR_ATTACHMENT_LAYOUTS:
+                raise ShaderError(f"pass '{self.pass_.name}': '{name}' is a color target, but "
+                                  f"the plan has it in {layout} (declare an Attachment slot)")
+            a = atts[i]
+            a.imageView = ex.view(name).handle
+            a.imageLayout = image_layout(layout)
+            a.loadOp = const("VK_ATTACHMENT_LOAD_OP_LOAD" if clear is None
+                             else "VK_ATTACHMENT_LOAD_OP_CLEAR")
+            a.storeOp = const("VK_ATTACHMENT_STORE_OP_STORE")
+            if clear is not None:
+                kind = format_info(ex.plan.resource(name).format).kind
+                values = (*tuple(clear), 0, 0, 0, 0)[:4]
+                for k in range(4):
+                    if kind == "uint":
+                        a.clearValue.color.uint32[k] = int(values[k])
+                    elif kind == "sint":
+                        a.clearValue.color.int32[k] = int(values[k])
+                    else:
+                        a.clearValue.color.float32[k] = float(values[k])
+        info = new("VkRenderingInfo", layerCount=1, colorAttachmentCount=len(colors),
+                   pColorAttachments=atts)
+        info.renderArea.extent.width, info.renderArea.extent.height = extent
+        keep = [atts]
+        if depth is not None:
+            name, clear = self.resource(depth[0]), depth[1]
+            layout = self._attachment_layout(name)
+            read_only = "READ_ONLY" in layout
+            d = new("VkRenderingAttachmentInfo", imageView=ex.view(name).handle,
+                    imageLayout=image_layout(layout))
+            if read_only or (not depth_write and clear is None):
+                d.loadOp = const("VK_ATTACHMENT_LOAD_OP_LOAD")
+                d.storeOp = const("VK_ATTACHMENT_STORE_OP_NONE" if read_only
+                                  else "VK_ATTACHMENT_STORE_OP_STORE")
+            else:
+                d.loadOp = const("VK_ATTACHMENT_LOAD_OP_LOAD" if clear is None
+                                 else "VK_ATTACHMENT_LOAD_OP_CLEAR")
+                d.storeOp = const("VK_ATTACHMENT_STORE_OP_STORE")
+                d.clearValue.depthStencil.depth = float(clear or 0.0)
+            info.pDepthAttachment = d
+            if format_info(ex.plan.resource(name).format).stencil:
+                info.pStencilAttachment = d
+            keep.append(d)
+        vk.vkCmdBeginRendering(self.cmd, info)
+
+    def _attachment_layout(self, name: str) -> str:
+        state = self.executor.state_in(self.pass_.name, name)
+        if state is None or state.layout is None:
+            raise ShaderError(f"pass '{self.pass_.name}': '{name}' is not a resource of this "
+                              "pass in the plan")
+        return state.layout

@@ -1,0 +1,132 @@
+"""Compiling a graph for a Vulkan device: placement that fits the driver, and the passes'
+GLSL twins checked before any GPU object is made."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rfw.graph import CompiledGraph
+from rfw.graph.compile import MemoryOptions, compile
+from rfw.graph.graph import Graph
+from rfw.passes import Pass
+from rfw.shaders import ShaderError
+
+from .device import VkDevice
+from .memory import memory_options, requirements
+
+# ---------------------------------------------------------------------------------------------
+# compiling for a device
+
+
+def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
+             readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
+    """Compile ``graph`` for the vk backend with placement rules that fit ``device``.
+
+    The compiler's default placement (texel bytes, 64 KiB image / 256 B buffer alignment) is
+    checked against the driver's real requirements (``vkext.memory.memory_options``: its
+    alignments and exact padded sizes); where they differ the graph is compiled again with
+    the device's, so the plan's bytes are the bytes the driver binds. The returned dict says
+    what happened: ``recompiled``, ``default_fits`` (whether ``plan_heaps`` would have
+    accepted the default plan at all), the alignments and a ``reason``.
+    """
+    for p in graph.passes:
+        if p.enabled and p.backend not in (None, "vk"):
+            raise ShaderError(f"pass '{p.name}' is pinned to backend '{p.backend}': the vk "
+                              "backend runs every pass on Vulkan (frames that mix backends "
+                              "run through rfw.render.render or vkext.mixed.render_mixed)",
+                              file=graph.source)
+    return fit_graph(graph, device, alias=alias, readback=readback)
+
+
+def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
+              readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
+    """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
+    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
+    base = MemoryOptions(alias=alias)
+    # the device's capabilities: a pass needing a feature it lacks is refused here, by name
+    plan = compile(graph, caps=device.caps, backend="vk", memory=base)
+    opts = memory_options(plan, device, base=base, readback=readback)
+    info: dict[str, Any] = {"recompiled": False, "image_alignment": base.image_alignment,
+                            "buffer_alignment": base.buffer_alignment, "default_fits": True}
+    fitted = compile(graph, caps=device.caps, backend="vk", memory=opts)
+    placement = [(r.name, r.bytes, r.offset) for r in plan.resources if r.transient]
+    if placement != [(r.name, r.bytes, r.offset) for r in fitted.resources if r.transient]:
+        fits = plan_fits(plan, device, readback=readback)
+        padded = [r.name for r in plan.resources
+                  if r.transient and dict(opts.sizes).get(r.name, 0) > r.raw_bytes]
+        info = {"recompiled": True, "image_alignment": opts.image_alignment,
+                "buffer_alignment": opts.buffer_alignment, "default_fits": fits,
+                "reason": (f"the default placement ({base.image_alignment} B image, "
+                           f"{base.buffer_alignment} B buffer alignment, texel bytes) "
+                           + ("fits but over-reserves on" if fits else "does not fit")
+                           + f" {device.name}: re-compiled with its {opts.image_alignment} B / "
+                           f"{opts.buffer_alignment} B alignment and exact sizes"
+                           + (f" ({len(padded)} padded by the driver)" if padded else ""))}
+        plan = fitted
+    return plan, info
+
+
+def plan_fits(plan: CompiledGraph, device: VkDevice, *, readback: bool = True) -> bool:
+    """Whether every transient's driver size and alignment fit its planned bytes and offset."""
+    reqs = requirements(plan, device, readback=readback)
+    for r in plan.resources:
+        if r.name in reqs:
+            size, alignment = reqs[r.name]
+            if size > r.bytes or (r.offset or 0) % alignment:
+                return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------------
+# the passes' GLSL twins
+
+
+def glsl_twins(folder: Path, shader: str, kind: str) -> list[Path]:
+    """The GLSL files that stand for a pass's WGSL shader (``kind``: compute | render);
+    the first is required, the rest (a fragment shader) optional."""
+    if shader.endswith(".glsl"):
+        return [folder / shader]
+    stem = shader.removesuffix(".wgsl").removesuffix(".comp")
+    if kind == "compute":
+        return [folder / f"{stem}.comp.glsl"]
+    return [folder / f"{stem}.vert.glsl", folder / f"{stem}.frag.glsl"]
+
+
+def twin_paths(pass_: Pass, shader: str | None, kind: str) -> list[Path]:
+    """Existing twins of ``shader`` (default: the pass's), or a ShaderError naming the pass
+    and the missing file."""
+    name = shader or pass_.shader
+    if not name:
+        raise ShaderError(f"pass '{pass_.name}' ({type(pass_).id or type(pass_).__name__}) "
+                          "records work but declares no shader")
+    paths = glsl_twins(pass_.folder(), name, kind)
+    if not paths[0].is_file():
+        raise ShaderError(f"pass '{pass_.name}' ({type(pass_).id or type(pass_).__name__}) "
+                          f"has no GLSL twin of {name}: {paths[0]} is missing (the vk backend "
+                          f"runs {paths[0].name} beside {name})")
+    return [paths[0], *(p for p in paths[1:] if p.is_file())]
+
+
+def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
+    """Every scheduled pass has an instance and GLSL twins of its shader: a ShaderError
+    naming the pass and the missing file, before any GPU object is made."""
+    for name in plan.order:
+        p = passes.get(name)
+        if p is None:
+            if is_bridge(plan, name) and len(plan.accesses[name]) > 1:
+                raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
+                                  "them, and runs through vkext.mixed (each backend gets its "
+                                  "part of it)")
+            if is_bridge(plan, name):
+                continue  # its barriers are recorded; vkext.mixed copies through the host
+            raise ShaderError(f"pass '{name}' has no pass instance")
+        if p.shader:
+            twin_paths(p, None, "compute" if p.type == "compute" else "render")
+
+
+def is_bridge(plan: CompiledGraph, name: str) -> bool:
+    """Whether ``name`` is a bridge pass (``rfw.graph.bridges``): named ``bridge.*`` and
+    touching its resources only as a transfer source or destination."""
+    return name.startswith("bridge.") and all(
+        a.usages <= {"transfer_src", "transfer_dst"} for a in plan.accesses.get(name, ()))
