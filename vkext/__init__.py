@@ -4,6 +4,9 @@ The only package that imports ``vulkan``. Importing it never fails: without a lo
 ``VkDevice()`` raises :class:`VkUnavailableError`.
 """
 
+from .allocation import DeviceMemory, PlanMismatchError, VkOutOfMemoryError
+from .blocks import BlockAllocator
+from .buffers import Buffer, staging_buffer
 from .commands import (
     BufferBarrier,
     CommandPool,
@@ -30,23 +33,8 @@ from .device import (
     VkUnavailableError,
     VkValidationError,
 )
-from .memory import (
-    BlockAllocator,
-    Buffer,
-    DeviceMemory,
-    Heap,
-    Image,
-    ImageView,
-    PlanMismatchError,
-    TransientMemory,
-    UnsupportedFormatError,
-    VkOutOfMemoryError,
-    image_view,
-    memory_options,
-    plan_heaps,
-    requirements,
-    staging_buffer,
-)
+from .images import Image, ImageView, UnsupportedFormatError, image_view
+from .memory import Heap, TransientMemory, memory_options, plan_heaps, requirements
 
 __all__ = [
     "BlockAllocator", "Buffer", "BufferBarrier", "CommandPool", "DeviceMemory", "Heap",

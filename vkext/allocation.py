@@ -27,14 +27,16 @@ HOST_COHERENT = "VK_MEMORY_PROPERTY_HOST_COHERENT_BIT"
 HOST_CACHED = "VK_MEMORY_PROPERTY_HOST_CACHED_BIT"
 
 
-def _flags(names: Iterable[str]) -> int:
+def flags_of(names: Iterable[str]) -> int:
+    """The OR of Vulkan constants given by name."""
     out = 0
     for n in names:
         out |= const(n)
     return out
 
 
-def _size(n: int) -> str:
+def byte_text(n: int) -> str:
+    """A byte count for messages: ``1.5 MiB``, ``300 B``."""
     for unit, scale in (("GiB", GiB), ("MiB", MiB), ("KiB", KiB)):
         if n >= scale:
             return f"{n / scale:.4g} {unit}"
@@ -45,7 +47,7 @@ def find_memory_type(device: VkDevice, type_bits: int, required: Iterable[str] =
                      preferred: Iterable[str] = ()) -> int:
     """The first memory type allowed by ``type_bits`` with every ``required`` property,
     and, among those, the most ``preferred`` ones."""
-    need = _flags(required)
+    need = flags_of(required)
     want = [const(p) for p in preferred]
     best: tuple[int, int] | None = None
     for i, (props, _) in enumerate(device.memory_types):
@@ -78,11 +80,12 @@ class DeviceMemory:
         if self.size <= 0:
             raise ValueError(f"{label or 'memory'}: size must be positive, got {self.size}")
         if self.size > heap_size:
-            raise VkOutOfMemoryError(f"{label or 'memory'}: {_size(self.size)} is larger than "
-                                     f"memory heap {heap} ({_size(heap_size)}) of {device.name}")
+            raise VkOutOfMemoryError(f"{label or 'memory'}: {byte_text(self.size)} is larger "
+                                     f"than memory heap {heap} ({byte_text(heap_size)}) of "
+                                     f"{device.name}")
         if self.size > limit:
-            raise VkOutOfMemoryError(f"{label or 'memory'}: {_size(self.size)} is over the "
-                                     f"device's maxMemoryAllocationSize ({_size(limit)})")
+            raise VkOutOfMemoryError(f"{label or 'memory'}: {byte_text(self.size)} is over the "
+                                     f"device's maxMemoryAllocationSize ({byte_text(limit)})")
         info = ffi.new("VkMemoryAllocateInfo*")
         info.sType = const("VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO")
         info.allocationSize, info.memoryTypeIndex = self.size, self.type_index
@@ -96,7 +99,7 @@ class DeviceMemory:
             self.handle = vk.vkAllocateMemory(device.device, info, None)
         except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory) as e:
             raise VkOutOfMemoryError(f"{label or 'memory'}: the driver refused "
-                                     f"{_size(self.size)} ({type(e).__name__})") from None
+                                     f"{byte_text(self.size)} ({type(e).__name__})") from None
         device.register(self)
         device.set_name(self.handle, "DEVICE_MEMORY", label)
 
@@ -125,7 +128,7 @@ class DeviceMemory:
         self.device.unregister(self)
 
 
-class _Resource:
+class Resource:
     """What images and buffers share: requirements, binding, the memory they own."""
 
     kind = "resource"
@@ -140,7 +143,7 @@ class _Resource:
         self.memory: DeviceMemory | None = None
         self.offset = 0
         self._owned: DeviceMemory | None = None  # dedicated memory freed with the resource
-        self._allocation: Any = None  # a blocks.SubAllocation, from a BlockAllocator
+        self.sub_allocation: Any = None  # a blocks.SubAllocation, from a BlockAllocator
 
     def bind(self, memory: DeviceMemory, offset: int = 0) -> None:
         if self.memory is not None:
@@ -168,9 +171,9 @@ class _Resource:
         self.bind(mem, 0)
 
     def _release_memory(self) -> None:
-        if self._allocation is not None:
-            self._allocation.free()
-            self._allocation = None
+        if self.sub_allocation is not None:
+            self.sub_allocation.free()
+            self.sub_allocation = None
         if self._owned is not None:
             self._owned.destroy()
             self._owned = None

@@ -121,7 +121,7 @@ class BlockAllocator:
         if a not in block.allocs:
             return
         block.allocs.remove(a)
-        self.resources = [r for r in self.resources if r._allocation is not a]
+        self.resources = [r for r in self.resources if r.sub_allocation is not a]
         blocks = self.blocks.get(block.memory.type_index, [])
         # an empty block goes back unless it is the last regular one of its type
         if not block.allocs and (len(blocks) > 1 or block.memory.size > self.block_size):
@@ -133,7 +133,7 @@ class BlockAllocator:
             a = self.allocate(res.size, res.alignment, res.type_bits,
                               linear=isinstance(res, Buffer), host_visible=host_visible,
                               label=res.label)
-            res._allocation = a
+            res.sub_allocation = a
             res.bind(a.memory, a.offset)
         except BaseException:
             res.destroy()

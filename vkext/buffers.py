@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from .allocation import DeviceMemory, _flags, _Resource
+from .allocation import DeviceMemory, Resource, flags_of
 from .consts import const, vk
 from .device import VkDevice
 
-_BUFFER_USAGE = {
+BUFFER_USAGE = {
     "storage": "VK_BUFFER_USAGE_STORAGE_BUFFER_BIT",
     "uniform": "VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT",
     "indirect": "VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT",
@@ -31,19 +31,20 @@ _BUFFER_USAGE = {
 def buffer_usage_flags(usages: Iterable[str] | int) -> int:
     if isinstance(usages, int):
         return usages
-    unknown = [u for u in usages if u not in _BUFFER_USAGE]
+    unknown = [u for u in usages if u not in BUFFER_USAGE]
     if unknown:
         raise ValueError(f"unknown buffer usage {', '.join(sorted(unknown))} "
-                         f"(known: {', '.join(sorted(_BUFFER_USAGE))})")
-    return _flags(_BUFFER_USAGE[u] for u in usages)
+                         f"(known: {', '.join(sorted(BUFFER_USAGE))})")
+    return flags_of(BUFFER_USAGE[u] for u in usages)
 
 
-def _buffer_flags(device: VkDevice, usage: Iterable[str] | int) -> int:
-    # with buffer device address, anything shaders touch also gets an address
+def device_buffer_flags(device: VkDevice, usage: Iterable[str] | int) -> int:
+    """``buffer_usage_flags`` on ``device``: with buffer device address, anything shaders
+    touch also gets an address."""
     flags = buffer_usage_flags(usage)
     if not isinstance(usage, int) and "buffer_device_address" in device.caps \
             and set(usage) - {"transfer_src", "transfer_dst"}:
-        flags |= const(_BUFFER_USAGE["device_address"])
+        flags |= const(BUFFER_USAGE["device_address"])
     return flags
 
 
@@ -52,7 +53,7 @@ def buffer_create_info(size: int, usage: int) -> Any:
                                  sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE)
 
 
-class Buffer(_Resource):
+class Buffer(Resource):
     """A buffer (unbound until ``bind``/``allocate``). With buffer device address, any
     usage beyond transfers adds ``SHADER_DEVICE_ADDRESS`` so shaders can reach it."""
 
@@ -66,7 +67,7 @@ class Buffer(_Resource):
         if self.bytes <= 0:
             raise ValueError(f"buffer '{self.label}': size must be positive, got {size}")
         self.usages = frozenset(usage) if not isinstance(usage, int) else frozenset()
-        self.usage = _buffer_flags(device, usage)
+        self.usage = device_buffer_flags(device, usage)
         self._init_binding()
         self.handle = vk.vkCreateBuffer(device.device, buffer_create_info(self.bytes, self.usage),
                                         None)
@@ -82,7 +83,7 @@ class Buffer(_Resource):
     @property
     def address(self) -> int:
         """The buffer's device address (needs buffer device address)."""
-        if not self.usage & const(_BUFFER_USAGE["device_address"]):
+        if not self.usage & const(BUFFER_USAGE["device_address"]):
             raise ValueError(f"buffer '{self.label}' was not created for device addresses")
         return self.device.buffer_address(self.handle)
 

@@ -20,9 +20,10 @@ from rfw.graph.compile import Barrier
 from rfw.graph.formats import format_info
 from rfw.graph.sync import State
 
+from .buffers import Buffer, staging_buffer
 from .consts import const, ffi, flag_name, vk
 from .device import VkDevice
-from .memory import Buffer, Image, aspect_flags, numpy_dtype, staging_buffer
+from .images import Image, aspect_flags, numpy_dtype
 
 FENCE_TIMEOUT_NS = 60 * 10**9
 NONE: frozenset[str] = frozenset()

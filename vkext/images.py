@@ -11,7 +11,7 @@ import numpy as np
 from rfw.errors import RfwError
 from rfw.graph.formats import FormatInfo, format_info
 
-from .allocation import DeviceMemory, _flags, _Resource
+from .allocation import DeviceMemory, Resource, flags_of
 from .consts import const, vk
 from .device import VkDevice
 
@@ -78,7 +78,7 @@ def _aspect(aspect: str | int | None, default: int) -> int:
         return default
     if isinstance(aspect, int):
         return aspect
-    return _flags(_ASPECTS[a] for a in aspect.replace("_", "|").split("|"))
+    return flags_of(_ASPECTS[a] for a in aspect.replace("_", "|").split("|"))
 
 
 def image_usage_flags(usages: Iterable[str] | int) -> int:
@@ -88,7 +88,7 @@ def image_usage_flags(usages: Iterable[str] | int) -> int:
     if unknown:
         raise ValueError(f"unknown image usage {', '.join(sorted(unknown))} "
                          f"(known: {', '.join(sorted(_IMAGE_USAGE))})")
-    return _flags(_IMAGE_USAGE[u][0] for u in usages)
+    return flags_of(_IMAGE_USAGE[u][0] for u in usages)
 
 
 def _missing_features(device: VkDevice, fmt: int, usages: Iterable[str]) -> list[str]:
@@ -113,7 +113,7 @@ def numpy_dtype(format: str) -> tuple[np.dtype, int]:
     return np.dtype(f"{code}{size}"), info.components
 
 
-class Image(_Resource):
+class Image(Resource):
     """A 2D optimal-tiling image (unbound until ``bind``/``allocate``)."""
 
     kind = "image"

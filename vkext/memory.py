@@ -13,29 +13,19 @@ from typing import Any
 
 from rfw.graph.compile import CompiledGraph, MemoryOptions, ResourcePlan
 
-# the names other modules imported from here before the split, kept so their imports work
-from .allocation import DeviceMemory, PlanMismatchError, VkOutOfMemoryError, _size
+from .allocation import DeviceMemory, PlanMismatchError, VkOutOfMemoryError, byte_text
 from .blocks import BlockAllocator
-from .buffers import _BUFFER_USAGE, Buffer, _buffer_flags, buffer_create_info, staging_buffer
+from .buffers import BUFFER_USAGE, Buffer, buffer_create_info, device_buffer_flags, staging_buffer
 from .consts import const, ffi, vk
 from .device import VkDevice
-from .images import (
-    Image,
-    ImageView,
-    UnsupportedFormatError,
-    aspect_flags,
-    image_create_info,
-    image_usage_flags,
-    image_view,
-    numpy_dtype,
-    vk_format,
-)
+from .images import Image, ImageView, image_create_info, image_usage_flags, image_view, vk_format
 
+# BlockAllocator, Buffer, Image, ImageView, image_view and staging_buffer live in blocks,
+# buffers and images; they are re-exported here while the modules that import them from here
+# (the executor and its parts, accel, scene, rt, raycast) are being edited by others
 __all__ = [
-    "BlockAllocator", "Buffer", "DeviceMemory", "Heap", "Image", "ImageView",
-    "Placement", "PlanMismatchError", "TransientMemory", "UnsupportedFormatError",
-    "VkOutOfMemoryError", "aspect_flags", "image_view", "memory_options", "numpy_dtype",
-    "plan_heaps", "requirements", "staging_buffer", "vk_format",
+    "BlockAllocator", "Buffer", "Heap", "Image", "ImageView", "Placement", "TransientMemory",
+    "image_view", "memory_options", "plan_heaps", "requirements", "staging_buffer",
 ]
 
 
@@ -82,7 +72,7 @@ def _image_usages(r: ResourcePlan, readback: bool) -> set[str]:
 
 
 def _buffer_usages(r: ResourcePlan, readback: bool) -> set[str]:
-    usages = set(r.usages) & set(_BUFFER_USAGE) or {"storage"}
+    usages = set(r.usages) & set(BUFFER_USAGE) or {"storage"}
     return usages | ({"transfer_src"} if readback else set())
 
 
@@ -112,7 +102,7 @@ def requirements(plan: CompiledGraph, device: VkDevice, *,
             req = _requirements2()
             vk.vkGetDeviceImageMemoryRequirements(device.device, query, req)
         else:
-            usage = _buffer_flags(device, _buffer_usages(r, readback))
+            usage = device_buffer_flags(device, _buffer_usages(r, readback))
             query = vk.VkDeviceBufferMemoryRequirements(
                 pCreateInfo=buffer_create_info(r.raw_bytes, usage))
             req = _requirements2()
@@ -169,9 +159,9 @@ class TransientMemory:
     def report(self) -> str:
         """One line per resource: heap, offset, driver size and alignment against the plan."""
         mode = "separate allocations" if self.no_alias else "aliased heaps"
-        lines = [f"{self.plan.name}: {_size(self.allocated_bytes)} in {len(self.memories)} "
-                 f"{mode} (plan: {_size(self.plan.transient_bytes)} aliased, "
-                 f"{_size(self.plan.unaliased_bytes)} unaliased)"]
+        lines = [f"{self.plan.name}: {byte_text(self.allocated_bytes)} in {len(self.memories)} "
+                 f"{mode} (plan: {byte_text(self.plan.transient_bytes)} aliased, "
+                 f"{byte_text(self.plan.unaliased_bytes)} unaliased)"]
         for p in self.placements.values():
             lines.append(f"  {p.name:<28} heap {p.heap} @ {p.offset:>10}  size {p.size:>10}  "
                          f"align {p.alignment:>6}  planned {p.planned:>10}")

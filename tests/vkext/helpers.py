@@ -10,7 +10,7 @@ import numpy as np
 from rfw.graph import Attachment, DepthAttachment, GraphBuilder, Texture
 from rfw.graph.graph import Graph
 from vkext.consts import const, ffi, vk
-from vkext.memory import Image, ImageView
+from vkext.images import Image, ImageView
 
 
 def unorm_codes(value: float, bits: int = 8) -> set[int]:

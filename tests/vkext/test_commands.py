@@ -24,6 +24,7 @@ from vkext import (
     upload_buffer,
     upload_image,
 )
+from vkext.buffers import staging_buffer
 from vkext.commands import (
     COPY_WRITE,
     HOST_READ,
@@ -34,7 +35,6 @@ from vkext.commands import (
     readback_bytes,
     texels,
 )
-from vkext.memory import staging_buffer
 
 from .helpers import (
     chain_graph,

@@ -24,7 +24,7 @@ from vkext import (
     staging_buffer,
 )
 from vkext.consts import vk
-from vkext.memory import vk_format
+from vkext.images import vk_format
 
 from .helpers import chain_graph
 
