@@ -37,7 +37,7 @@ import numpy as np
 import pygltflib
 
 from ..errors import warn as warn_once
-from .gltf_json import _decode, _reject_constant, _ShapeError
+from .gltf_json import ShapeError, decode_json, reject_constant
 from .model import (
     WORLD_LIMIT,
     Camera,
@@ -260,7 +260,7 @@ class _Loader:
             raise SceneError(f"{self.source}: cannot read: {e.strerror or e}") from None
         text = self.split_glb(data) if data[:4] == _GLB_MAGIC else data
         try:
-            raw = json.loads(bytes(text).decode("utf-8-sig"), parse_constant=_reject_constant)
+            raw = json.loads(bytes(text).decode("utf-8-sig"), parse_constant=reject_constant)
         except UnicodeDecodeError:
             self.fail("JSON", "not UTF-8 text (is this a glTF file?)")
         except (json.JSONDecodeError, ValueError, RecursionError) as e:
@@ -269,8 +269,8 @@ class _Loader:
             self.fail("JSON", "the top level must be an object")
         self.check_version(raw)
         try:
-            self.doc: pygltflib.GLTF2 = _decode(raw, pygltflib.GLTF2, "gltf")
-        except _ShapeError as e:
+            self.doc: pygltflib.GLTF2 = decode_json(raw, pygltflib.GLTF2, "gltf")
+        except ShapeError as e:
             raise SceneError(f"{self.source}: {e}") from None
         except RecursionError:
             self.fail("JSON", "nested too deeply")

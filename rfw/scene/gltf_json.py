@@ -14,25 +14,25 @@ from typing import Any, NoReturn
 import pygltflib
 
 
-class _ShapeError(Exception):
-    pass
+class ShapeError(Exception):
+    """A JSON value of the wrong type; the message names the element."""
 
 
-def _shape_error(where: str, expected: str, value: Any) -> _ShapeError:
+def _shape_error(where: str, expected: str, value: Any) -> ShapeError:
     text = json.dumps(value)
     if len(text) > 40:
         text = text[:37] + "..."
-    return _ShapeError(f"{where.removeprefix('gltf.')}: expected {expected}, got {text}")
+    return ShapeError(f"{where.removeprefix('gltf.')}: expected {expected}, got {text}")
 
 
-def _decode(value: Any, hint: Any, where: str) -> Any:
-    """One JSON value as the type ``hint`` says, or _ShapeError naming the element."""
+def decode_json(value: Any, hint: Any, where: str) -> Any:
+    """One JSON value as the type ``hint`` says, or ShapeError naming the element."""
     if value is None:
         return None  # required fields are checked where they are used
     origin = typing.get_origin(hint)
     if origin is typing.Union:
         inner = [a for a in typing.get_args(hint) if a is not type(None)]
-        return _decode(value, inner[0], where)
+        return decode_json(value, inner[0], where)
     if hint is typing.Any:
         return value
     if origin is list:
@@ -42,7 +42,7 @@ def _decode(value: Any, hint: Any, where: str) -> Any:
         for i, v in enumerate(value):
             if v is None:  # a field set to null reads as absent, a list item cannot
                 raise _shape_error(f"{where}[{i}]", "a value", v)
-        return [_decode(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+        return [decode_json(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
     if hint is pygltflib.Attributes:
         if not isinstance(value, dict):
             raise _shape_error(where, "an object", value)
@@ -59,7 +59,7 @@ def _decode(value: Any, hint: Any, where: str) -> Any:
             raise _shape_error(where, "an object", value)
         hints = _hints(hint)
         # unknown keys are dropped; extras may hold any JSON value and nothing reads them
-        return hint(**{k: _decode(v, hints[k], f"{where}.{k}") for k, v in value.items()
+        return hint(**{k: decode_json(v, hints[k], f"{where}.{k}") for k, v in value.items()
                        if k in hints and k != "extras"})
     if hint is bool:
         if not isinstance(value, bool):
@@ -91,5 +91,6 @@ def _hints(cls: type) -> dict[str, Any]:
     return _HINTS[cls]
 
 
-def _reject_constant(name: str) -> NoReturn:
+def reject_constant(name: str) -> NoReturn:
+    """``json.loads``' ``parse_constant``: NaN and Infinity are not JSON."""
     raise ValueError(f"{name} is not valid JSON")
