@@ -4,15 +4,18 @@ sionna-rt wheels), the cache's idempotence and atomicity, error lines, and ``--l
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import gzip
 import hashlib
 import io
 import json
 import os
+import re
 import shutil
 import stat
 import struct
+import subprocess
 import sys
 import tarfile
 import zipfile
@@ -766,3 +769,64 @@ def test_mitsuba_rotate_and_matrix(tmp_path):
     # (1, 0, 0) -> rotate 90 about z -> (0, 1, 0) -> +5 x -> (5, 1, 0) -> y up -> (5, 0, -1)
     assert np.allclose(world @ [1, 0, 0, 1], [5, 0, -1, 1], atol=1e-6)
     assert s.materials[0].name == "default"
+
+
+# -- the package's layout and its command line --------------------------------------------------
+
+
+def documented_order() -> list[str]:
+    """The modules in the order the package docstring lists them."""
+    return re.findall(r"``(\w+)`` \(", F.__doc__.split("Modules,", 1)[1])
+
+
+def sibling_imports(folder: Path, package: str) -> dict[str, set[str]]:
+    """Module -> the sibling modules it imports (relative or absolute), ``__init__`` left out."""
+    out = {}
+    for path in sorted(folder.glob("*.py")):
+        if path.stem == "__init__":
+            continue
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                found |= {node.module} if node.module else {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith(package):
+                found.add(node.module.removeprefix(package).lstrip(".") or "__init__")
+        out[path.stem] = found
+    return out
+
+
+def layer_violations(imports: dict[str, set[str]], order: list[str]) -> list[str]:
+    """Every import of a module that is not listed before the importer."""
+    rank = {m: i for i, m in enumerate(order)}
+    return [f"{m} imports {t}" for m, targets in sorted(imports.items())
+            for t in sorted(targets) if rank.get(t, len(order)) >= rank.get(m, -1)]
+
+
+def test_fetch_modules_import_only_those_listed_before_them():
+    imports = sibling_imports(Path(F.__file__).parent, "rfw.scene.fetch")
+    assert sorted(imports) == sorted(documented_order())
+    assert layer_violations(imports, documented_order()) == []
+
+
+def test_an_import_against_the_order_is_found(tmp_path):
+    # negative control: an upward import, one of the package and an unlisted module
+    (tmp_path / "download.py").write_text("from .cache import fetch\nfrom . import glb\n")
+    (tmp_path / "glb.py").write_text("from rfw.scene.fetch import SCENES\n")
+    (tmp_path / "extra.py").write_text("import json\n")
+    imports = sibling_imports(tmp_path, "rfw.scene.fetch")
+    assert layer_violations(imports, ["download", "glb", "cache"]) == [
+        "download imports cache", "download imports glb", "glb imports __init__"]
+    assert sorted(imports) != ["cache", "download", "glb"]  # extra.py is not in the order
+
+
+def test_cli_in_a_subprocess(tmp_path):
+    cache = str(tmp_path / "c")
+    done = subprocess.run([sys.executable, "-m", "rfw.cli", "scenes", "fetch", "--list",
+                           "--cache", cache], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert [ln.split()[0] for ln in done.stdout.splitlines()[1:-1]] == list(F.SCENES)
+    bad = subprocess.run([sys.executable, "-m", "rfw.cli", "scenes", "fetch", "dragonn",
+                          "--cache", cache], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and bad.stdout == ""
+    assert bad.stderr.startswith("rfw: error: unknown scene 'dragonn' (available: dragon, ")
+    assert len(bad.stderr.splitlines()) == 1
