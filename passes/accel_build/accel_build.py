@@ -11,8 +11,10 @@ class AccelBuildPass(Pass):
     The BLAS are built once per scene, with ``prefer`` (``fast_trace``, ``fast_build`` or
     ``none``) and optionally ``compact``ed, and kept on the scene for every frame and graph
     that uses the same options. Each frame the pass rebuilds the TLAS from the instances'
-    transforms or, with ``allow_update``, refits it in place. The graph plans the barrier
-    from this build to every pass that reads ``tlas``. ``timings.json`` reports the
+    transforms or, with ``allow_update``, refits it in place, in a scratch buffer it keeps.
+    Both are outputs, so the graph plans every barrier of the build: after the last frame's
+    build (``scratch``, write after write) and traces (``tlas``, write after read), and
+    before every pass that reads ``tlas``. ``timings.json`` reports the
     structures' counts, bytes (before and after compaction) and build times under ``accel``.
     Vulkan only (wgpu has no acceleration structures).
     """
@@ -20,7 +22,9 @@ class AccelBuildPass(Pass):
     type = "compute"
     backend = "vk"
     requires = ("VK_KHR_acceleration_structure",)
-    outputs = {"tlas": AccelStructure(desc="top-level acceleration structure of the scene")}
+    outputs = {"tlas": AccelStructure(desc="top-level acceleration structure of the scene"),
+               "scratch": AccelStructure(desc="scratch memory of the TLAS builds, reused "
+                                             "every frame (the scene's, like the structures)")}
 
     class Params(Settings):
         prefer: str = "fast_trace"  # fast_trace | fast_build | none

@@ -1,4 +1,4 @@
-"""vkext.accel: BLAS reuse, compaction, refit, build order and teardown, under validation.
+"""vkext.accel: BLAS reuse, compaction, refit, build plans and order, teardown, under validation.
 
 Measured on lavapipe (Mesa 25.0.7): the courtyard's 36 meshes with triangles give 36 BLAS
 (19,200 triangles) for 405 instances (164,544 triangles), 1.9 MiB of BLAS; lavapipe reports
@@ -16,14 +16,24 @@ import itertools
 import numpy as np
 import pytest
 
-import vkext.accel as accel_module
+import vkext.commands as commands_module
+from rfw.graph import AccelStructure, GraphBuilder, compile
 from rfw.scene import default_scene
 from rfw.scene.model import Instance, Material, Scene
-from vkext.accel import ALPHA_MASK, INSTANCE_DTYPE, SceneAccel
+from vkext.accel import (
+    ALPHA_MASK,
+    INSTANCE_DTYPE,
+    PlanRecorder,
+    SceneAccel,
+    build_graph,
+    refit_graph,
+)
 from vkext.consts import const
 from vkext.raycast import RAY_DTYPE, raycaster
 
 from ..conftest import box_mesh
+
+BUILD = {"ACCELERATION_STRUCTURE_BUILD_KHR"}
 
 
 @pytest.fixture(scope="module")
@@ -139,41 +149,115 @@ def test_update_needs_allow_update_and_good_transforms(vk_device):
             acc.update(np.identity(4))
 
 
+def _orders_writes_before_reads(e) -> bool:
+    return (e[0] == "barrier" and "ACCELERATION_STRUCTURE_BUILD_KHR" in e[1].stages
+            and "ACCELERATION_STRUCTURE_WRITE_KHR" in e[1].access
+            and "ACCELERATION_STRUCTURE_BUILD_KHR" in e[2].stages
+            and "ACCELERATION_STRUCTURE_READ_KHR" in e[2].access)
+
+
+def _unordered_builds(events) -> list[tuple]:
+    """Pairs of consecutive builds with no build-stage write -> read barrier between them."""
+    builds = [i for i, e in enumerate(events) if e[0] == "build"]
+    return [(events[a], events[b]) for a, b in itertools.pairwise(builds)
+            if not any(_orders_writes_before_reads(e) for e in events[a + 1:b])]
+
+
 def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch):
     """In the recorded stream, a barrier from acceleration-structure writes to
     acceleration-structure reads in the build stage lies between the last BLAS build and
-    the TLAS build; with several scratch batches, one also lies between batches."""
+    the TLAS build; with several scratch batches, one also lies between batches. The
+    barriers come from the build plan, recorded by ``record_barriers`` as a frame's are."""
     events = []
-    real_barrier, real_build = accel_module.barrier, vk_device.fn.vkCmdBuildAccelerationStructuresKHR
+    real_barrier = commands_module.barrier
+    real_build = vk_device.fn.vkCmdBuildAccelerationStructuresKHR
 
-    def barrier(cmd, *args, memory_barriers=(), **kw):
+    # the build plan's barriers go through record_barriers, as a frame's do
+    def barrier(cmd, image_barriers=(), buffer_barriers=(), memory_barriers=()):
         events.extend(("barrier", s, d) for s, d in memory_barriers)
-        return real_barrier(cmd, *args, memory_barriers=memory_barriers, **kw)
+        return real_barrier(cmd, image_barriers, buffer_barriers, memory_barriers)
 
     def build(cmd, count, infos, ranges):
         events.append(("build", int(infos[0].type), count))
         return real_build(cmd, count, infos, ranges)
 
-    monkeypatch.setattr(accel_module, "barrier", barrier)
+    monkeypatch.setattr(commands_module, "barrier", barrier)
     monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
     with SceneAccel(vk_device, courtyard, scratch_budget=1) as acc:  # one BLAS per batch
         assert acc.stats()["blas_batches"] == 36
+        assert acc.build_plan.order == (*(f"blas{k}" for k in range(36)), "tlas", "readers")
 
     bottom = const("VK_ACCELERATION_STRUCTURE_TYPE_BOTTOM_LEVEL_KHR")
     top = const("VK_ACCELERATION_STRUCTURE_TYPE_TOP_LEVEL_KHR")
-    builds = [i for i, e in enumerate(events) if e[0] == "build"]
-    kinds = [events[i][1] for i in builds]
+    kinds = [e[1] for e in events if e[0] == "build"]
     assert kinds == [bottom] * 36 + [top]
+    assert _unordered_builds(events) == []
+    # negative control: the same stream without its barriers fails the check at every pair
+    assert len(_unordered_builds([e for e in events if e[0] != "barrier"])) == 36
 
-    def orders_writes_before_reads(e):
-        return (e[0] == "barrier" and "ACCELERATION_STRUCTURE_BUILD_KHR" in e[1].stages
-                and "ACCELERATION_STRUCTURE_WRITE_KHR" in e[1].access
-                and "ACCELERATION_STRUCTURE_BUILD_KHR" in e[2].stages
-                and "ACCELERATION_STRUCTURE_READ_KHR" in e[2].access)
 
-    for a, b in itertools.pairwise(builds):
-        assert any(orders_writes_before_reads(e) for e in events[a + 1:b]), \
-            f"no build-stage write -> read barrier between builds {events[a]} and {events[b]}"
+def _barrier(plan, pass_name, resource):
+    return next((b for b in plan.barriers
+                 if b.pass_name == pass_name and b.resource == resource), None)
+
+
+def _waits_for_build_write(b) -> bool:
+    return (b is not None and "ACCELERATION_STRUCTURE_BUILD_KHR" in b.src.stages
+            and b.src.access == {"ACCELERATION_STRUCTURE_WRITE_KHR"})
+
+
+def test_the_build_plan_orders_batches_tlas_and_readers():
+    plan = compile(build_graph(3, compact=False), (1, 1))
+    assert plan.order == ("blas0", "blas1", "blas2", "tlas", "readers")
+    # a batch waits for the previous one's use of the shared scratch
+    for k in (1, 2):
+        b = _barrier(plan, f"blas{k}", "scratch")
+        assert _waits_for_build_write(b)
+        assert b.dst.access == {"ACCELERATION_STRUCTURE_READ_KHR",
+                                "ACCELERATION_STRUCTURE_WRITE_KHR"}
+    # the TLAS build reads every batch's BLAS after its write, in the build stage
+    for k in range(3):
+        b = _barrier(plan, "tlas", f"blas{k}.blas")
+        assert _waits_for_build_write(b)
+        assert b.dst.stages == BUILD and b.dst.access == {"ACCELERATION_STRUCTURE_READ_KHR"}
+    # later users of any stage see the TLAS and the BLAS
+    for name in ("tlas", "blas0.blas", "blas2.blas"):
+        b = _barrier(plan, "readers", name)
+        assert _waits_for_build_write(b) and b.dst.stages == {"ALL_COMMANDS"}
+    # negative control: batches that do not share the scratch are not ordered at all
+    g = GraphBuilder("unshared", size=(1, 1))
+    for k in range(2):
+        g.add_pass(f"blas{k}", "compute").output("blas", AccelStructure())
+    plan = compile(g.build())
+    assert plan.order == ("blas0", "blas1")
+    assert not any(b.pass_name == "blas1" and b.resource == "blas0.blas" for b in plan.barriers)
+    assert not _waits_for_build_write(_barrier(plan, "blas1", "scratch"))
+
+
+def test_the_compacting_plan_queries_before_it_copies():
+    plan = compile(build_graph(2, compact=True), (1, 1))
+    assert plan.order == ("blas0", "blas1", "compact_query", "compact", "tlas", "readers")
+    assert _waits_for_build_write(_barrier(plan, "compact_query", "blas1.blas"))
+    # the TLAS build reads the compacted copies, not the originals
+    assert _waits_for_build_write(_barrier(plan, "tlas", "compact.blas"))
+    assert _barrier(plan, "tlas", "blas0.blas") is None
+    # a scene without triangles: no BLAS pass, and the TLAS build makes the scratch
+    assert compile(build_graph(0, compact=True), (1, 1)).order == ("tlas", "readers")
+
+
+def test_a_refit_waits_for_earlier_readers():
+    plan = compile(refit_graph(), (1, 1))
+    b = _barrier(plan, "refit", "tlas")  # from the last refit's readers (the plan repeats)
+    assert b is not None and "ALL_COMMANDS" in b.src.stages and b.dst.stages == BUILD
+    assert _waits_for_build_write(_barrier(plan, "readers", "tlas"))
+    assert _waits_for_build_write(_barrier(plan, "refit", "scratch"))
+
+
+def test_passes_record_in_the_plans_order():
+    rec = PlanRecorder(compile(build_graph(1, compact=False), (1, 1)))
+    with pytest.raises(RuntimeError, match="pass 'tlas' recorded where the plan has blas0"):
+        rec.enter(None, "tlas")
+    assert not rec.done()
 
 
 def test_instances_carry_index_mask_hit_group_and_no_culling(vk_device):
@@ -190,8 +274,8 @@ def test_instances_carry_index_mask_hit_group_and_no_culling(vk_device):
         assert acc.blas[2] is None and acc.hit_records == 2
         assert acc.tlas_instances == [0, 2, 3]
         rec = acc.instance_buffer.read(INSTANCE_DTYPE, 3)
-        assert acc._geometry(0).flags == const("VK_GEOMETRY_OPAQUE_BIT_KHR")
-        assert acc._geometry(1).flags == const(
+        assert acc.geometry.geometry(0).flags == const("VK_GEOMETRY_OPAQUE_BIT_KHR")
+        assert acc.geometry.geometry(1).flags == const(
             "VK_GEOMETRY_NO_DUPLICATE_ANY_HIT_INVOCATION_BIT_KHR")
     np.testing.assert_array_equal(rec["index_mask"] & 0xFFFFFF, [0, 2, 3])
     np.testing.assert_array_equal(rec["index_mask"] >> 24, [ALPHA_MASK["OPAQUE"],
