@@ -471,7 +471,7 @@ def build(cfg: Config) -> Built:
         b = g.add_pass(entry.name, inst.type, enabled=entry.enabled,
                        side_effect=cls.side_effect, requires=inst.requires,
                        settings=inst.params.as_dict(), schema=tuple(inst.params.fields()),
-                       backend=entry.backend or cls.backend)
+                       backend=entry.backend or cls.backend, steps=inst.steps())
         mapping: dict[str, str] = {}
         for slot, spec in ins.items():
             source = entry.inputs.get(slot)

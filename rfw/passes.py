@@ -15,6 +15,15 @@ A pass is a class in ``passes/<id>/<id>.py`` with its shader beside it::
         def record(self, ctx):
             ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
                          s_ldr=ctx.storage("ldr"), u_params=self.params)
+
+Synchronization is the graph's: no pass records a barrier. A pass whose work comes in
+ordered steps over parts of its resources (one dispatch per mip of a chain, say) declares
+them in ``steps()``: each :class:`rfw.graph.Step` names the parts (``Part(slot, mips=(first,
+count))`` of an image, ``bytes=(offset, size)`` of a buffer, or a bare slot name for all of
+it) it reads and writes. The compiler plans the barriers between steps as it plans those
+between passes, and ``record`` calls ``ctx.step(i)`` before recording step ``i``'s work: on
+Vulkan that records the barriers planned before step ``i``, on wgpu (which orders a pass's
+dispatches itself) nothing. A pass that declares steps must write its resources in them.
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from .graph.errors import GraphError, did_you_mean
-from .graph.resources import SizeRule, Slot, _slot
+from .graph.resources import SizeRule, Slot, Step, _slot
 
 
 class SettingsError(GraphError):
@@ -253,6 +262,11 @@ class Pass:
     def declare(self) -> tuple[dict[str, Slot], dict[str, Slot]]:
         """This instance's input and output slots; override when settings change them."""
         return dict(self.inputs), dict(self.outputs)
+
+    def steps(self) -> tuple[Step, ...]:
+        """The ordered steps inside this pass, with the parts of slots each reads and writes
+        (see the module docstring); none by default: the pass is one step."""
+        return ()
 
     def setup(self, ctx: Any) -> None:
         """Create persistent GPU objects (pipelines, samplers). Called once per device."""

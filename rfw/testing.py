@@ -34,7 +34,7 @@ def run_pass(cls: type[Pass], inputs: dict[str, tuple[str, np.ndarray]], *,
         g.external(name, Texture(fmt, size=SizeRule.fixed(array.shape[1], array.shape[0])))
         slots[slot] = name
     b = g.add_pass(inst.name, cls.type, settings=inst.params.as_dict(),
-                   schema=tuple(inst.params.fields()))
+                   schema=tuple(inst.params.fields()), steps=inst.steps())
     for slot, spec in ins.items():
         if slot in slots:
             b.input(slot, slots[slot], spec)

@@ -10,17 +10,19 @@ from .resources import (
     Buffer,
     DepthAttachment,
     History,
+    Part,
     Reference,
     ShadingRate,
     SizeRule,
     Slot,
+    Step,
     Storage,
     Texture,
 )
 
 __all__ = [
     "AccelStructure", "Attachment", "Buffer", "CompiledGraph", "DepthAttachment", "Diagnostic", "Graph",
-    "GraphBuilder", "GraphError", "History", "MemoryOptions", "PassDecl", "Reference",
-    "ShadingRate", "SizeRule", "Slot", "Storage", "Texture", "compile", "load_graph",
+    "GraphBuilder", "GraphError", "History", "MemoryOptions", "Part", "PassDecl", "Reference",
+    "ShadingRate", "SizeRule", "Slot", "Step", "Storage", "Texture", "compile", "load_graph",
     "load_raptor", "load_toml", "loads_raptor", "loads_toml", "to_toml",
 ]

@@ -1,6 +1,5 @@
 """Step 7 of ``compile``: the barriers between accesses, planned once for the executors."""
 
-
 from __future__ import annotations
 
 import bisect
@@ -8,6 +7,7 @@ from collections import defaultdict
 
 from .plan import STATS, Barrier, Declared
 from .resolve import Resolved
+from .steps import whole
 from .sync import State
 
 # ---------------------------------------------------------------------------------------------
@@ -43,6 +43,72 @@ def plan_barriers(declared: Declared, schedule: list[int], resolved: dict[str, R
             if src is not None:
                 barriers.append(Barrier(p.name, a.resource, src, a.state, aliased))
     return barriers
+
+
+def plan_step_barriers(declared: Declared, schedule: list[int]) -> list[Barrier]:
+    """Barriers between the steps of a pass, per span of mips or bytes.
+
+    A step's accesses are merged into its pass's, so the barrier before the pass makes all
+    earlier work visible to every step: inside a pass a span starts with nothing to wait for
+    and only the earlier steps' accesses are tracked, with the layout the plan gives the pass.
+    """
+    barriers: list[Barrier] = []
+    for i in schedule:
+        p = declared.passes[i]
+        steps = declared.steps.get(p.name)
+        if not steps:
+            continue
+        tracks: dict[str, _Spans] = {}
+        for k, accesses in enumerate(steps):
+            for sa in accesses:
+                r = declared.resources[sa.resource]
+                t = tracks.get(sa.resource)
+                if t is None:
+                    t = tracks[sa.resource] = _Spans(sa.state.layout, whole(r))
+                for lo, hi, src in t.visit(sa.lo, sa.hi, sa.state):
+                    barriers.append(Barrier(p.name, sa.resource, src, sa.state, step=k,
+                                            **_part(r.kind, lo, hi, t.end)))
+    return barriers
+
+
+def _part(kind: str, lo: int, hi: int, end: int) -> dict[str, tuple[int, int]]:
+    if lo == 0 and hi == end:
+        return {}  # all of it
+    return {"mips" if kind == "image" else "bytes": (lo, hi - lo)}
+
+
+class _Spans:
+    """The tracks of one resource's disjoint spans ``[lo, hi)`` inside one pass; a step's
+    access splits them where it starts and ends."""
+
+    def __init__(self, layout: str | None, end: int):
+        self.end = end
+        self.cuts = [0, end]  # span k is [cuts[k], cuts[k + 1])
+        self.tracks = [_Track(layout)]
+
+    def _cut(self, at: int) -> None:
+        k = bisect.bisect_left(self.cuts, at)
+        if k < len(self.cuts) and self.cuts[k] == at:
+            return
+        self.cuts.insert(k, at)
+        self.tracks.insert(k - 1, self.tracks[k - 1].copy())
+
+    def visit(self, lo: int, hi: int, s: State) -> list[tuple[int, int, State]]:
+        """Record an access of ``[lo, hi)``; the barriers it needs, neighbouring spans with
+        the same source merged into one."""
+        self._cut(lo)
+        self._cut(hi)
+        out: list[tuple[int, int, State]] = []
+        for k in range(self.cuts.index(lo), self.cuts.index(hi)):
+            src = self.tracks[k].visit(s)
+            if src is None:
+                continue
+            a, b = self.cuts[k], self.cuts[k + 1]
+            if out and out[-1][1] == a and out[-1][2] == src:
+                out[-1] = (out[-1][0], b, src)
+            else:
+                out.append((a, b, src))
+        return out
 
 
 def _write_access(s: State | None) -> frozenset[str]:

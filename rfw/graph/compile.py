@@ -2,7 +2,8 @@
 
 validate -> cull -> order -> resolve -> lifetimes -> assign memory -> plan barriers ->
 parallel levels. Each step is a short function; executors make no decision made here.
-The steps live beside this driver: validate.py (1), schedule.py (2, 3, 5, 8), resolve.py (4),
+The steps live beside this driver: validate.py (1: accesses.py and steps.py derive what the
+slots and the steps inside passes touch), schedule.py (2, 3, 5, 8), resolve.py (4),
 placement.py (6), barriers.py (7); plan.py holds what they pass along and return.
 """
 
@@ -14,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import replace
 from typing import Any
 
-from .barriers import plan_barriers
+from .barriers import plan_barriers, plan_step_barriers
 from .bridges import insert_bridges
 from .errors import GraphError
 from .graph import Graph
@@ -150,6 +151,9 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
                     for (a, b), kind in sorted(declared.edges.items())
                     if a in kept and b in kept),
         outputs=declared.outputs,
+        step_barriers=tuple(plan_step_barriers(declared, schedule)),
+        steps={n: tuple(s.name for s in declared.passes[i].steps)
+               for n, i in zip(names, schedule, strict=True) if declared.passes[i].steps},
         follow_output=sum(_follows_output(n, declared.resources) for n, r in resolved.items()
                           if r.kind == "image" and r.format),
     )

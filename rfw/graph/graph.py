@@ -12,7 +12,7 @@ from typing import Any
 
 from ..errors import IDENTIFIER, check_identifier
 from .errors import GraphError
-from .resources import PASS_TYPES, Binding, Slot, Texture
+from .resources import PASS_TYPES, Binding, Slot, Step, Texture
 
 
 def _freeze(value: Any) -> Any:
@@ -38,12 +38,14 @@ class PassDecl:
     requires: tuple[str, ...] = ()  # device capabilities, e.g. "VK_EXT_mesh_shader"
     settings: tuple[tuple[str, Any], ...] = ()
     schema: tuple[str, ...] | None = None  # known setting names, when the pass class says
+    steps: tuple[Step, ...] = ()  # ordered steps inside the pass, barriers planned between
     origin: str | None = field(default=None, compare=False)  # "file:line" for messages
 
     @cached_property
     def _hash(self) -> int:
         return hash((self.name, self.type, self.inputs, self.outputs, self.enabled,
-                     self.side_effect, self.requires, self.settings, self.schema, self.backend))
+                     self.side_effect, self.requires, self.settings, self.schema, self.backend,
+                     self.steps))
 
     def __hash__(self) -> int:
         return self._hash
@@ -149,7 +151,8 @@ class PassBuilder:
         schema = opts.pop("schema", None)
         return PassDecl(self.name, self.type, tuple(self.inputs), tuple(self.outputs),
                         settings=settings, schema=None if schema is None else tuple(schema),
-                        requires=tuple(opts.pop("requires", ())), **opts)
+                        requires=tuple(opts.pop("requires", ())),
+                        steps=tuple(opts.pop("steps", ())), **opts)
 
 
 class GraphBuilder:
@@ -176,7 +179,7 @@ class GraphBuilder:
                  side_effect: bool = False, requires: Iterable[str] = (),
                  settings: Mapping[str, Any] | None = None,
                  schema: Iterable[str] | None = None, origin: str | None = None,
-                 backend: str | None = None) -> PassBuilder:
+                 backend: str | None = None, steps: Iterable[Step] = ()) -> PassBuilder:
         check_identifier("pass", name, file=self.source)
         if type not in PASS_TYPES:
             raise GraphError(f"pass '{name}': unknown pass type '{type}'", file=self.source,
@@ -185,7 +188,7 @@ class GraphBuilder:
             raise GraphError(f"pass '{name}' is declared twice", file=self.source)
         p = PassBuilder(self, name, type, enabled=enabled, side_effect=side_effect,
                         requires=tuple(requires), settings=settings or {}, schema=schema,
-                        origin=origin, backend=backend)
+                        origin=origin, backend=backend, steps=tuple(steps))
         self._passes.append(p)
         self._names.add(name)
         return p

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..units import MiB
-from .compile import CompiledGraph
+from .compile import Barrier, CompiledGraph
 
 
 def _mib(n: int) -> str:
@@ -50,13 +50,7 @@ def describe(c: CompiledGraph) -> str:
                                                   "heap", "offset", "first..last", "lifetime",
                                                   "usage"])]
     out.append("")
-    out.append(f"barriers ({len(c.barriers)}):")
-    for b in c.barriers:
-        j = b.to_json()
-        src, dst = j["from"], j["to"]
-        alias = f"  [takes memory of {', '.join(b.aliased)}]" if b.aliased else ""
-        out.append(f"  {b.pass_name} / {b.resource}: {src['layout']} -> {dst['layout']}; "
-                   f"{src['stages']}:{src['access']} -> {dst['stages']}:{dst['access']}{alias}")
+    out += _barriers(c)
     out.append("")
     out.append("parallel levels:")
     out += [f"  {i}: {', '.join(level)}" for i, level in enumerate(c.parallel_levels)]
@@ -73,6 +67,33 @@ def describe(c: CompiledGraph) -> str:
         out.append("diagnostics:")
         out += [f"  {d.level}: {d.message}" for d in c.diagnostics]
     return "\n".join(out)
+
+
+def _barriers(c: CompiledGraph) -> list[str]:
+    """Each pass's barriers before it, then those between its steps (before step N)."""
+    steps = f", {len(c.step_barriers)} between steps" if c.step_barriers else ""
+    out = [f"barriers ({len(c.barriers)}{steps}):"]
+    entry: dict[str, list[Barrier]] = {}
+    inside: dict[str, list[Barrier]] = {}
+    for b in c.barriers:
+        entry.setdefault(b.pass_name, []).append(b)
+    for b in c.step_barriers:
+        inside.setdefault(b.pass_name, []).append(b)
+    for name in c.order:
+        out += [_barrier_line(b, f"{b.pass_name} / {b.resource}") for b in entry.get(name, ())]
+        for b in inside.get(name, ()):
+            step = c.steps[name][b.step] if b.step is not None else "?"
+            out.append(_barrier_line(b, f"{b.pass_name} step {b.step} ({step}) / "
+                                        f"{b.resource} {b.part()}"))
+    return out
+
+
+def _barrier_line(b: Barrier, what: str) -> str:
+    j = b.to_json()
+    src, dst = j["from"], j["to"]
+    alias = f"  [takes memory of {', '.join(b.aliased)}]" if b.aliased else ""
+    return (f"  {what}: {src['layout']} -> {dst['layout']}; "
+            f"{src['stages']}:{src['access']} -> {dst['stages']}:{dst['access']}{alias}")
 
 
 def _q(s: str) -> str:

@@ -1,7 +1,6 @@
 """Step 6 of ``compile``: where transient resources live in memory (aliasing), its lower
 bound, and what Raptor's allocator would need for comparison."""
 
-
 from __future__ import annotations
 
 import bisect

@@ -1,7 +1,6 @@
 """What the compiler works on and produces: the validated declaration, and the compiled
 plan (order, resources, memory, barriers) executors follow without deciding anything."""
 
-
 from __future__ import annotations
 
 from collections import Counter
@@ -97,13 +96,44 @@ class Barrier:
     src: State
     dst: State
     aliased: tuple[str, ...] = ()  # resources whose memory this one takes over
+    # a barrier between steps of a pass: the step it comes before and the part it covers
+    step: int | None = None
+    mips: tuple[int, int] | None = None  # (first, count); None: every mip
+    bytes: tuple[int, int] | None = None  # (offset, size); None: the whole buffer
 
     def to_json(self) -> dict[str, Any]:
         src = self.src.to_json()
         if self.aliased:
             src["aliased"] = list(self.aliased)
-        return {"pass": self.pass_name, "resource": self.resource, "from": src,
-                "to": self.dst.to_json()}
+        out = {"pass": self.pass_name, "resource": self.resource, "from": src,
+               "to": self.dst.to_json()}
+        if self.step is not None:
+            out["step"] = self.step
+            out.update({k: list(v) for k, v in (("mips", self.mips), ("bytes", self.bytes))
+                        if v is not None})
+        return out
+
+    def part(self) -> str:
+        """The sub-resource it covers, for people: ``mips 2..3``, ``bytes 0..255`` or ``all``."""
+        if self.mips is not None:
+            first, count = self.mips
+            return f"mip {first}" if count == 1 else f"mips {first}..{first + count - 1}"
+        if self.bytes is not None:
+            offset, size = self.bytes
+            return f"bytes {offset}..{offset + size - 1}"
+        return "all"
+
+
+@dataclass(frozen=True)
+class StepAccess:
+    """One step of a pass touching a span of one resource: ``[lo, hi)`` of its mips (images)
+    or bytes (buffers)."""
+
+    step: int
+    resource: str
+    lo: int
+    hi: int
+    state: State
 
 
 @dataclass(frozen=True)
@@ -129,6 +159,8 @@ class CompiledGraph:
     size_from: str = field(default="graph", compare=False)
     # images sized from the output size (directly or through others); 0: all fixed
     follow_output: int = field(default=0, compare=False)
+    step_barriers: tuple[Barrier, ...] = ()  # inside passes, before the step they name
+    steps: dict[str, tuple[str, ...]] = field(default_factory=dict, compare=False)  # names
 
     def resource(self, name: str) -> ResourcePlan:
         for r in self.resources:
@@ -148,6 +180,7 @@ class CompiledGraph:
             "lower_bound_bytes": self.lower_bound_bytes,
             "raptor_reuse_bytes": self.raptor_reuse_bytes,
             "barriers": [b.to_json() for b in self.barriers],
+            "step_barriers": [b.to_json() for b in self.step_barriers],
             "parallel_levels": [list(level) for level in self.parallel_levels],
             "diagnostics": [d.to_json() for d in self.diagnostics],
         }
@@ -168,6 +201,8 @@ class Declared:
     history: dict[str, str]  # history copy -> resource it follows
     diagnostics: list[Diagnostic]
     history_of: dict[str, str] = field(default_factory=dict)  # resource -> its history copy
+    # per pass with steps: each step's accesses, in step order
+    steps: dict[str, tuple[tuple[StepAccess, ...], ...]] = field(default_factory=dict)
 
 
 class _Problems:

@@ -1,6 +1,5 @@
 """Step 4 of ``compile``: size rules to texels, formats to bytes."""
 
-
 from __future__ import annotations
 
 import math

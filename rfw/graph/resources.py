@@ -177,3 +177,36 @@ class ResourceDecl:
     producer: str | None = None  # pass name; None for imports
     slot: str | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+
+
+@dataclass(frozen=True)
+class Part:
+    """What a step touches of a slot's resource: mips ``(first, count)`` of an image or bytes
+    ``(offset, size)`` of a buffer; neither: all of it."""
+
+    slot: str
+    mips: tuple[int, int] | None = None
+    bytes: tuple[int, int] | None = None
+
+
+def _parts(parts: Any) -> tuple[Part, ...]:
+    # a bare slot name means the whole resource
+    if isinstance(parts, str | Part):
+        parts = (parts,)
+    return tuple(Part(p) if isinstance(p, str) else p for p in parts)
+
+
+@dataclass(frozen=True)
+class Step:
+    """An ordered step inside a pass (one dispatch of a mip chain, say) and the parts of its
+    slots' resources it reads and writes. The compiler plans the barriers between steps as
+    it plans those between passes; the pass enters step ``i`` with ``ctx.step(i)``."""
+
+    name: str
+    reads: tuple[Part, ...] = ()
+    writes: tuple[Part, ...] = ()
+
+    def __post_init__(self) -> None:
+        # lists and bare slot names are accepted: the graph is hashed, so store tuples
+        object.__setattr__(self, "reads", _parts(self.reads))
+        object.__setattr__(self, "writes", _parts(self.writes))

@@ -1,6 +1,5 @@
 """Where passes go: dependency edges, cull, order, lifetimes and parallel levels."""
 
-
 from __future__ import annotations
 
 import heapq
