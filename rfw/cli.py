@@ -36,11 +36,15 @@ def _write_atomic(path: Path, text: str) -> None:
 
 def _load(args: argparse.Namespace) -> Graph:
     """The graph of a graph file (TOML, Raptor JSON) or of a run config (``configs/*.toml``),
-    built through its pass classes with its default variants."""
+    built through its pass classes with its default variants; ``--caps`` resolves a run
+    config's auto variants as a device with those capabilities would."""
     if Path(args.file).suffix.lower() == ".toml" and is_run_config(args.file):
-        from .config import build, load_config
+        from .config import build, load_config, resolve_auto
 
-        return build(load_config(args.file)).graph
+        cfg = load_config(args.file)
+        if getattr(args, "caps", None) is not None:
+            cfg, _ = resolve_auto(cfg, [c for c in args.caps.split(",") if c])
+        return build(cfg).graph
     return load_graph(args.file, strict=args.strict)
 
 

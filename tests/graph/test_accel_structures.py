@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from rfw.graph import AccelStructure, DepthAttachment, GraphBuilder, GraphError, Texture, compile
@@ -86,3 +90,60 @@ def test_a_missing_extension_names_the_pass():
      .input("tlas", "accel.tlas", AccelStructure()).output("o", Texture("r32uint")))
     with pytest.raises(GraphError, match=r"pass 'shadows'.*VK_KHR_ray_query"):
         compile(g.output("shadows.o").build(), caps={"VK_KHR_acceleration_structure"})
+
+
+# `rfw graph plan` on the ray-tracing configs, through the real CLI ---------------------------
+
+ROOT = Path(__file__).resolve().parents[2]
+RT_CAPS = "VK_KHR_acceleration_structure,VK_KHR_ray_query,VK_KHR_ray_tracing_pipeline"
+BUILD_WRITE = "ACCELERATION_STRUCTURE_BUILD_KHR:ACCELERATION_STRUCTURE_WRITE_KHR"
+BUILD_RW = ("ACCELERATION_STRUCTURE_BUILD_KHR:ACCELERATION_STRUCTURE_READ_KHR|"
+            "ACCELERATION_STRUCTURE_WRITE_KHR")
+
+
+def _plan(*args: str) -> list[str]:
+    done = subprocess.run([sys.executable, "-m", "rfw.cli", "graph", "plan", *args],
+                          cwd=ROOT, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.splitlines()
+
+
+def _barrier_line(lines: list[str], pass_name: str, resource: str) -> str | None:
+    head = f"  {pass_name} / {resource}: "
+    return next((line for line in lines if line.startswith(head)), None)
+
+
+def _accel_barriers(lines: list[str], tracer: str, stage: str) -> None:
+    # the build waits for the last frame's traces (the TLAS) and builds (its scratch) ...
+    build = _barrier_line(lines, "accel", "accel.tlas")
+    assert build is not None and f"|{stage}:" in build and build.endswith(f"-> {BUILD_RW}")
+    assert _barrier_line(lines, "accel", "accel.scratch") == \
+        f"  accel / accel.scratch: - -> -; {BUILD_WRITE} -> {BUILD_RW}"
+    # ... and the tracer waits for the build
+    assert _barrier_line(lines, tracer, "accel.tlas") == \
+        f"  {tracer} / accel.tlas: - -> -; {BUILD_WRITE} -> {stage}:ACCELERATION_STRUCTURE_READ_KHR"
+
+
+def test_plan_prints_rt_primary_acceleration_structure_barriers():
+    _accel_barriers(_plan("configs/rt_primary.toml"), "primary", "RAY_TRACING_SHADER_KHR")
+
+
+def test_plan_prints_rt_shadows_acceleration_structure_barriers_for_a_ray_tracing_device():
+    lines = _plan("configs/rt_shadows.toml", "--caps", RT_CAPS)
+    _accel_barriers(lines, "rt_shadows", "COMPUTE_SHADER")  # auto: ray queries first
+    # rt_ao traces in the same stage after rt_shadows: the TLAS is already visible to it
+    assert _barrier_line(lines, "rt_ao", "accel.tlas") is None
+    # negative control: without those capabilities auto means the raster techniques, and
+    # the plan has no acceleration structure at all
+    raster = _plan("configs/rt_shadows.toml")
+    assert not any("accel" in line for line in raster if " / " in line)
+    with pytest.raises(AssertionError):
+        _accel_barriers(raster, "rt_shadows", "COMPUTE_SHADER")
+
+
+def test_plan_with_caps_a_pass_lacks_is_one_error_line():
+    done = subprocess.run([sys.executable, "-m", "rfw.cli", "graph", "plan",
+                           "configs/rt_primary.toml", "--caps", "VK_KHR_ray_query"],
+                          cwd=ROOT, capture_output=True, text=True, check=False)
+    assert done.returncode == 2 and done.stderr.startswith("rfw: error: ")
+    assert len(done.stderr.splitlines()) == 1 and "accel" in done.stderr
