@@ -30,7 +30,7 @@ DEFERRED_TOML = ROOT / "configs" / "deferred.toml"
 
 PLAN_KEYS = {"order", "culled", "disabled", "resources", "heaps", "transient_bytes",
              "unaliased_bytes", "lower_bound_bytes", "raptor_reuse_bytes", "barriers",
-             "parallel_levels", "diagnostics"}
+             "step_barriers", "parallel_levels", "diagnostics"}
 RESOURCE_KEYS = {"name", "kind", "format", "width", "height", "bytes", "heap", "offset",
                  "first", "last", "transient"}
 TOTALS = ("transient_bytes", "unaliased_bytes", "lower_bound_bytes", "raptor_reuse_bytes")
