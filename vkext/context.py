@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -68,6 +69,7 @@ class VkPassContext(SlotContext):
         self.device = executor.device
         self.frame = executor.frame_index
         self._dispatched = False
+        self._rendering: VkRenderPass | None = None
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:
@@ -113,9 +115,25 @@ class VkPassContext(SlotContext):
 
     # recording ----------------------------------------------------------------------------
     def program(self, kind: str, *, shader: str | None = None,
-                defines: dict[str, object] | None = None) -> Program:
-        paths = twin_paths(self.pass_, shader, kind)
+                defines: dict[str, object] | None = None,
+                stages: Sequence[str | Path] = ()) -> Program:
+        """The pass's program of ``kind`` (compute | render | mesh | ray_tracing) from
+        ``shader`` (default: the pass's) and the files of its other ``stages`` (names beside
+        the pass, or paths): a mesh program is its mesh shader plus, in ``stages``, an
+        optional task and fragment shader."""
+        if kind in ("compute", "render") and not stages:
+            paths = twin_paths(self.pass_, shader, kind)
+        else:
+            paths = [self._stage_path(n) for n in (shader or self.pass_.shader, *stages)]
         return self.executor.programs.get(self.pass_, paths, defines or {}, kind)
+
+    def _stage_path(self, name: str | Path | None) -> Path:
+        if not name:
+            raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
+        path = name if isinstance(name, Path) else self.pass_.folder() / name
+        if not path.is_file():
+            raise ShaderError(f"pass '{self.pass_.name}': shader {path} is missing")
+        return path
 
     def _check_extra(self, prog: Program, values: dict[str, Any]) -> None:
         extra = [k for k in values if k not in prog.descriptors]
@@ -304,18 +322,48 @@ class VkPassContext(SlotContext):
         self._begin_rendering(colors, depth, depth_write, (first.width, first.height))
         try:
             vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
-            vp = ffi.new("VkViewport*")
-            vp.width, vp.height, vp.maxDepth = float(first.width), float(first.height), 1.0
-            sc = ffi.new("VkRect2D*")
-            sc.extent.width, sc.extent.height = first.width, first.height
-            lib.vkCmdSetViewport(self.cmd, 0, 1, vp)
-            lib.vkCmdSetScissor(self.cmd, 0, 1, sc)
+            _viewport(self.cmd, first.width, first.height)
             self.bind(prog, bindings, point, own)
             self._push(prog, push_constants)
             return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
                                    alpha=alpha)
         finally:
             vk.vkCmdEndRendering(self.cmd)
+
+    def render_pass(self, *, color: Sequence[tuple[str, Any]] = (),
+                    depth: tuple[str, Any] | None = None,
+                    depth_read_only: bool = False) -> VkRenderPass:
+        """Begin dynamic rendering into ``color`` targets ([(slot, clear color or None to
+        load)]) and ``depth`` ((slot, clear depth or None)); record into the returned
+        :class:`VkRenderPass` and ``end()`` it (or use it as a ``with`` block)."""
+        ex = self.executor
+        colors = [(self.resource(slot), clear) for slot, clear in color]
+        targets = [ex.image(r) for r, _ in colors]
+        dimage = ex.image(self.resource(depth[0])) if depth is not None else None
+        first = (targets or [dimage])[0]
+        if first is None:
+            raise ShaderError(f"pass '{self.pass_.name}': render_pass needs a color or depth "
+                              "target")
+        if self._rendering is not None and self._rendering.open:
+            raise ShaderError(f"pass '{self.pass_.name}': render_pass while another is open "
+                              "(end() it first)")
+        self._begin_rendering(colors, depth, not depth_read_only, (first.width, first.height))
+        self._rendering = VkRenderPass(self, targets, dimage, not depth_read_only)
+        return self._rendering
+
+    def finish(self) -> None:
+        """After ``record``: a render pass left open is ended, and named as an error."""
+        if self._rendering is not None and self._rendering.open:
+            self._rendering.end()
+            raise ShaderError(f"pass '{self.pass_.name}' left a render pass open (end() it, "
+                              "or begin it in a with block)")
+
+    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
+                compare: str | None = None) -> Sampler:
+        """A sampler the executor makes once and keeps (``filter``: linear | nearest for
+        magnification, minification and mips; ``address``: clamp-to-edge | repeat |
+        mirror-repeat on every axis; ``compare``: a depth comparison)."""
+        return self.executor.sampler(filter=filter, address=address, compare=compare)
 
     def _begin_rendering(self, colors: list[tuple[str, Any]], depth: tuple[str, Any] | None,
                          depth_write: bool, extent: tuple[int, int]) -> None:
@@ -373,3 +421,104 @@ class VkPassContext(SlotContext):
             raise ShaderError(f"pass '{self.pass_.name}': '{name}' is not a resource of this "
                               "pass in the plan")
         return state.layout
+
+
+def _viewport(cmd: Any, width: int, height: int) -> None:
+    """Viewport and scissor over the whole target."""
+    vp = ffi.new("VkViewport*")
+    vp.width, vp.height, vp.maxDepth = float(width), float(height), 1.0
+    sc = ffi.new("VkRect2D*")
+    sc.extent.width, sc.extent.height = width, height
+    lib.vkCmdSetViewport(cmd, 0, 1, vp)
+    lib.vkCmdSetScissor(cmd, 0, 1, sc)
+
+
+class VkRenderPass:
+    """Dynamic rendering begun by ``ctx.render_pass``: ``use`` a render or mesh program
+    (its pipeline for these targets), ``bind`` its own sets by binding name and the scene's
+    with ``bind_scene``, ``push`` constants, draw; ``end`` ends the rendering."""
+
+    def __init__(self, ctx: VkPassContext, targets: list[Image], depth: Image | None,
+                 depth_write: bool):
+        self.ctx, self.cmd = ctx, ctx.cmd
+        self.targets, self.depth, self.depth_write = targets, depth, depth_write
+        self.prog: Program | None = None
+        self.point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+        self.open = True
+        first = (targets or [depth])[0]
+        _viewport(self.cmd, first.width, first.height)
+        self.samples = first.samples
+
+    def __enter__(self) -> VkRenderPass:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.end()
+
+    def use(self, prog: Program, *, depth_compare: str = "less", cull: str = "back",
+            blend: dict | None = None) -> None:
+        """Bind ``prog``'s pipeline for this pass's targets (made once per state)."""
+        if prog.kind not in ("render", "mesh"):
+            raise ShaderError(f"pass '{self.ctx.pass_.name}': {prog.name} is a {prog.kind} "
+                              "program; a render pass draws render or mesh programs")
+        d = self.depth
+        pipe = self.ctx.executor.programs.graphics_pipeline(
+            prog, colors=[t.vk_format for t in self.targets],
+            depth=d.vk_format if d is not None else None,
+            stencil=bool(d is not None and d.info.stencil), samples=self.samples,
+            depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend)
+        vk.vkCmdBindPipeline(self.cmd, self.point, pipe.handle)
+        self.prog = prog
+
+    def _program(self) -> Program:
+        if self.prog is None:
+            raise ShaderError(f"pass '{self.ctx.pass_.name}': bind a program with use() first")
+        return self.prog
+
+    def bind(self, *, sets: Sequence[int] | None = None, **values: Any) -> None:
+        """Bind the program's own sets (default: every set that is not the scene's),
+        matching its binding names to ``values``."""
+        prog = self._program()
+        self.ctx._check_extra(prog, values)
+        own = [s for s in prog.sets() if s not in prog.scene_sets] if sets is None else sets
+        self.ctx.bind(prog, values, self.point, own)
+
+    def bind_scene(self, *, camera: str = "main", material: int | None = None,
+                   instance: int | None = None) -> None:
+        """Bind the scene's camera set (1) and, where given, a material's (2) and an
+        instance's (3)."""
+        prog, scene = self._program(), self.ctx.scene
+        if scene is None:
+            raise ShaderError(f"pass '{self.ctx.pass_.name}' binds the scene, but none is "
+                              "loaded")
+        layout = prog.pipeline_layout.handle
+        for s, handle in ((1, scene.camera_sets[camera]),
+                          (2, None if material is None else scene.material_sets[material]),
+                          (3, None if instance is None else scene.instance_sets[instance])):
+            if handle is not None:
+                lib.vkCmdBindDescriptorSets(self.cmd, self.point, layout, s, 1, handle, 0,
+                                            ffi.NULL)
+
+    def push(self, data: bytes) -> None:
+        """Push constants to every stage of the program."""
+        self.ctx._push(self._program(), data)
+
+    def draw_mesh_tasks(self, x: int, y: int = 1, z: int = 1) -> None:
+        """``vkCmdDrawMeshTasksEXT``: x * y * z task (or mesh) workgroups."""
+        self._program()
+        self.ctx.device.fn.vkCmdDrawMeshTasksEXT(self.cmd, int(x), int(y), int(z))
+
+    def draw_mesh_tasks_indirect(self, buffer: Buffer | BufferRange, *, offset: int = 0,
+                                 count: int = 1, stride: int = 12) -> None:
+        """``vkCmdDrawMeshTasksIndirectEXT`` of ``count`` commands (x, y, z: three uints
+        each) ``stride`` bytes apart from ``offset`` in ``buffer`` (a buffer slot's)."""
+        self._program()
+        handle = buffer.buffer if isinstance(buffer, BufferRange) else buffer.handle
+        base = buffer.offset if isinstance(buffer, BufferRange) else 0
+        self.ctx.device.fn.vkCmdDrawMeshTasksIndirectEXT(self.cmd, handle, base + offset,
+                                                         int(count), int(stride))
+
+    def end(self) -> None:
+        if self.open:
+            self.open = False
+            vk.vkCmdEndRendering(self.cmd)

@@ -50,12 +50,15 @@ from .device import VkDevice
 from .fitting import check_passes, fit_graph, fit_plan
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
 from .programs import Programs
-from .scene import VkScene
+from .scene import COMPARE, Sampler, VkScene, make_sampler
 
 # the old home of these names: vkext.backend, vkext.mixed and passes import them from here
 __all__ = ["ImageBinding", "PassTiming", "VkExecutor", "check_passes", "fit_graph", "fit_plan"]
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
+# what ctx.sampler offers (WebGPU's names, as vkext.scene.make_sampler takes them)
+FILTERS = ("linear", "nearest")
+ADDRESSES = ("clamp-to-edge", "repeat", "mirror-repeat")
 
 
 @dataclass
@@ -112,6 +115,7 @@ class VkExecutor(FrameExecutor):
                          ((r.name, r.name.removesuffix("@prev")) for r in plan.resources
                           if r.history and r.name.endswith("@prev"))]
         self._views: dict[tuple[int, bool, int | None], ImageView] = {}
+        self._samplers: dict[tuple[str, str, str | None], Sampler] = {}
         # acceleration structures by plan resource, published by the passes that build them
         self.accels: dict[str, Any] = {}
         self.transients = None
@@ -233,6 +237,23 @@ class VkExecutor(FrameExecutor):
         """The state the plan puts ``resource`` in for ``pass_name``."""
         return self._states.get((pass_name, resource))
 
+    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
+                compare: str | None = None) -> Sampler:
+        """A sampler made once per (filter, address, compare) and kept until ``destroy``."""
+        for what, value, allowed in (("filter", filter, FILTERS), ("address", address, ADDRESSES),
+                                     ("compare", compare, (None, *COMPARE))):
+            if value not in allowed:
+                raise ShaderError(f"sampler {what} '{value}' is none of "
+                                  f"{', '.join(str(a) for a in allowed)}")
+        key = (filter, address, compare)
+        s = self._samplers.get(key)
+        if s is None:
+            s = self._samplers[key] = make_sampler(
+                self.device, mag=filter, min=filter, mip=filter, address_u=address,
+                address_v=address, address_w=address, compare=compare,
+                label=f"rfw:sampler:{filter}:{address}" + (f":{compare}" if compare else ""))
+        return s
+
     def scene_bindings(self) -> dict[str, Any]:
         return self.scene.bindings() if self.scene is not None else {}
 
@@ -296,6 +317,7 @@ class VkExecutor(FrameExecutor):
                 t = time.perf_counter()
                 with naming(f"pass '{name}'"):
                     p.record(ctx)
+                    ctx.finish()
                 self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
                 if ts is not None:
                     ts.write(cmd, TIMESTAMP_STAGE, 2 * k + 1)
@@ -365,6 +387,9 @@ class VkExecutor(FrameExecutor):
                     self.transients, self.allocator):
             if obj is not None:
                 obj.destroy()
+        for smp in self._samplers.values():
+            smp.destroy()
+        self._samplers.clear()
         for v in self._views.values():
             v.destroy()
         self._views.clear()

@@ -18,6 +18,7 @@ from .scene import COMPARE, SCENE_SETS, DescriptorSetLayout, VkObject, VkScene, 
 from .spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
+               "task": "VK_SHADER_STAGE_TASK_BIT_EXT", "mesh": "VK_SHADER_STAGE_MESH_BIT_EXT",
                "comp": "VK_SHADER_STAGE_COMPUTE_BIT", "rgen": "VK_SHADER_STAGE_RAYGEN_BIT_KHR",
                "rmiss": "VK_SHADER_STAGE_MISS_BIT_KHR",
                "rchit": "VK_SHADER_STAGE_CLOSEST_HIT_BIT_KHR",
@@ -39,6 +40,10 @@ _BLEND_FACTOR = {
 _BLEND_OP = {"add": "VK_BLEND_OP_ADD", "subtract": "VK_BLEND_OP_SUBTRACT",
              "reverse-subtract": "VK_BLEND_OP_REVERSE_SUBTRACT", "min": "VK_BLEND_OP_MIN",
              "max": "VK_BLEND_OP_MAX"}
+# the stages each kind of program runs; raster kinds use the scene's sets 1-3
+KINDS = {"compute": ("comp",), "render": ("vert", "frag"), "mesh": ("task", "mesh", "frag"),
+         "ray_tracing": ("rgen", "rmiss", "rchit", "rahit")}
+RASTER = ("render", "mesh")
 # the scene's vertex buffers (gpu_scene.VERTEX_BUFFERS): one attribute per buffer
 _VERTEX = ((12, "VK_FORMAT_R32G32B32_SFLOAT"), (12, "VK_FORMAT_R32G32B32_SFLOAT"),
            (8, "VK_FORMAT_R32G32_SFLOAT"), (16, "VK_FORMAT_R32G32B32A32_SFLOAT"))
@@ -61,7 +66,7 @@ class Program:
     """Compiled stages of one shader variant, their reflected layouts and pipelines."""
 
     paths: tuple[Path, ...]
-    kind: str  # compute | render | ray_tracing
+    kind: str  # compute | render | mesh | ray_tracing
     modules: dict[str, ShaderModule]  # stage -> module
     descriptors: dict[str, DescriptorInfo]
     set_layouts: list[Any]  # VkDescriptorSetLayout per set index
@@ -90,8 +95,14 @@ class Programs:
         self.objects: list[VkObject] = []
         self.compiled: dict[tuple, list[Any]] = {}
 
-    def get(self, pass_: Pass, paths: list[Path], defines: dict[str, object],
+    def get(self, owner: Pass | str, paths: list[Path], defines: dict[str, object],
             kind: str) -> Program:
+        """The program of ``paths`` (one file per stage) compiled with ``defines``;
+        ``kind``: compute | render (vertex [+ fragment]) | mesh ([task +] mesh [+ fragment])
+        | ray_tracing. ``owner`` (a pass or a name) is named by every error."""
+        if kind not in KINDS:
+            raise ShaderError(f"{_owner(owner)}: unknown program kind '{kind}' "
+                              f"({', '.join(KINDS)})")
         # compile_glsl hashes every include and asks glslang its version: once per variant
         # and file version, not once per dispatch
         memo = (kind, tuple(paths), tuple(sorted((k, str(v)) for k, v in defines.items())),
@@ -101,37 +112,37 @@ class Programs:
             try:
                 spirvs = self.compiled[memo] = [compile_glsl(p, defines) for p in paths]
             except ShaderCompileError as e:
-                raise ShaderCompileError(f"pass '{pass_.name}': {e}") from None
+                raise ShaderCompileError(f"{_owner(owner)}: {e}") from None
         key = (kind, *(s.key for s in spirvs))
         prog = self.programs.get(key)
         if prog is None:
-            prog = self.programs[key] = self._build(pass_, paths, spirvs, kind)
+            prog = self.programs[key] = self._build(_owner(owner), paths, spirvs, kind)
         return prog
 
     def _own(self, obj: VkObject) -> Any:
         self.objects.append(obj)
         return obj
 
-    def _build(self, pass_: Pass, paths: list[Path], spirvs: list[Any], kind: str) -> Program:
+    def _build(self, owner: str, paths: list[Path], spirvs: list[Any], kind: str) -> Program:
         dev = self.device
         descriptors: dict[str, DescriptorInfo] = {}
-        stage_flags, push, local = 0, 0, (1, 1, 1)
+        stage_flags, push = 0, 0
+        sizes: dict[str, tuple[int, int, int]] = {}
         modules: dict[str, ShaderModule] = {}
         where = " + ".join(str(p) for p in paths)
         for path, spv in zip(paths, spirvs, strict=True):
             refl = reflect(spv.code)
             if spv.stage in modules:
-                raise ShaderError(f"pass '{pass_.name}': {where} has two {spv.stage} shaders "
+                raise ShaderError(f"{owner}: {where} has two {spv.stage} shaders "
                                   "(a program takes one of each stage)")
             stage_flags |= const(_STAGE_BITS[spv.stage])
             push = max(push, refl.push_constant_size)
-            if spv.stage == "comp":
-                local = refl.local_size
+            sizes[spv.stage] = refl.local_size
             for d in refl.descriptors.values():
                 prior = descriptors.get(d.name)
                 if prior is not None and (prior.set, prior.binding, prior.kind) != (
                         d.set, d.binding, d.kind):
-                    raise ShaderError(f"pass '{pass_.name}': '{d.name}' is set {prior.set} "
+                    raise ShaderError(f"{owner}: '{d.name}' is set {prior.set} "
                                       f"binding {prior.binding} ({prior.kind}) in one stage "
                                       f"and set {d.set} binding {d.binding} ({d.kind}) in "
                                       f"{path}")
@@ -141,14 +152,22 @@ class Programs:
             info = new("VkShaderModuleCreateInfo", codeSize=len(spv.code), pCode=words)
             modules[spv.stage] = self._own(ShaderModule(
                 dev, vk.vkCreateShaderModule(dev.device, info, None), path.name))
+        # the workgroup a dispatch (or a mesh-task launch) counts in
+        local = next((sizes[st] for st in ("comp", "task", "mesh") if st in sizes), (1, 1, 1))
         if kind == "render" and "vert" not in modules:
-            raise ShaderError(f"pass '{pass_.name}': {where} has no vertex shader")
+            raise ShaderError(f"{owner}: {where} has no vertex shader")
+        if kind == "mesh" and "mesh" not in modules:
+            raise ShaderError(f"{owner}: {where} has no mesh shader")
+        odd = sorted(set(modules) - set(KINDS[kind]))
+        if odd:
+            raise ShaderError(f"{owner}: {where} has {', '.join(odd)} shader(s), which a "
+                              f"{kind} program does not run ({', '.join(KINDS[kind])})")
 
         by_set: dict[int, list[DescriptorInfo]] = defaultdict(list)
         for d in descriptors.values():
             by_set[d.set].append(d)
         top = max(by_set, default=-1)
-        if kind == "render" and self.scene is not None:
+        if kind in RASTER and self.scene is not None:
             top = max(top, max(SCENE_SETS))
         layouts, scene_sets = [], set()
         for s in range(top + 1):
@@ -158,11 +177,11 @@ class Programs:
             scene_like = kind != "ray_tracing" and self.scene is not None and s in SCENE_SETS \
                 and all(
                 (d.name, d.binding, d.kind) in SCENE_SETS[s] for d in mine)
-            if kind == "render" and s in SCENE_SETS and self.scene is not None:
+            if kind in RASTER and s in SCENE_SETS and self.scene is not None:
                 if not scene_like:
                     odd = [d.name for d in mine if (d.name, d.binding, d.kind)
                            not in SCENE_SETS[s]]
-                    raise ShaderError(f"pass '{pass_.name}': {where} declares "
+                    raise ShaderError(f"{owner}: {where} declares "
                                       f"{', '.join(odd)} in set {s}, which the scene owns "
                                       f"({', '.join(n for n, _, _ in SCENE_SETS[s])})")
                 layouts.append(self.scene.layouts[s].handle)
@@ -231,18 +250,9 @@ class Programs:
             stages[i].stage = const(_STAGE_BITS[stage])
             stages[i].module = module.handle
             stages[i].pName = entry
-        bindings = ffi.new("VkVertexInputBindingDescription[4]")
-        attributes = ffi.new("VkVertexInputAttributeDescription[4]")
-        for i, (stride, fmt) in enumerate(_VERTEX):
-            bindings[i].binding, bindings[i].stride = i, stride
-            bindings[i].inputRate = const("VK_VERTEX_INPUT_RATE_VERTEX")
-            attributes[i].location, attributes[i].binding = i, i
-            attributes[i].format, attributes[i].offset = const(fmt), 0
-        vertex = new("VkPipelineVertexInputStateCreateInfo", vertexBindingDescriptionCount=4,
-                     pVertexBindingDescriptions=bindings, vertexAttributeDescriptionCount=4,
-                     pVertexAttributeDescriptions=attributes)
-        assembly = new("VkPipelineInputAssemblyStateCreateInfo",
-                       topology=const("VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST"))
+        vertex = assembly = ffi.NULL  # mesh pipelines: the mesh shader fetches its vertices
+        if prog.kind == "render":
+            vertex, assembly = _vertex_input(keep)
         viewport = new("VkPipelineViewportStateCreateInfo", viewportCount=1, scissorCount=1)
         if cull not in _CULL:
             raise ShaderError(f"unknown cull mode '{cull}' (none, front or back)")
@@ -276,7 +286,7 @@ class Programs:
                    pMultisampleState=multisample, pDepthStencilState=ds,
                    pColorBlendState=blend_info, pDynamicState=dynamic,
                    layout=prog.pipeline_layout.handle, basePipelineIndex=-1)
-        keep += [entry, bindings, attributes, formats, dyn_states]
+        keep += [entry, formats, dyn_states]
         handle = vk.vkCreateGraphicsPipelines(self.device.device, ffi.NULL, 1, info, None)[0]
         pipe = prog.pipelines[key] = self._own(
             Pipeline(self.device, handle, f"{prog.paths[0].name}:graphics"))
@@ -344,6 +354,28 @@ class RayPipeline:
             self.sbt = None
         self.pipeline.destroy()
 
+
+
+def _vertex_input(keep: list[Any]) -> tuple[Any, Any]:
+    """The scene's vertex buffers as a vertex input and triangle-list assembly state."""
+    bindings = ffi.new("VkVertexInputBindingDescription[4]")
+    attributes = ffi.new("VkVertexInputAttributeDescription[4]")
+    for i, (stride, fmt) in enumerate(_VERTEX):
+        bindings[i].binding, bindings[i].stride = i, stride
+        bindings[i].inputRate = const("VK_VERTEX_INPUT_RATE_VERTEX")
+        attributes[i].location, attributes[i].binding = i, i
+        attributes[i].format, attributes[i].offset = const(fmt), 0
+    keep += [bindings, attributes]
+    vertex = new("VkPipelineVertexInputStateCreateInfo", vertexBindingDescriptionCount=4,
+                 pVertexBindingDescriptions=bindings, vertexAttributeDescriptionCount=4,
+                 pVertexAttributeDescriptions=attributes)
+    assembly = new("VkPipelineInputAssemblyStateCreateInfo",
+                   topology=const("VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST"))
+    return vertex, assembly
+
+
+def _owner(owner: Pass | str) -> str:
+    return owner if isinstance(owner, str) else f"pass '{owner.name}'"
 
 
 def _mtime(path: Path) -> int:
