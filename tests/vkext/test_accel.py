@@ -12,12 +12,15 @@ checked on the recorded command stream instead.
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import vkext.commands as commands_module
+from rfw.config import apply_overrides, load_config
 from rfw.graph import AccelStructure, GraphBuilder, compile
+from rfw.render import render
 from rfw.scene import default_scene
 from rfw.scene.model import Instance, Material, Scene
 from vkext.accel import (
@@ -34,6 +37,7 @@ from vkext.raycast import RAY_DTYPE, raycaster
 from ..conftest import box_mesh
 
 BUILD = {"ACCELERATION_STRUCTURE_BUILD_KHR"}
+RT_PRIMARY = Path(__file__).resolve().parents[2] / "configs" / "rt_primary.toml"
 
 
 @pytest.fixture(scope="module")
@@ -194,6 +198,48 @@ def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch)
     assert _unordered_builds(events) == []
     # negative control: the same stream without its barriers fails the check at every pair
     assert len(_unordered_builds([e for e in events if e[0] != "barrier"])) == 36
+
+
+def test_frames_build_the_tlas_behind_the_frame_plans_barriers(vk_device, monkeypatch):
+    """record_tlas records no barrier: each frame's TLAS build waits for the last one
+    through the barriers the frame graph plans for accel_build's outputs, the TLAS and the
+    frame scratch (a write after write in the build stage, the scratch's alone)."""
+    if "VK_KHR_ray_tracing_pipeline" not in vk_device.caps:
+        pytest.skip("no VK_KHR_ray_tracing_pipeline")
+    events = []
+    real_barrier = commands_module.barrier
+    real_build = vk_device.fn.vkCmdBuildAccelerationStructuresKHR
+
+    def barrier(cmd, image_barriers=(), buffer_barriers=(), memory_barriers=()):
+        events.extend(("barrier", s, d) for s, d in memory_barriers)
+        return real_barrier(cmd, image_barriers, buffer_barriers, memory_barriers)
+
+    def build(cmd, count, infos, ranges):
+        events.append(("build", int(infos[0].type), count))
+        return real_build(cmd, count, infos, ranges)
+
+    monkeypatch.setattr(commands_module, "barrier", barrier)
+    monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
+    cfg = apply_overrides(load_config(RT_PRIMARY), ["size=32x18"])
+    render(cfg, scene=_row_of_boxes(3), device=vk_device, backend="vk", frames=2)
+
+    top = const("VK_ACCELERATION_STRUCTURE_TYPE_TOP_LEVEL_KHR")
+    tops = [i for i, e in enumerate(events) if e[:2] == ("build", top)]
+    assert len(tops) == 1 + 3  # the scene's first build, then a warm-up and two frames
+
+    def scratch_waw(e):
+        return (e[0] == "barrier" and e[1].stages == BUILD
+                and e[1].access == {"ACCELERATION_STRUCTURE_WRITE_KHR"}
+                and e[2].stages == BUILD and "ACCELERATION_STRUCTURE_WRITE_KHR" in e[2].access)
+
+    def unordered(stream, tops):
+        return [(a, b) for a, b in itertools.pairwise(tops)
+                if not any(scratch_waw(e) for e in stream[a + 1:b])]
+
+    assert unordered(events, tops) == []
+    # negative control: the stream without its barriers fails the check at every pair
+    bare = [e for e in events if e[0] != "barrier"]
+    assert len(unordered(bare, [i for i, e in enumerate(bare) if e[:2] == ("build", top)])) == 3
 
 
 def _barrier(plan, pass_name, resource):
