@@ -19,7 +19,7 @@ import pytest
 
 import vkext.commands as commands_module
 from rfw.config import apply_overrides, load_config
-from rfw.graph import AccelStructure, GraphBuilder, compile
+from rfw.graph import AccelStructure, GraphBuilder, GraphError, Step, compile
 from rfw.render import render
 from rfw.scene import default_scene
 from rfw.scene.model import Instance, Material, Scene
@@ -189,7 +189,8 @@ def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch)
     monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
     with SceneAccel(vk_device, courtyard, scratch_budget=1) as acc:  # one BLAS per batch
         assert acc.stats()["blas_batches"] == 36
-        assert acc.build_plan.order == (*(f"blas{k}" for k in range(36)), "tlas", "readers")
+        assert acc.build_plan.order == ("blas", "tlas", "readers")
+        assert acc.build_plan.steps["blas"] == tuple(f"batch{k}" for k in range(36))
 
     bottom = const("VK_ACCELERATION_STRUCTURE_TYPE_BOTTOM_LEVEL_KHR")
     top = const("VK_ACCELERATION_STRUCTURE_TYPE_TOP_LEVEL_KHR")
@@ -254,39 +255,42 @@ def _waits_for_build_write(b) -> bool:
 
 def test_the_build_plan_orders_batches_tlas_and_readers():
     plan = compile(build_graph(3, compact=False), (1, 1))
-    assert plan.order == ("blas0", "blas1", "blas2", "tlas", "readers")
-    # a batch waits for the previous one's use of the shared scratch
+    assert plan.order == ("blas", "tlas", "readers")
+    assert plan.steps["blas"] == ("batch0", "batch1", "batch2")
+    # a batch (a step of the blas pass) waits for the previous one's use of the scratch
+    assert plan.barriers_before_step("blas", 0, -1) == ()
     for k in (1, 2):
-        b = _barrier(plan, f"blas{k}", "scratch")
-        assert _waits_for_build_write(b)
+        (b,) = plan.barriers_before_step("blas", k, k - 1)
+        assert b.resource == "scratch" and _waits_for_build_write(b)
         assert b.dst.access == {"ACCELERATION_STRUCTURE_READ_KHR",
                                 "ACCELERATION_STRUCTURE_WRITE_KHR"}
     # the TLAS build reads every batch's BLAS after its write, in the build stage
     for k in range(3):
-        b = _barrier(plan, "tlas", f"blas{k}.blas")
+        b = _barrier(plan, "tlas", f"blas.blas{k}")
         assert _waits_for_build_write(b)
         assert b.dst.stages == BUILD and b.dst.access == {"ACCELERATION_STRUCTURE_READ_KHR"}
     # later users of any stage see the TLAS and the BLAS
-    for name in ("tlas", "blas0.blas", "blas2.blas"):
+    for name in ("tlas", "blas.blas0", "blas.blas2"):
         b = _barrier(plan, "readers", name)
         assert _waits_for_build_write(b) and b.dst.stages == {"ALL_COMMANDS"}
     # negative control: batches that do not share the scratch are not ordered at all
     g = GraphBuilder("unshared", size=(1, 1))
+    p = g.add_pass("blas", "compute", steps=[Step(f"batch{k}", writes=f"blas{k}")
+                                             for k in range(2)])
     for k in range(2):
-        g.add_pass(f"blas{k}", "compute").output("blas", AccelStructure())
+        p.output(f"blas{k}", AccelStructure())
     plan = compile(g.build())
-    assert plan.order == ("blas0", "blas1")
-    assert not any(b.pass_name == "blas1" and b.resource == "blas0.blas" for b in plan.barriers)
-    assert not _waits_for_build_write(_barrier(plan, "blas1", "scratch"))
+    assert plan.steps["blas"] == ("batch0", "batch1")
+    assert plan.barriers_before_step("blas", 1, 0) == ()
 
 
 def test_the_compacting_plan_queries_before_it_copies():
     plan = compile(build_graph(2, compact=True), (1, 1))
-    assert plan.order == ("blas0", "blas1", "compact_query", "compact", "tlas", "readers")
-    assert _waits_for_build_write(_barrier(plan, "compact_query", "blas1.blas"))
+    assert plan.order == ("blas", "compact_query", "compact", "tlas", "readers")
+    assert _waits_for_build_write(_barrier(plan, "compact_query", "blas.blas1"))
     # the TLAS build reads the compacted copies, not the originals
     assert _waits_for_build_write(_barrier(plan, "tlas", "compact.blas"))
-    assert _barrier(plan, "tlas", "blas0.blas") is None
+    assert _barrier(plan, "tlas", "blas.blas0") is None
     # a scene without triangles: no BLAS pass, and the TLAS build makes the scratch
     assert compile(build_graph(0, compact=True), (1, 1)).order == ("tlas", "readers")
 
@@ -300,9 +304,11 @@ def test_a_refit_waits_for_earlier_readers():
 
 
 def test_passes_record_in_the_plans_order():
-    rec = PlanRecorder(compile(build_graph(1, compact=False), (1, 1)))
-    with pytest.raises(RuntimeError, match="pass 'tlas' recorded where the plan has blas0"):
+    rec = PlanRecorder(compile(build_graph(2, compact=False), (1, 1)))
+    with pytest.raises(RuntimeError, match="pass 'tlas' recorded where the plan has blas"):
         rec.enter(None, "tlas")
+    with pytest.raises(GraphError, match="enters step 1 but declares no steps"):
+        rec.step(None, 1)  # outside any pass; checked before anything is recorded
     assert not rec.done()
 
 

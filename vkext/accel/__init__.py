@@ -12,8 +12,8 @@ barriers the graph compiler plans:
 1. size queries (``vkGetAccelerationStructureBuildSizesKHR``) for every BLAS and the TLAS;
 2. BLAS builds, each with its own range of one scratch buffer whose ranges are aligned to
    ``minAccelerationStructureScratchOffsetAlignment``; when the scratch of all of them would
-   exceed ``scratch_budget`` they are built in batches reusing the scratch (passes
-   ``blas0``, ``blas1``, ... that all write it);
+   exceed ``scratch_budget`` they are built in batches reusing the scratch (steps
+   ``batch0``, ``batch1``, ... of the ``blas`` pass that all write it);
 3. with ``compact``: the compacted sizes are queried (``compact_query``), the BLAS copied
    into structures of that size (``compact``, ``VK_COPY_ACCELERATION_STRUCTURE_MODE_COMPACT_KHR``)
    and the originals freed;

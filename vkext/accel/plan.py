@@ -1,13 +1,15 @@
 """The builds of a scene's acceleration structures as tiny frame graphs, and their barriers.
 
 Builds outside a frame (the BLAS and first TLAS at scene load, a host-side refit) are
-declared as graphs and compiled by :func:`rfw.graph.compile`, like a frame: every BLAS batch,
+declared as graphs and compiled by :func:`rfw.graph.compile`, like a frame: the BLAS builds,
 the compaction query and copies, the TLAS build and the refit are passes; the BLAS of each
-batch, the scratch they share, the compacted BLAS and the TLAS are acceleration-structure
-resources. The compiler plans every barrier (a batch after the previous one's scratch use,
-the TLAS build after the BLAS writes, later readers after the TLAS); :class:`PlanRecorder`
-records them, pass by pass, with :func:`vkext.commands.record_barriers`, as
-``VkExecutor.record`` does, and the accel modules record only the work between them.
+batch, the scratch the builds share, the compacted BLAS and the TLAS are acceleration-structure
+resources. Batches of BLAS builds are steps of the ``blas`` pass (``rfw.graph.Step``): batch
+``k`` writes its BLAS and the whole scratch, so the compiler plans a barrier between batches
+as it plans those between passes. It plans every other barrier too: the TLAS build after the
+BLAS writes, later readers after the TLAS. :class:`PlanRecorder` records them, pass by pass
+and step by step, with :func:`vkext.commands.record_barriers`, as ``VkExecutor.record`` does;
+the accel modules record only the work between them.
 
 Not through ``VkExecutor`` itself: ``vkext.executor`` imports ``vkext.scene``, which builds
 these structures (an import circle), and a build needs none of what the executor makes for
@@ -23,7 +25,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from rfw.graph import AccelStructure, CompiledGraph, Graph, GraphBuilder, Reference, compile
+from rfw.graph import (
+    AccelStructure,
+    CompiledGraph,
+    Graph,
+    GraphBuilder,
+    Reference,
+    Step,
+    compile,
+)
 
 from ..commands import GLOBAL, record_barriers
 
@@ -37,17 +47,18 @@ _LATER_READ = AccelStructure(stages=ANY_STAGE, desc="read by any later trace or 
 
 
 def build_graph(batches: int, *, compact: bool) -> Graph:
-    """Passes ``blas0`` .. ``blas{batches-1}`` (each writes its BLAS and the shared
-    ``scratch``), with ``compact`` then ``compact_query`` (reads them) and ``compact`` (copies
-    them into ``compact.blas``), then ``tlas`` (reads the BLAS, writes ``tlas`` with the same
-    scratch) and ``readers``."""
+    """Pass ``blas`` with one step per batch (``batch0`` ..; batch ``k`` writes slot
+    ``blas{k}`` and the shared ``scratch``), with ``compact`` then ``compact_query`` (reads
+    the BLAS) and ``compact`` (copies them into ``compact.blas``), then ``tlas`` (reads the
+    BLAS, writes ``tlas`` with the same scratch) and ``readers``. No batch: no ``blas``."""
     g = GraphBuilder("accel_build", size=(1, 1))
-    blas = []
-    for k in range(batches):
-        p = g.add_pass(f"blas{k}", "compute")
-        p.output("blas", AccelStructure(desc=f"the BLAS of batch {k}"))
-        _write_scratch(p, first=k == 0)
-        blas.append(f"blas{k}.blas")
+    blas = [f"blas.blas{k}" for k in range(batches)]
+    if batches:
+        steps = [Step(f"batch{k}", writes=(f"blas{k}", "scratch")) for k in range(batches)]
+        p = g.add_pass("blas", "compute", steps=steps)
+        for k in range(batches):
+            p.output(f"blas{k}", AccelStructure(desc=f"the BLAS of batch {k}"))
+        _write_scratch(p, first=True)
     if compact and blas:
         q = g.add_pass("compact_query", "compute", side_effect=True)
         c = g.add_pass("compact", "compute")
@@ -96,12 +107,13 @@ def compiled(graph: Graph) -> CompiledGraph:
 
 
 class PlanRecorder:
-    """Records a compiled build plan's barriers into command buffers, pass by pass in the
-    plan's order (an out-of-order pass is a bug: it raises)."""
+    """Records a compiled build plan's barriers into command buffers, pass by pass and step
+    by step in the plan's order (out of order is a bug: it raises)."""
 
     def __init__(self, plan: CompiledGraph):
         self.plan = plan
         self._next = 0
+        self._step = -1  # the step of the current pass it is in
         self._resources = {r.name: GLOBAL for r in plan.resources}
         self.recorded = 0  # barriers recorded so far
 
@@ -113,8 +125,18 @@ class PlanRecorder:
             raise RuntimeError(f"{self.plan.name}: pass '{name}' recorded where the plan has "
                                f"{expected}")
         self._next += 1
+        self._step = -1
+        self._record(cmd, [b for b in self.plan.barriers if b.pass_name == name])
+
+    def step(self, cmd: Any, index: int) -> None:
+        """Record the barriers step ``index`` of the current pass needs before its work."""
+        name = self.plan.order[self._next - 1] if self._next else "-"
+        self._record(cmd, self.plan.barriers_before_step(name, index, self._step))
+        self._step = index
+
+    def _record(self, cmd: Any, barriers: list | tuple) -> None:
         # every resource here is synchronized by global memory barriers: equal ones are one
-        unique = {(b.src, b.dst): b for b in self.plan.barriers if b.pass_name == name}
+        unique = {(b.src, b.dst): b for b in barriers}
         self.recorded += record_barriers(cmd, list(unique.values()), self._resources)
 
     def done(self) -> bool:

@@ -183,8 +183,10 @@ class SceneAccel:
         with one_time(dev, label=f"{self.label}: build") as cmd:
             timer.start(cmd)
             timer.mark(cmd, 0)
+            if groups:
+                plan.enter(cmd, "blas")
             for k, batch in enumerate(groups):
-                plan.enter(cmd, f"blas{k}")
+                plan.step(cmd, k)
                 keep += record_batch(dev, cmd, batch, self.blas, base, align)
             timer.mark(cmd, 1)
             if compact:
