@@ -190,10 +190,10 @@ def record_barriers(cmd: Any, barriers: Iterable[Barrier],
                            "not among the resources given (external? pass it in resources)")
         if res is GLOBAL:
             memory.append((b.src, b.dst))
-        elif isinstance(res, Image):
-            images.append(ImageBarrier(res, b.src, b.dst))
+        elif isinstance(res, Image):  # a barrier between steps may cover some mips only
+            images.append(ImageBarrier(res, b.src, b.dst, mips=b.mips))
         else:
-            buffers.append(BufferBarrier(res, b.src, b.dst))
+            buffers.append(BufferBarrier(res, b.src, b.dst, *(b.bytes or (0, None))))
     barrier(cmd, images, buffers, memory)
     return len(images) + len(buffers) + len(memory)
 

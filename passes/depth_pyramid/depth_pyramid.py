@@ -1,10 +1,7 @@
 """Hierarchical depth (Hi-Z) pyramid: max-reduced depth mips for occlusion culling."""
 
 from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.graph.sync import State
-
-_WRITE = State(None, frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_STORAGE_WRITE"}))
-_READ = State(None, frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_STORAGE_READ"}))
+from rfw.graph import Part, Step
 
 
 @register_pass("depth_pyramid")
@@ -17,13 +14,10 @@ class DepthPyramidPass(ComputePass):
     ``p`` lies in level ``L``'s texel ``min(p >> L, size_L - 1)``. One dispatch per level,
     each level written and read through its own single-mip storage view.
 
-    Barriers: the compiled graph plans barriers between passes only. Inside this pass (and
-    only for its own mip chain) it records one compute-write -> compute-read memory barrier
-    between consecutive level dispatches, so level L's writes are visible to level L+1's
-    reads; the image stays in GENERAL throughout, as the plan has it."""
+    Each level is a declared step (level L reads mip L - 1, writes mip L): the compiled
+    graph plans the barrier on mip L - 1 before level L, as between passes."""
 
     shader = "depth_pyramid.comp.glsl"
-    backend = "vk"
     inputs = {"depth": Tex2D(desc="scene depth, 0 near 1 far")}
     outputs = {"pyramid": Tex2D("r32float", size_of="depth",
                                 desc="max-depth mip chain, level 0 at depth's size")}
@@ -31,21 +25,27 @@ class DepthPyramidPass(ComputePass):
     class Params(Settings):
         levels: int = 6  # mip levels (at most floor(log2(max(width, height))) + 1)
 
+    def _levels(self) -> int:
+        return max(1, int(self.params.levels))
+
     def declare(self):
         outs = dict(self.outputs)
-        outs["pyramid"] = outs["pyramid"].with_(mips=max(1, int(self.params.levels)))
+        outs["pyramid"] = outs["pyramid"].with_(mips=self._levels())
         return dict(self.inputs), outs
 
-    def record(self, ctx) -> None:
-        from vkext.commands import barrier
+    def steps(self) -> tuple[Step, ...]:
+        first = Step("level 0", reads="depth", writes=Part("pyramid", mips=(0, 1)))
+        return (first, *(Step(f"level {lv}", reads=Part("pyramid", mips=(lv - 1, 1)),
+                              writes=Part("pyramid", mips=(lv, 1)))
+                         for lv in range(1, self._levels())))
 
+    def record(self, ctx) -> None:
         w, h = ctx.extent("pyramid")
-        levels = ctx.texture("pyramid").mips
+        ctx.step(0)
         ctx.dispatch(threads=(w, h), defines={"FROM_DEPTH": 1}, t_depth=ctx.sampled("depth"),
                      o_dst=ctx.storage("pyramid", mip=0))
-        for level in range(1, levels):
-            # the one in-pass barrier: level - 1 written above, read below
-            barrier(ctx.cmd, memory_barriers=[(_WRITE, _READ)])
+        for level in range(1, self._levels()):
+            ctx.step(level)
             ctx.dispatch(threads=(max(1, w >> level), max(1, h >> level)),
                          i_src=ctx.storage("pyramid", mip=level - 1),
                          o_dst=ctx.storage("pyramid", mip=level))

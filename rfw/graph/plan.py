@@ -162,6 +162,24 @@ class CompiledGraph:
     step_barriers: tuple[Barrier, ...] = ()  # inside passes, before the step they name
     steps: dict[str, tuple[str, ...]] = field(default_factory=dict, compare=False)  # names
 
+    def barriers_before_step(self, pass_name: str, index: int,
+                             previous: int) -> tuple[Barrier, ...]:
+        """The barriers before step ``index`` of a pass that is in step ``previous`` (-1:
+        none yet). Steps are entered in order, none skipped: a skipped step's barriers
+        would be missing."""
+        names = self.steps.get(pass_name, ())
+        if not names:
+            raise GraphError(f"pass '{pass_name}' enters step {index} but declares no steps "
+                             "(Pass.steps)")
+        if not (isinstance(index, int) and 0 <= index < len(names)):
+            raise GraphError(f"pass '{pass_name}' enters step {index!r}, but declares "
+                             f"{len(names)} steps (0..{len(names) - 1})")
+        if index != previous + 1:
+            raise GraphError(f"pass '{pass_name}' enters step {index} after step {previous}: "
+                             f"steps are entered in order (step {previous + 1} next)")
+        return tuple(b for b in self.step_barriers
+                     if b.pass_name == pass_name and b.step == index)
+
     def resource(self, name: str) -> ResourcePlan:
         for r in self.resources:
             if r.name == name:

@@ -253,3 +253,17 @@ def test_a_step_cannot_write_what_the_pass_only_reads():
                steps=[Step("x", reads="t", writes="o")]).input("t", "src.t").output(
         "o", Texture("r8unorm"))
     assert compile(g.build()).step_barriers == ()
+
+
+def test_entering_steps_gives_their_barriers_in_order_only():
+    c = compile(pyramid_graph(3))
+    assert c.barriers_before_step("hiz", 0, -1) == ()
+    assert [b.mips for b in c.barriers_before_step("hiz", 1, 0)] == [(0, 1)]
+    with pytest.raises(GraphError, match=r"pass 'hiz' enters step 2 after step 0: steps are "
+                                         r"entered in order \(step 1 next\)"):
+        c.barriers_before_step("hiz", 2, 0)
+    with pytest.raises(GraphError, match=r"pass 'hiz' enters step 3, but declares 3 steps "
+                                         r"\(0..2\)"):
+        c.barriers_before_step("hiz", 3, 2)
+    with pytest.raises(GraphError, match=r"pass 'use' enters step 0 but declares no steps"):
+        c.barriers_before_step("use", 0, -1)
