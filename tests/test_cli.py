@@ -744,3 +744,36 @@ def test_console_script_entry_point(tmp_path):
     assert "Traceback" not in done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rfw: error:") and str(bad) in lines[0]
+
+
+def test_plan_prints_the_pyramid_barriers_between_its_levels(tmp_path):
+    """configs/meshlet.toml: the depth pyramid's levels are steps; the plan shows the barrier
+    on mip L - 1 before level L, as text and as JSON."""
+    from rfw.config import build, load_config
+
+    config = ROOT / "configs" / "meshlet.toml"
+    levels = build(load_config(config)).passes["hiz"].params.levels
+    done = subprocess.run([*_console_script(), "graph", "plan", str(config)],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    steps = [line for line in done.stdout.splitlines() if " step " in line]
+    assert steps == [f"  hiz step {lv} (level {lv}) / hiz.pyramid mip {lv - 1}: GENERAL -> "
+                     "GENERAL; COMPUTE_SHADER:SHADER_STORAGE_WRITE -> "
+                     "COMPUTE_SHADER:SHADER_STORAGE_READ" for lv in range(1, levels)]
+    done = subprocess.run([*_console_script(), "graph", "plan", str(config), "--json"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    plan = json.loads(done.stdout)
+    assert [(b["pass"], b["step"], b["mips"]) for b in plan["step_barriers"]] == \
+        [("hiz", lv, [lv - 1, 1]) for lv in range(1, levels)]
+
+    # the barriers follow the declaration: a two-level pyramid has one
+    text = config.read_text()
+    assert text.count('use = "depth_pyramid"\n') == 1
+    two = write(tmp_path / "meshlet.toml",
+                text.replace('use = "depth_pyramid"\n',
+                             'use = "depth_pyramid"\nsettings = { levels = 2 }\n'))
+    done = subprocess.run([*_console_script(), "graph", "plan", str(two)],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    assert [line.split(":")[0] for line in done.stdout.splitlines() if " step " in line] == \
+        ["  hiz step 1 (level 1) / hiz.pyramid mip 0"]
