@@ -4,7 +4,8 @@ A BLAS holds a mesh's triangles in the mesh's own space and is built once, howev
 instances place it: the TLAS refers to it by device address with each instance's transform
 (the talk's sofas and chairs). Triangles come from device buffers through their buffer
 device addresses: all meshes' positions in one buffer, all indices in another, kept after the
-build and readable by shaders (``positions``/``indices``, offsets in ``mesh_ranges``).
+build and readable by shaders (``SceneAccel.geometry``: ``positions``, ``indices``, offsets in
+``mesh_ranges``).
 
 Building follows the talk's order, each step a pass of the build plan (:mod:`.plan`), whose
 barriers the graph compiler plans:

@@ -63,7 +63,7 @@ class SceneAccel:
 
     ``blas[m]`` is mesh ``m``'s structure (None for a mesh without triangles), shared by
     every instance of the mesh; ``tlas`` the top level; ``transforms`` the instances' current
-    (N, 4, 4) world matrices. ``build_plan`` is the compiled plan of the one-time build,
+    (N, 4, 4) world matrices; ``geometry`` the triangles' buffers (:mod:`.geometry`). ``build_plan`` is the compiled plan of the one-time build,
     ``refit_plan`` that of the last :meth:`update`.
     """
 
@@ -116,22 +116,6 @@ class SceneAccel:
     @property
     def instance_buffer(self) -> Buffer:
         return self.top.instance_buffer
-
-    @property
-    def positions(self) -> Buffer:
-        return self.geometry.positions
-
-    @property
-    def indices(self) -> Buffer:
-        return self.geometry.indices
-
-    @property
-    def uvs(self) -> Buffer:
-        return self.geometry.uvs
-
-    @property
-    def mesh_ranges(self) -> list[tuple[int, int, int, int]]:
-        return self.geometry.mesh_ranges
 
     def _instance_records(self) -> np.ndarray:
         records, self.tlas_instances = instance_records(self.scene, self.blas, self.transforms,

@@ -49,7 +49,7 @@ def accel_stats(acc: Any) -> dict[str, Any]:
     and now, after any compaction), build times in ms per phase and how they were measured
     (``"gpu"`` timestamps or the ``"cpu"`` clock), and the TLAS builds frames recorded."""
     built = [b for b in acc.blas if b is not None]
-    ranges = acc.mesh_ranges if acc.geometry is not None else []
+    ranges = acc.geometry.mesh_ranges if acc.geometry is not None else []
     return {
         "blas": len(built),
         "instances": len(acc.tlas_instances),
