@@ -117,6 +117,7 @@ def _why(error: BaseException | None) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from .backend import get_backend
     from .config import apply_overrides, load_config
     from .render import backend_for, clear_outputs, render, table, write_outputs
 
@@ -128,6 +129,7 @@ def _run(args: argparse.Namespace) -> int:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     cfg = apply_overrides(cfg, sets)
     backend = args.backend or backend_for(cfg)
+    get_backend(backend)  # an unknown name: one line naming the installed ones
     if backend != "vk" and (args.validate or args.no_alias):
         raise GraphError("--validate and --no-alias need --backend vk", file=cfg.source)
     out = Path(args.out)
@@ -223,9 +225,9 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--size", type=argtypes.size, help="output size WxH")
     run.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES),
                      help="frames to time (after one warm-up)")
-    run.add_argument("--backend", choices=["wgpu", "vk"],
-                     help="backend of unpinned passes (default: vk when every pass is pinned "
-                     "to vk, else wgpu)")
+    run.add_argument("--backend", metavar="NAME",
+                     help="backend of unpinned passes: wgpu, vk or another installed one "
+                     "(default: vk when every pass is pinned to vk, else wgpu)")
     run.add_argument("--validate", action="store_true",
                      help="vk: run under the validation layer; any message exits 1")
     run.add_argument("--no-alias", action="store_true",

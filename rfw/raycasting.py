@@ -1,11 +1,13 @@
-"""``rfw.raycast``: closest hits of many rays against triangles, on the GPU through vkext.
+"""``rfw.raycast``: closest hits of many rays against triangles, on the GPU.
 
 Defined here and exported lazily by ``rfw`` (``rfw.raycast``); the module has another name
 so that importing it never turns the attribute ``rfw.raycast`` into a module.
 
-The numpy face of :mod:`vkext.accel` and :mod:`vkext.raycast`: check the arrays, build the
-acceleration structures, cast, hand back arrays. ``vkext`` is imported on the first call
-only, so ``import rfw`` never loads Vulkan (the same rule as ``rfw.render``'s vk backend).
+The numpy face of a backend's ray casting: check the arrays, hand them to the first
+installed backend (``rfw.backends`` entry points) that has a ``raycast`` method (``vk``:
+``vkext.backend.VkBackend.raycast`` builds the acceleration structures, casts and
+destroys them), hand back arrays. rfw imports no backend itself, so ``import rfw`` never
+loads Vulkan.
 
 Each call builds its acceleration structures and destroys them afterwards; the pipeline of a
 method stays with the device (the default device is made on first use and destroyed at
@@ -20,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from .backend import Backend, get_backend, installed
+from .errors import RfwError
 from .scene.model import Instance, Mesh, Scene
 
 _default_device: Any = None
@@ -66,13 +70,21 @@ def _mesh_scene(vertices: Any, indices: Any) -> Scene:
     return Scene("raycast", meshes=[mesh], instances=[Instance(0, np.identity(4, np.float32))])
 
 
-def _device() -> Any:
-    global _default_device
-    if _default_device is None or not _default_device.alive:
-        from vkext.device import VkDevice
+def _caster() -> Backend:
+    """The first installed backend that casts rays."""
+    for name in installed():
+        backend = get_backend(name, element=None)
+        if hasattr(backend, "raycast"):
+            return backend
+    raise RfwError(f"no installed backend casts rays (rfw.backends: "
+                   f"{', '.join(installed()) or 'none'})", element="rfw.raycast")
 
-        _default_device = VkDevice(label="rfw.raycast")
-        atexit.register(_default_device.destroy)
+
+def _device(backend: Backend) -> Any:
+    global _default_device
+    if _default_device is None or not getattr(_default_device, "alive", True):
+        _default_device = backend.make_device(label="rfw.raycast")
+        atexit.register(backend.destroy_device, _default_device)
     return _default_device
 
 
@@ -92,13 +104,14 @@ def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
     tmin, tmax
         Numbers or (R,) arrays, non-negative; ``tmax`` may be infinite.
     device
-        A ``vkext.VkDevice`` (default: one made on first use and kept).
+        The ray-casting backend's device, a ``vkext.VkDevice`` (default: one made on first
+        use and kept).
     method
         ``"ray_query"`` (compute shader), ``"ray_pipeline"`` (raygen, miss and closest-hit
         shaders through a shader binding table) or ``"auto"``: ray queries where the device
         has them, else the pipeline.
     batch
-        Rays per GPU submit (default ``vkext.raycast.DEFAULT_BATCH``, about a million):
+        Rays per GPU submit (default on vk ``vkext.raycast.DEFAULT_BATCH``, about a million):
         memory stays bounded whatever the ray count.
 
     Returns
@@ -141,19 +154,10 @@ def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
     if method not in ("auto", "ray_query", "ray_pipeline"):
         raise ValueError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not {method!r}")
 
-    from vkext.accel import SceneAccel
-    from vkext.raycast import DEFAULT_BATCH, HIT_DTYPE, RAY_DTYPE, raycaster
-
-    rays = np.empty(n, RAY_DTYPE)
-    rays["origin"], rays["direction"], rays["tmin"], rays["tmax"] = o, d, lo, hi
-    dev = device if device is not None else _device()
-    caster = raycaster(dev, method)  # a method the device lacks fails here
-    if n == 0 or all(len(m.indices) == 0 for m in target.meshes) or not target.instances:
-        hits = np.zeros(n, HIT_DTYPE)  # nothing to hit: no GPU work
-        hits["t"], hits["primitive"], hits["instance"] = np.inf, -1, -1
-    else:
-        with SceneAccel(dev, target, label="raycast") as accel:
-            hits = caster.trace(accel, rays, batch=batch or DEFAULT_BATCH)
+    caster = _caster()
+    dev = device if device is not None else _device(caster)
+    hits = caster.raycast(dev, target, {"origin": o, "direction": d, "tmin": lo, "tmax": hi},
+                          method=method, batch=batch)
     out = {"t": hits["t"].copy(), "primitive": hits["primitive"].copy(),
            "barycentrics": np.stack([hits["u"], hits["v"]], axis=1)}
     if scene is not None:

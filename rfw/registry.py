@@ -1,15 +1,14 @@
-"""Pass registry: ``@register_pass("id")``, built-ins in ``passes/<id>/``, third-party passes
-through the ``rfw.passes`` entry-point group."""
+"""Pass registry: ``@register_pass("id")``; passes are found through the ``rfw.passes``
+entry-point group, the built-ins in ``passes/<id>/`` (listed in rfw's pyproject.toml) like
+third-party ones."""
 
 from __future__ import annotations
 
-import importlib
-import importlib.metadata
-import pkgutil
 from collections.abc import Callable
 
 from .graph.errors import GraphError, did_you_mean
 from .passes import Pass
+from .plugins import entry_points
 
 ENTRY_POINT_GROUP = "rfw.passes"
 _REGISTRY: dict[str, type[Pass]] = {}
@@ -36,17 +35,12 @@ def register_pass(pass_id: str) -> Callable[[type[Pass]], type[Pass]]:
 
 
 def _load_all() -> None:
-    # built-ins: every folder of the passes package with a module of the same name
+    # every module the group names registers its passes as it is imported
     global _loaded
     if _loaded:
         return
     _loaded = True
-    import passes
-
-    for info in pkgutil.iter_modules(passes.__path__):
-        if info.ispkg:
-            importlib.import_module(f"passes.{info.name}.{info.name}")
-    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+    for ep in entry_points(ENTRY_POINT_GROUP):
         try:
             ep.load()
         except Exception as e:  # a broken plugin must not hide the others

@@ -8,8 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from .config import MAX_FRAMES, Config, build
-from .errors import RfwError, check_number
+from .backend import Devices, get_backend
+from .config import MAX_FRAMES, Config, build, resolve_auto
+from .errors import check_number
 from .fileio import atomic_write, inside
 from .frame import (
     Result,
@@ -19,93 +20,98 @@ from .frame import (
     pass_timings,
     pinned_elsewhere,
 )
-from .graph import compile
 from .graph.formats import format_info
+from .mixed import MixedFrame, prepare, start
+
+# timings.json's fields a backend adds, in this order after the ones every run has
+EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
 
 
 def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
-           device: Any = None, backend: str = "wgpu", validation: bool = False,
-           alias: bool = True) -> Result:
-    """Build, compile and run ``cfg``; returns images and timings (GPU ms from timestamps).
+           device: Any = None, devices: Any = (), backend: str = "wgpu",
+           validation: bool = False, alias: bool = True) -> Result:
+    """Build, compile and run ``cfg`` on ``backend`` (a name in the ``rfw.backends``
+    entry-point group: ``wgpu``, ``vk`` or an installed one); returns images and timings
+    (GPU ms from timestamps): the one frame driver of every backend.
 
-    ``backend="vk"`` runs it on raw Vulkan (``vkext.backend.render_vk``: ``validation`` turns
-    the validation layer on, ``alias=False`` gives every transient its own allocation).
+    ``device`` (and ``devices``) may be any backend's: each serves the backend that owns it,
+    and a backend the run needs without one gets a device made here, with the validation
+    layer when ``validation``, and destroyed here (``timings["validation"]`` then counts
+    its messages, leak reports included). ``alias=False`` gives every transient its own
+    allocation where the backend places memory itself (vk). A backend with
+    ``auto_variants`` (vk) resolves auto variants for its device first
+    (``timings["techniques"]`` reports what they chose).
 
     A config that pins passes to a backend other than ``backend`` runs on both
-    (``vkext.mixed.render_mixed``): ``backend`` is then the one of unpinned passes, bridges
-    copy resources across through host memory and are timed as passes of their own, and
-    ``device`` may be either backend's (the other one is made and dropped here)."""
-    if backend not in ("wgpu", "vk"):
-        raise RfwError(f"unknown backend '{backend}' (wgpu or vk)", file=cfg.source)
+    (:mod:`rfw.mixed`): ``backend`` is then the one of unpinned passes, bridges copy
+    resources across through host memory and are timed as passes of their own."""
+    run = get_backend(backend, file=cfg.source)
     if frames is not None:
         check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
-    if backend == "vk" and not _is_wgpu_device(device):
-        from vkext.backend import render_vk
-
-        # render_vk resolves auto variants for its device, then mixes backends if pinned
-        return render_vk(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
-                         validation=validation, alias=alias)
-    if pinned_elsewhere(cfg, backend):
-        from vkext.device import VkDevice
-        from vkext.mixed import render_mixed
-
-        devices = {"vk_device" if isinstance(device, VkDevice) else "wgpu_device": device}
-        return render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend=backend,
-                            validation=validation, alias=alias, **devices)
-    if backend == "vk":
-        from vkext.backend import render_vk
-
-        return render_vk(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
-                         validation=validation, alias=alias)
-    from .backends.gpu_scene import GpuScene
-    from .backends.wgpu_backend import Device, Executor
-
-    built = build(cfg)
-    plan = compile(built.graph)
-    device = device or Device()
-    check_extents(plan, device.device.limits.get("max-texture-dimension-2d"), cfg.source)
-    scene = load_scene_for(cfg, scene)
-    gpu_scene = GpuScene(device.device, scene, camera_for(cfg, scene))
-    gpu_scene.set_viewport(cfg.size)
-    outputs = tuple(plan.outputs)
-    ex = Executor(device, plan, built.passes, built.slots, gpu_scene, readback=outputs)
+    devs = Devices((device, *devices), validation=validation)
+    frame = None
     try:
-        ex.run(warmup)
-        for t in ex.timings.values():
-            t.gpu_ms.clear()
-            t.cpu_ms.clear()
-        ex.run(frames or cfg.frames)
-        images = {name: ex.read(name) for name in outputs}
+        techniques: dict[str, str] = {}
+        if run.auto_variants:  # the run's device decides what auto variants mean
+            cfg, techniques = resolve_auto(cfg, run.caps(devs.get(run)))
+        mix = pinned_elsewhere(cfg, backend)
+        mixed, sides = prepare(build(cfg), backend, devs, alias=alias, mix=mix)
+        scene = load_scene_for(cfg, scene)
+        frame = start(mixed, sides, scene=scene, camera=camera_for(cfg, scene), size=cfg.size,
+                      alias=alias)
+        n = frames or cfg.frames
+        frame.run(warmup)
+        frame.clear_timings()
+        frame.run(n)
+        images = {name: frame.read(name) for name in frame.plan.outputs}
+        extras = {k: v for s in sides.values()
+                  for k, v in s.backend.collect(frame.executors[s.backend.name]).items()}
     finally:
-        ex.destroy()
-        gpu_scene.destroy()
-    passes = pass_timings(plan.order, ex.timings)
-    timings = {**device.describe(), **frame_record(
-        cfg, frames or cfg.frames, scene, gpu_scene.default_light, passes,
-        timestamps="timestamp-query" in device.features)}
-    return Result(cfg, images, timings, ex)
+        if frame is not None:
+            frame.destroy()
+        devs.close()  # leak reports arrive here, so count messages after it
+    for s in sides.values():
+        extras.update(s.backend.report(frame.executors[s.backend.name], s.device,
+                                       validation=validation))
+    if techniques:
+        extras["techniques"] = techniques
+    timings = _mixed_record(frame, sides) if mix else _record(frame, sides[backend])
+    timings.update(frame_record(cfg, n, scene, frame.default_light, timings.pop("passes"),
+                                timestamps=all(s.backend.timestamps(s.device)
+                                               for s in sides.values())))
+    if mix:
+        bridges = [p for p in timings["passes"] if p["name"] in frame.mixed.bridges]
+        timings["bridge_ms_total"] = sum(p["cpu_ms"] or 0.0 for p in bridges)
+        timings["bridges"] = [p["name"] for p in bridges]
+    known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
+    timings.update({k: extras[k] for k in known if extras[k] is not None})
+    executor = frame if mix else frame.executors[backend]
+    return Result(cfg, images, timings, executor)
 
 
-def check_extents(plan: Any, limit: int | None, source: str) -> None:
-    """Every image of ``plan`` within the device's 2D limit: a clear error, not a GPU one."""
-    for r in plan.resources:
-        if limit and r.kind == "image" and max(r.width, r.height) > limit:
-            raise RfwError(f"'{r.name}' would be {r.width}x{r.height}, over the device's "
-                           f"limit of {limit} pixels per side (use a smaller --size)",
-                           file=source, element="size")
+def _record(frame: MixedFrame, side: Any) -> dict[str, Any]:
+    # one backend: its device's fields, then its passes
+    ex = frame.executors[side.backend.name]
+    return {**side.backend.describe(side.device), "passes": pass_timings(ex.plan.order,
+                                                                        ex.timings)}
+
+
+def _mixed_record(frame: MixedFrame, sides: dict[str, Any]) -> dict[str, Any]:
+    # each backend's device fields joined, and every pass with the backend it ran on
+    described = {name: s.backend.describe(s.device) for name, s in sides.items()}
+    return {**{k: " + ".join(dict.fromkeys(d[k] for d in described.values()))
+               for k in ("device", "driver", "api")},
+            "backend": "+".join(sides), "backends": described,
+            "passes": frame.pass_timings()}
 
 
 def backend_for(cfg: Config) -> str:
-    """The backend a run takes when none is asked for: vk when every enabled pass is pinned
-    to vk (in the config or by its class), else wgpu (pinned passes then mix in)."""
+    """The backend a run takes when none is asked for: the one every enabled pass is pinned
+    to (in the config or by its class), else wgpu (pinned passes then mix in)."""
     from .config import pass_class
 
     pins = {e.backend or pass_class(cfg, e).backend for e in cfg.passes if e.enabled}
-    return "vk" if pins == {"vk"} else "wgpu"
-
-
-def _is_wgpu_device(device: Any) -> bool:
-    return device is not None and type(device).__module__.startswith("rfw.backends")
+    return pins.pop() if len(pins) == 1 and None not in pins else "wgpu"
 
 
 def to_png_array(image: np.ndarray, fmt: str) -> np.ndarray:

@@ -1,103 +1,137 @@
-"""``render_vk``: ``rfw.render.render`` on raw Vulkan, with the same ``Result``."""
+"""The ``vk`` backend (registered in the ``rfw.backends`` entry-point group): raw Vulkan's
+device, fitted plans, executor and host copies behind :class:`rfw.backend.Backend`, so that
+:func:`rfw.render.render` drives it as it drives wgpu. Also the Vulkan half of
+``rfw.raycast`` (``VkBackend.raycast``).
+
+``render_vk(cfg, ...)`` is ``rfw.render.render(cfg, backend="vk", ...)``.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
-from rfw.config import Config, build, resolve_auto
-from rfw.frame import (
-    Result,
-    camera_for,
-    frame_record,
-    load_scene_for,
-    pass_timings,
-    pinned_elsewhere,
-)
+import numpy as np
 
+from rfw.backend import BackendBase
+from rfw.config import Config
+from rfw.frame import Result
+from rfw.graph import CompiledGraph
+from rfw.graph.graph import Graph
+from rfw.passes import Pass
+from rfw.render import render
+from rfw.scene.model import Scene
+
+from .commands import read_buffer, read_image, upload_buffer, upload_image
 from .device import VkDevice
-from .executor import VkExecutor, check_passes, fit_plan
+from .executor import VkExecutor, check_passes, fit_graph
 from .frame_stats import accel_stats, culling_counters
-from .mixed import render_mixed
 from .scene import VkScene
+
+
+class VkBackend(BackendBase):
+    name = "vk"
+    auto_variants = True  # ray queries, ray pipelines and mesh shaders are per device
+    host_writes_depth = True
+
+    def make_device(self, *, validation: bool = False, label: str | None = None) -> VkDevice:
+        return VkDevice(validation=validation, **({"label": label} if label else {}))
+
+    def owns(self, device: Any) -> bool:
+        return isinstance(device, VkDevice)
+
+    def describe(self, device: VkDevice) -> dict[str, str]:
+        return device.describe()
+
+    def caps(self, device: VkDevice) -> frozenset[str]:
+        return frozenset(device.caps)
+
+    def timestamps(self, device: VkDevice) -> bool:
+        return "timestamp" in device.caps
+
+    def fit(self, graph: Graph, device: VkDevice, *, alias: bool = True,
+            readback: bool = True) -> tuple[CompiledGraph, Any]:
+        # the plan's transients placed with the driver's exact sizes and alignments
+        return fit_graph(graph, device, alias=alias, readback=readback)
+
+    def check(self, plan: CompiledGraph, passes: dict[str, Pass]) -> None:
+        check_passes(plan, passes)
+
+    def scene(self, device: VkDevice, scene: Scene, camera: Any,
+              size: tuple[int, int]) -> VkScene:
+        vscene = VkScene(device, scene, camera)
+        try:
+            vscene.set_viewport(size)
+        except BaseException:
+            vscene.destroy()
+            raise
+        return vscene
+
+    def executor(self, device: VkDevice, plan: CompiledGraph, passes: dict[str, Pass],
+                 slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
+                 alias: bool, fitted: Any) -> VkExecutor:
+        return VkExecutor(device, plan, passes, slots, scene, readback=readback, alias=alias,
+                          memory_info=fitted)
+
+    def read_bridge(self, executor: VkExecutor, bridge: str, resource: str) -> np.ndarray:
+        state = executor.state_in(bridge, resource)  # the plan's transfer-src state there
+        if resource in executor.buffers:
+            return read_buffer(executor.device, executor.buffers[resource], state)
+        return read_image(executor.device, executor.image(resource), layout_now=state,
+                          layout_after=state)
+
+    def write_bridge(self, executor: VkExecutor, bridge: str, resource: str,
+                     data: np.ndarray) -> None:
+        state = executor.state_in(bridge, resource)  # transfer dst: the consumer's from
+        if resource in executor.buffers:
+            upload_buffer(executor.device, executor.buffers[resource], data, dst=state)
+        else:
+            upload_image(executor.device, executor.image(resource), data, layout_after=state,
+                         layout_before=state)
+
+    def collect(self, executor: VkExecutor) -> dict[str, Any]:
+        # before the scene, which owns the acceleration structures, goes; the culling
+        # counters come back through the executor's readback, before the executor goes
+        return {"memory": executor.memory(), "accel": accel_stats(executor),
+                "culling": culling_counters(executor)}
+
+    def report(self, executor: VkExecutor, device: VkDevice, *,
+               validation: bool) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if validation or device.validation:
+            out["validation"] = {"messages": len(device.messages),
+                                 "texts": [m.text for m in device.messages[:20]]}
+        return out
+
+    def destroy_device(self, device: VkDevice) -> None:
+        device.destroy()
+
+    def raycast(self, device: VkDevice, scene: Scene, rays: dict[str, np.ndarray], *,
+                method: str = "auto", batch: int | None = None) -> np.ndarray:
+        """Closest hits of ``rays`` (``origin``, ``direction``: (R, 3) float32; ``tmin``,
+        ``tmax``: (R,) float32) against every instance of ``scene``: a structured array
+        with ``t``, ``primitive``, ``instance``, ``u``, ``v`` per ray."""
+        from .accel import SceneAccel
+        from .raycast import DEFAULT_BATCH, HIT_DTYPE, RAY_DTYPE, raycaster
+
+        n = len(rays["origin"])
+        packed = np.empty(n, RAY_DTYPE)
+        for key in ("origin", "direction", "tmin", "tmax"):
+            packed[key] = rays[key]
+        caster = raycaster(device, method)  # a method the device lacks fails here
+        if n == 0 or all(len(m.indices) == 0 for m in scene.meshes) or not scene.instances:
+            hits = np.zeros(n, HIT_DTYPE)  # nothing to hit: no GPU work
+            hits["t"], hits["primitive"], hits["instance"] = np.inf, -1, -1
+            return hits
+        with SceneAccel(device, scene, label="raycast") as accel:
+            return caster.trace(accel, packed, batch=batch or DEFAULT_BATCH)
 
 
 def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
               device: VkDevice | None = None, validation: bool = False, alias: bool = True,
               warmup: int = 1) -> Result:
-    """Build, compile (fitted to the device's memory requirements) and run ``cfg`` on
-    Vulkan; returns images of the graph outputs and timings.json's fields (GPU ms from
-    timestamps) plus ``memory``: transient bytes allocated against the plan's numbers.
-
-    ``alias=False`` gives every transient its own allocation (``--no-alias``). Without a
-    ``device`` one is made (with the validation layer when ``validation``) and destroyed
-    here; ``timings["validation"]`` then counts the messages, leak reports included.
-
-    A config that pins passes to wgpu runs as a mixed frame (``vkext.mixed.render_mixed``,
-    unpinned passes on Vulkan).
-
-    Variants left at an auto option (``shadows = "auto"``) are resolved for the device
-    first (``rfw.config.resolve_auto``); ``timings["techniques"]`` reports what they chose.
-    """
-    own = device is None
-    if own:
-        device = VkDevice(validation=validation)
-    try:
-        cfg, techniques = resolve_auto(cfg, device.caps)
-    except BaseException:
-        if own:
-            device.destroy()
-        raise
-    if pinned_elsewhere(cfg, "vk"):
-        if own:  # the mixed frame makes and counts its own
-            device.destroy()
-        result = render_mixed(cfg, scene=scene, frames=frames, warmup=warmup, backend="vk",
-                              vk_device=None if own else device, validation=validation,
-                              alias=alias)
-        if techniques:
-            result.timings["techniques"] = techniques
-        return result
-    built = build(cfg)
-    validation = validation or device.validation
-    try:
-        plan, info = fit_plan(built.graph, device, alias=alias, readback=True)
-        check_passes(plan, built.passes)  # a missing GLSL twin fails before any upload
-        scene = load_scene_for(cfg, scene)
-        vscene = VkScene(device, scene, camera_for(cfg, scene))
-        outputs = tuple(plan.outputs)
-        ex = None
-        try:
-            vscene.set_viewport(cfg.size)
-            ex = VkExecutor(device, plan, built.passes, built.slots, vscene, readback=outputs,
-                            alias=alias, memory_info=info)
-            ex.run(warmup)
-            for t in ex.timings.values():
-                t.gpu_ms.clear()
-                t.cpu_ms.clear()
-            n = frames or cfg.frames
-            ex.run(n)
-            images = {name: ex.read(name) for name in outputs}
-            memory = ex.memory()
-            accel = accel_stats(ex)  # before the scene, which owns the structures, goes
-        finally:
-            if ex is not None:
-                ex.destroy()
-            vscene.destroy()
-    finally:
-        if own:
-            device.destroy()  # leak reports arrive here, so count messages after it
-    passes = pass_timings(plan.order, ex.timings)
-    timings: dict[str, Any] = {
-        **device.describe(), **frame_record(cfg, n, scene, vscene.default_light, passes,
-                                            timestamps="timestamp" in device.caps),
-        "memory": memory}
-    culling = culling_counters(ex)
-    if culling is not None:
-        timings["culling"] = culling
-    if techniques:
-        timings["techniques"] = techniques
-    if accel is not None:
-        timings["accel"] = accel
-    if validation:
-        timings["validation"] = {"messages": len(device.messages),
-                                 "texts": [m.text for m in device.messages[:20]]}
-    return Result(cfg, images, timings, ex)
+    """``rfw.render.render`` on raw Vulkan: images of the graph outputs and timings.json's
+    fields, plus ``memory`` (transient bytes allocated against the plan's numbers),
+    ``techniques`` (what auto variants chose for the device) and, where the frame has
+    them, ``culling`` and ``accel``. A config that pins passes to wgpu runs mixed."""
+    return render(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
+                  backend="vk", validation=validation, alias=alias)

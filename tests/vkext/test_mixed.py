@@ -21,12 +21,12 @@ from rfw import ComputePass
 from rfw.cli import main
 from rfw.config import Built, apply_overrides, build, load_config
 from rfw.graph import Buffer, GraphBuilder, compile
+from rfw.mixed import open_frame, split
 from rfw.render import render
 from rfw.scene import default_scene
 from rfw.shaders import ShaderError
 from vkext.commands import one_time
 from vkext.executor import check_passes, fit_graph, fit_plan
-from vkext.mixed import open_frame, render_mixed, split
 
 from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch
@@ -72,8 +72,7 @@ def courtyard():
 
 @pytest.fixture(scope="module")
 def tiny_mixed(vk_device, device):
-    return render_mixed(mixed("160x90"), scene=tiny_scene(), vk_device=vk_device,
-                        wgpu_device=device)
+    return render(mixed("160x90"), scene=tiny_scene(), devices=(vk_device, device))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -132,10 +131,10 @@ def test_one_backend_refuses_the_whole_mixed_plan(device, vk_device):
     with pytest.raises(ShaderError, match=r"pass 'bridge.shadow.depth.wgpu-vk' copies between "
                                           r"backends"):
         Executor(device, plan, built.passes, built.slots)
-    with pytest.raises(ShaderError, match=r"copies between backends: .*vkext.mixed"):
+    with pytest.raises(ShaderError, match=r"copies between backends"):
         check_passes(plan, built.passes)
-    with pytest.raises(ShaderError, match=r"pinned to backend 'wgpu'.*render_mixed"):
-        fit_plan(built.graph, vk_device)  # render_vk's first step
+    with pytest.raises(ShaderError, match=r"pinned to backend 'wgpu'.*rfw.render.render"):
+        fit_plan(built.graph, vk_device)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -159,7 +158,7 @@ def test_tiny_scene_matches_all_wgpu(tiny_mixed, device):
 
 def test_courtyard_matches_all_wgpu(vk_device, device, courtyard):
     cfg = mixed("192x108")
-    mx = render_mixed(cfg, scene=courtyard, vk_device=vk_device, wgpu_device=device)
+    mx = render(cfg, scene=courtyard, devices=(vk_device, device))
     wg = render(unpinned(cfg), scene=courtyard, device=device)
     a, b = mx.images["tonemap.ldr"], wg.images["tonemap.ldr"]
     assert a.shape == b.shape == (108, 192, 4)
@@ -173,7 +172,7 @@ def test_the_other_direction_vk_to_wgpu(vk_device, device):
     cfg = pinned(mixed("160x90", "shadow.resolution=512"), tonemap="wgpu")
     plan = compile(build(cfg).graph, backend="wgpu")
     assert plan.order[-3:] == ("lighting", "bridge.lighting.hdr.vk-wgpu", "tonemap")
-    mx = render_mixed(cfg, scene=tiny_scene(), vk_device=vk_device, wgpu_device=device)
+    mx = render(cfg, scene=tiny_scene(), devices=(vk_device, device))
     wg = render(unpinned(cfg), scene=tiny_scene(), device=device)
     assert [p["backend"] for p in mx.timings["passes"]][-3:] == ["vk", "vk>wgpu", "wgpu"]
     assert_similar(mx.images["tonemap.ldr"], wg.images["tonemap.ldr"],
@@ -271,7 +270,7 @@ def test_buffers_cross_both_ways(vk_device, device, tmp_path, monkeypatch):
                   {"fill": {"data": "fill.data"}, "twice": {"a": "fill.data", "b": "twice.b"},
                    "inc": {"b": "twice.b", "c": "inc.c"}})
     before = live_vk(vk_device)
-    frame = open_frame(built, "wgpu", wgpu_device=device, vk_device=vk_device)
+    frame = open_frame(built, "wgpu", devices=(device, vk_device))
     try:
         assert frame.plan.order == ("fill", "bridge.fill.data.vk-wgpu", "twice",
                                     "bridge.twice.b.wgpu-vk", "inc")
@@ -325,8 +324,8 @@ def test_validation_sees_a_missing_bridge_barrier(vk_device, device, monkeypatch
 
     monkeypatch.setattr(vkext.executor, "record_barriers", without_bridges)
     try:
-        render_mixed(mixed("64x36", "shadow.resolution=256"), scene=tiny_scene(),
-                     vk_device=vk_device, wgpu_device=device)
+        render(mixed("64x36", "shadow.resolution=256"), scene=tiny_scene(),
+               devices=(vk_device, device))
         texts = [m.text for m in vk_device.messages]
         assert any("@vk" in t and "layout" in t.lower() for t in texts), texts
     finally:
@@ -361,11 +360,10 @@ def test_rfw_run_validated(capsys, tmp_path):
 
 def test_render_and_drop_returns_to_baseline(vk_device, device):
     cfg = mixed("64x36", "shadow.resolution=256")
-    render_mixed(cfg, scene=tiny_scene(), vk_device=vk_device, wgpu_device=device)
+    render(cfg, scene=tiny_scene(), devices=(vk_device, device))
     vk_before, wgpu_before = live_vk(vk_device), live_wgpu()
     for _ in range(3):
-        result = render_mixed(cfg, scene=tiny_scene(), vk_device=vk_device,
-                              wgpu_device=device, frames=2)
+        result = render(cfg, scene=tiny_scene(), devices=(vk_device, device), frames=2)
         del result
     assert vk_device.live_objects() == vk_before
     wgpu_after = live_wgpu()

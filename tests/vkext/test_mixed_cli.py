@@ -44,7 +44,7 @@ def timings(folder: Path) -> dict:
 
 
 def test_meshlet_culling_counters_with_and_without_backend(tmp_path):
-    # the passes are pinned to vk: without --backend the frame runs through vkext.mixed
+    # the passes are pinned to vk: without --backend the frame runs through rfw.mixed
     runs = {}
     for label, extra in (("plain", ()), ("vk", ("--backend", "vk"))):
         done, out = rfw(tmp_path, label, str(CONFIGS / "meshlet.toml"), "--size", "64x36",
@@ -60,7 +60,7 @@ def test_meshlet_culling_counters_with_and_without_backend(tmp_path):
 
 
 def test_rt_primary_reports_its_structures_with_and_without_backend(tmp_path):
-    # its passes need Vulkan: without --backend the frame runs through vkext.mixed too
+    # its passes need Vulkan: without --backend the frame runs through rfw.mixed too
     runs = {}
     for label, extra in (("plain", ()), ("vk", ("--backend", "vk"))):
         done, out = rfw(tmp_path, label, str(CONFIGS / "rt_primary.toml"), "--size", "64x36",

@@ -22,6 +22,7 @@ wherever a resource crosses backends (``rfw.graph.bridges``). Here that plan run
   ``TRANSFER_DST_OPTIMAL`` state, which the consumer's planned barrier starts from.
   The destination is flushed too before the write: uploads are queued ahead of anything
   still unsubmitted, and the copy's memory may be shared with a resource such work uses.
+  (The reads and writes are each backend's ``read_bridge`` and ``write_bridge``.)
 * **Timing.** Each bridge is its own entry in ``timings["passes"]``: ``cpu_ms`` is the wall
   time of the readback and the upload (``perf_counter``), ``gpu_ms`` is ``None`` (no
   timestamp brackets a host copy, and keeping it out leaves ``gpu_ms_total`` the sum of
@@ -30,8 +31,10 @@ wherever a resource crosses backends (``rfw.graph.bridges``). Here that plan run
 wgpu-native exposes no Vulkan handles, so nothing is shared between the two devices: every
 crossing costs a device-to-host and a host-to-device copy, and a flush on both sides.
 
-``render_mixed`` is ``rfw.render.render`` for such configs (``render`` calls it when a pass
-is pinned to a backend other than the run's); ``open_frame`` gives the ``MixedFrame`` itself.
+``rfw.render.render`` runs such configs (a pass pinned to a backend other than the run's)
+through ``open_frame``, which gives the ``MixedFrame`` itself. Nothing here knows a backend's
+API: each side's device, plan, executor and host copies come from its
+:class:`rfw.backend.Backend`, found by name in the ``rfw.backends`` entry-point group.
 """
 
 from __future__ import annotations
@@ -42,19 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from rfw.config import Built, Config, build
-from rfw.frame import Result, camera_for, frame_record, load_scene_for, median
-from rfw.graph import CompiledGraph, compile
-from rfw.graph.bridges import backend_of, insert_bridges
-from rfw.graph.formats import format_info
-from rfw.graph.graph import Graph
-from rfw.graph.resources import Binding, SizeRule
-from rfw.shaders import ShaderError
-
-from .commands import read_buffer, read_image, upload_buffer, upload_image
-from .frame_stats import accel_stats, culling_counters
-
-BACKENDS = ("wgpu", "vk")
+from .backend import Backend, Devices, get_backend, installed, order
+from .config import Built
+from .frame import median
+from .graph import CompiledGraph, compile
+from .graph.bridges import backend_of, insert_bridges
+from .graph.formats import format_info
+from .graph.graph import Graph
+from .graph.resources import Binding, SizeRule
+from .shaders import ShaderError
 
 
 @dataclass(frozen=True)
@@ -83,7 +82,7 @@ class MixedPlan:
         used = {s for s in self.side.values() if ">" not in s}
         for b in self.bridges.values():
             used |= {b.src, b.dst}
-        return tuple(s for s in BACKENDS if s in used)
+        return tuple(order(used))
 
     def passes_of(self, backend: str) -> tuple[str, ...]:
         """The full order's passes that ``backend`` records (its bridge halves included)."""
@@ -108,15 +107,16 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
     decls = {p.name: p for p in bridged.passes if p.enabled and p.name in scheduled}
     side: dict[str, str] = {}
     bridges: dict[str, Bridge] = {}
+    known = installed()
     for name, p in decls.items():
         b = backend_of(p, backend) or backend
         side[name] = b
         if ">" in b:
             src, dst = b.split(">")
             bridges[name] = Bridge(name, src, dst, p.inputs[0].resource, p.outputs[0].resource)
-        elif b not in BACKENDS:
-            raise ShaderError(f"pass '{name}' is pinned to unknown backend '{b}'",
-                              file=graph.source)
+        elif b not in known:
+            raise ShaderError(f"pass '{name}' is pinned to unknown backend '{b}' "
+                              f"(installed: {', '.join(known)})", file=graph.source)
     owner: dict[str, str] = {}
     for r in plan.resources:
         if r.producer in side and ">" not in side[r.producer]:
@@ -133,7 +133,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                                   "not carry history; pin both passes to one backend",
                                   file=graph.source)
     graphs = {}
-    for s in BACKENDS:
+    for s in order(b for v in side.values() for b in v.split(">")):
         passes = []
         for p in bridged.passes:
             if p.name not in decls:
@@ -151,8 +151,9 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                                           "layers", file=graph.source)
                     spec = out.spec if out.spec.type == "buffer" else \
                         out.spec.with_(size=SizeRule.fixed(r.width, r.height))
-                    if s == "wgpu" and r.kind != "buffer" and format_info(r.format).depth:
-                        spec = _depth_for_wgpu(spec, r.format, br, _readers(decls, side,
+                    if r.kind != "buffer" and format_info(r.format).depth and \
+                            not get_backend(s, file=graph.source).host_writes_depth:
+                        spec = _depth_as_float(spec, r.format, br, _readers(decls, side,
                                                                             br), graph.source)
                     passes.append(replace(p, inputs=(), outputs=(replace(out, spec=spec),),
                                           backend=None))
@@ -174,7 +175,8 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
     return MixedPlan(plan, backend, side, bridges, graphs, slots, owner)
 
 
-# depth formats a bridge carries into wgpu as r32float (the host copy has the depth values)
+# depth formats a bridge carries as r32float into a backend that cannot upload depth images
+# (wgpu); the host copy has the depth values
 _DEPTH_AS_FLOAT = ("depth32float", "depth16unorm")
 
 
@@ -184,22 +186,24 @@ def _readers(decls: dict[str, Any], side: dict[str, str], br: Bridge) -> list[tu
             for b in p.inputs if b.resource == br.copy]
 
 
-def _depth_for_wgpu(spec: Any, fmt: str, br: Bridge, readers: list[tuple[str, Any]],
+def _depth_as_float(spec: Any, fmt: str, br: Bridge, readers: list[tuple[str, Any]],
                     source: str | None) -> Any:
     """WebGPU cannot write depth textures from the host (``write_texture`` and copies into
-    them are refused), so a depth image crossing into wgpu arrives as r32float: the depth
-    values themselves, for passes that sample depth as a texture (ssao accepts r32float).
-    A reader that needs a real depth texture, or a stencil, cannot be served: one line."""
-    why = "wgpu cannot write depth textures from the host"
+    them are refused; its backend says ``host_writes_depth = False``), so a depth image
+    crossing into wgpu arrives as r32float: the depth values themselves, for passes that
+    sample depth as a texture (ssao accepts r32float). A reader that needs a real depth
+    texture, or a stencil, cannot be served: one line."""
+    why = f"{br.dst} cannot write depth textures from the host"
     if fmt not in _DEPTH_AS_FLOAT:
-        raise ShaderError(f"'{br.resource}' ({fmt}) is made on {br.src} and read on wgpu, but "
-                          f"{why} and only {', '.join(_DEPTH_AS_FLOAT)} cross as r32float: pin "
-                          f"its readers to {br.src}", element=f"bridge '{br.name}'", file=source)
+        raise ShaderError(f"'{br.resource}' ({fmt}) is made on {br.src} and read on "
+                          f"{br.dst}, but {why} and only {', '.join(_DEPTH_AS_FLOAT)} cross "
+                          f"as r32float: pin its readers to {br.src}",
+                          element=f"bridge '{br.name}'", file=source)
     for name, slot in readers:
         if slot.type != "texture":
             raise ShaderError(f"reads '{br.resource}' ({fmt}, made on {br.src}) as a "
-                              f"{slot.type} slot on wgpu, but {why} (a bridge carries it as "
-                              f"r32float, for sampling only): pin '{name}' to {br.src}",
+                              f"{slot.type} slot on {br.dst}, but {why} (a bridge carries "
+                              f"it as r32float, for sampling only): pin '{name}' to {br.src}",
                               element=f"pass '{name}'", file=source)
     return spec.with_(format="r32float")
 
@@ -232,20 +236,29 @@ class BridgeTiming:
 class MixedFrame:
     """Drives one executor per backend through the full plan's order, bridges in between.
 
-    ``executors`` maps "wgpu" / "vk" to an ``rfw.backends.wgpu_backend.Executor`` /
-    ``vkext.executor.VkExecutor`` built on that backend's sub-plan."""
+    ``executors`` maps a backend's name to the executor built on that backend's sub-plan,
+    ``backends`` to its :class:`rfw.backend.Backend` (which copies through the host at
+    bridges), ``devices`` to the device each runs on."""
 
-    def __init__(self, mixed: MixedPlan, executors: dict[str, Any]):
+    def __init__(self, mixed: MixedPlan, executors: dict[str, Any],
+                 backends: dict[str, Backend] | None = None):
         self.mixed = mixed
         self.plan = mixed.plan
         self.executors = executors
-        self.scenes: list[Any] = []  # GpuScene / VkScene the frame owns
+        self.backends = backends if backends is not None else {}
+        self.scenes: list[Any] = []  # each backend's upload of the scene, owned by the frame
         self.devices: dict[str, Any] = {}
         self.frame_index = 0
         self.bridge_timings = {n: BridgeTiming(n) for n in mixed.bridges}
         self.default_light = False
+        self._devices: Devices | None = None  # devices open_frame made, closed by destroy
 
     def run(self, frames: int = 1) -> None:
+        if len(self.executors) == 1 and not self.mixed.bridges:
+            for ex in self.executors.values():  # one side: the executor's own frames
+                ex.run(frames)
+            self.frame_index += frames
+            return
         for _ in range(frames):
             self.frame()
 
@@ -264,8 +277,8 @@ class MixedFrame:
             src.flush()
             dst.flush()  # uploads go ahead of unsubmitted work: submit it first
             t = time.perf_counter()
-            data = self._read(br.src, src, name, br.resource)
-            self._write(br.dst, dst, name, br.copy, data)
+            data = self.backends[br.src].read_bridge(src, name, br.resource)
+            self.backends[br.dst].write_bridge(dst, name, br.copy, data)
             timing = self.bridge_timings[name]
             timing.cpu_ms.append((time.perf_counter() - t) * 1e3)
             timing.bytes = int(data.nbytes)
@@ -280,37 +293,6 @@ class MixedFrame:
                 t.cpu_ms.clear()
         for t in self.bridge_timings.values():
             t.cpu_ms.clear()
-
-    @staticmethod
-    def _read(backend: str, ex: Any, bridge: str, resource: str) -> np.ndarray:
-        if backend == "wgpu":
-            if ex.plan.resource(resource).kind == "buffer":
-                raw = ex.device.device.queue.read_buffer(ex.buffer(resource))
-                return np.frombuffer(raw, np.uint8)
-            return ex.read(resource)
-        state = ex.state_in(bridge, resource)  # the plan's transfer-src state at the bridge
-        if resource in ex.buffers:
-            return read_buffer(ex.device, ex.buffers[resource], state)
-        return read_image(ex.device, ex.image(resource), layout_now=state, layout_after=state)
-
-    @staticmethod
-    def _write(backend: str, ex: Any, bridge: str, resource: str, data: np.ndarray) -> None:
-        if backend == "wgpu":
-            r = ex.plan.resource(resource)
-            if r.kind == "buffer":
-                ex.device.device.queue.write_buffer(ex.buffer(resource), 0,
-                                                    np.ascontiguousarray(data).tobytes())
-                return
-            if r.format == "r32float" and data.dtype == np.uint16:  # depth16unorm's words
-                data = data.astype(np.float32) / np.float32(65535)
-            ex.upload(resource, data)
-            return
-        state = ex.state_in(bridge, resource)  # transfer dst: the consumer's barrier's from
-        if resource in ex.buffers:
-            upload_buffer(ex.device, ex.buffers[resource], data, dst=state)
-        else:
-            upload_image(ex.device, ex.image(resource), data, layout_after=state,
-                         layout_before=state)
 
     def read(self, resource: str) -> np.ndarray:
         """An output (or any resource) from the backend that holds it."""
@@ -332,137 +314,98 @@ class MixedFrame:
         return out
 
     def destroy(self) -> None:
-        """Destroy the executors, then the scenes."""
+        """Destroy the executors, then the scenes (then the devices open_frame made)."""
         for ex in self.executors.values():
             ex.destroy()
         for sc in reversed(self.scenes):
             sc.destroy()
         self.scenes = []
+        if self._devices is not None:
+            self._devices.close()
 
 
-def open_frame(built: Built, backend: str = "wgpu", *, wgpu_device: Any = None,
-               vk_device: Any = None, scene: Any = None, camera: Any = None,
-               size: tuple[int, int] | None = None, alias: bool = True) -> MixedFrame:
-    """Split ``built`` (``split``), compile each backend's part (Vulkan's fitted to
-    ``vk_device``'s memory requirements), upload ``scene`` to each backend used and make its
-    executor. A backend with passes needs its device (``wgpu_device`` may be left out: one
-    is made). The frame owns executors and scenes: ``destroy()`` them."""
-    from rfw.backends.gpu_scene import GpuScene
-    from rfw.backends.wgpu_backend import Device, Executor
+@dataclass
+class Side:
+    """One backend's part of a frame: its plan fitted to its device."""
 
-    from .executor import VkExecutor, check_passes, fit_graph
-    from .scene import VkScene
+    backend: Backend
+    device: Any
+    plan: CompiledGraph
+    fitted: Any  # what the backend's fit hands its executor
+    passes: dict[str, Any]  # pass instances it records
+    outputs: tuple[str, ...]  # graph outputs it holds
 
+
+def prepare(built: Built, backend: str, devices: Devices, *, alias: bool = True,
+            mix: bool = True) -> tuple[MixedPlan, dict[str, Side]]:
+    """Split ``built`` (``split``), then compile each backend's part for its device (fitted
+    to its memory requirements) and check that backend can run its passes. ``mix=False``:
+    the whole graph on ``backend`` (a frame of one side, no bridges)."""
+    if not mix:
+        return _whole(built, backend, devices, alias=alias)
     mixed = split(built, backend)
-    sides = mixed.sides
-    if "vk" in sides and vk_device is None:
-        raise ShaderError(f"'{mixed.plan.name}' runs passes on Vulkan: give a vk_device")
-    plans: dict[str, tuple[CompiledGraph, dict[str, Any]]] = {}
-    outputs = {s: tuple(o for o in mixed.plan.outputs if mixed.owner.get(o) == s)
-               for s in sides}
-    for s in sides:
-        if s == "vk":
-            plans[s] = fit_graph(mixed.graphs[s], vk_device, alias=alias,
-                                 readback=bool(outputs[s]))
-        else:
-            plans[s] = (compile(mixed.graphs[s]), {})
-        mixed.check(s, plans[s][0])
-    instances = {s: {n: built.passes[n] for n in plans[s][0].order if n in built.passes}
-                 for s in sides}
-    if "vk" in sides:  # a missing GLSL twin fails before any upload
-        check_passes(plans["vk"][0], instances["vk"])
-    frame = MixedFrame(mixed, {})
+    sides: dict[str, Side] = {}
+    for s in mixed.sides:
+        be = get_backend(s, file=built.graph.source, element=None)
+        device = devices.get(be)
+        outputs = tuple(o for o in mixed.plan.outputs if mixed.owner.get(o) == s)
+        plan, fitted = be.fit(mixed.graphs[s], device, alias=alias, readback=bool(outputs))
+        mixed.check(s, plan)
+        passes = {n: built.passes[n] for n in plan.order if n in built.passes}
+        sides[s] = Side(be, device, plan, fitted, passes, outputs)
+    for side in sides.values():  # e.g. a missing GLSL source fails before any upload
+        side.backend.check(side.plan, side.passes)
+    return mixed, sides
+
+
+def _whole(built: Built, backend: str, devices: Devices, *,
+           alias: bool) -> tuple[MixedPlan, dict[str, Side]]:
+    be = get_backend(backend, file=built.graph.source)
+    device = devices.get(be)
+    plan, fitted = be.fit(built.graph, device, alias=alias, readback=True)
+    be.check(plan, built.passes)  # e.g. a missing GLSL source fails before any upload
+    whole = MixedPlan(plan, backend, dict.fromkeys(plan.order, backend), {},
+                      {backend: built.graph}, built.slots,
+                      {r.name: backend for r in plan.resources})
+    return whole, {backend: Side(be, device, plan, fitted, built.passes, tuple(plan.outputs))}
+
+
+def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera: Any = None,
+          size: tuple[int, int] | None = None, alias: bool = True) -> MixedFrame:
+    """Upload ``scene`` to each backend used and make its executor; the frame owns both."""
+    frame = MixedFrame(mixed, {}, {s: side.backend for s, side in sides.items()})
     try:
-        if "wgpu" in sides:
-            wgpu_device = wgpu_device or Device()
-            wscene = None
+        for s, side in sides.items():
+            uploaded = None
             if scene is not None:
-                wscene = GpuScene(wgpu_device.device, scene, camera)
-                frame.scenes.append(wscene)
-                wscene.set_viewport(size or mixed.plan.size)
-            frame.executors["wgpu"] = Executor(wgpu_device, plans["wgpu"][0],
-                                               instances["wgpu"], mixed.slots, wscene,
-                                               readback=outputs["wgpu"])
-        if "vk" in sides:
-            vscene = None
-            if scene is not None:
-                vscene = VkScene(vk_device, scene, camera)
-                frame.scenes.append(vscene)
-                vscene.set_viewport(size or mixed.plan.size)
-            frame.executors["vk"] = VkExecutor(vk_device, plans["vk"][0], instances["vk"],
-                                               mixed.slots, vscene, readback=outputs["vk"],
-                                               alias=alias, memory_info=plans["vk"][1])
+                uploaded = side.backend.scene(side.device, scene, camera,
+                                              size or mixed.plan.size)
+                frame.scenes.append(uploaded)
+            frame.executors[s] = side.backend.executor(
+                side.device, side.plan, side.passes, mixed.slots, uploaded,
+                readback=side.outputs, alias=alias, fitted=side.fitted)
     except BaseException:
         frame.destroy()
         raise
-    frame.devices = {"wgpu": wgpu_device, "vk": vk_device}
+    frame.devices = {s: side.device for s, side in sides.items()}
     frame.default_light = bool(frame.scenes and frame.scenes[0].default_light)
     return frame
 
 
-def render_mixed(cfg: Config, *, scene: Any = None, frames: int | None = None,
-                 warmup: int = 1, backend: str = "wgpu", wgpu_device: Any = None,
-                 vk_device: Any = None, validation: bool = False,
-                 alias: bool = True) -> Result:
-    """Run ``cfg``, whose passes are pinned to more than one backend, as ``rfw.render.render``
-    does: images of the graph outputs and timings.json's fields, one entry per pass of the
-    full plan (bridges included, ``backend`` naming where each ran). ``backend`` is the
-    backend of unpinned passes. Devices not given are made here (the Vulkan one with the
-    validation layer when ``validation``) and destroyed; ``timings["validation"]`` counts
-    the Vulkan side's messages; ``timings["memory"]`` is the Vulkan side's transients."""
-    from .device import VkDevice
-
-    built = build(cfg)
-    on_vk = "vk" in split(built, backend).sides
-    n = frames or cfg.frames
-    own_vk = on_vk and vk_device is None
-    if own_vk:
-        vk_device = VkDevice(validation=validation)
-    validation = on_vk and (validation or vk_device.validation)
-    frame = None
+def open_frame(built: Built, backend: str = "wgpu", *, devices: Any = (), scene: Any = None,
+               camera: Any = None, size: tuple[int, int] | None = None, alias: bool = True,
+               validation: bool = False) -> MixedFrame:
+    """``prepare`` and ``start`` in one: a frame of ``built`` ready to run. ``devices`` is
+    a :class:`rfw.backend.Devices` or devices to use; a backend with passes and none of them
+    gets a device made here (with ``validation``) that the frame's ``destroy()`` releases."""
+    own = not isinstance(devices, Devices)
+    devs = Devices(devices, validation=validation) if own else devices
     try:
-        scene = load_scene_for(cfg, scene)
-        frame = open_frame(built, backend, wgpu_device=wgpu_device, vk_device=vk_device,
-                           scene=scene, camera=camera_for(cfg, scene), size=cfg.size,
-                           alias=alias)
-        frame.run(warmup)
-        frame.clear_timings()
-        frame.run(n)
-        images = {name: frame.read(name) for name in frame.plan.outputs}
-        memory = frame.executors["vk"].memory() if on_vk else None
-        # before the scenes, which own the structures, go
-        accel = accel_stats(frame.executors["vk"]) if on_vk else None
-    finally:
-        if frame is not None:
-            frame.destroy()
-        if own_vk:
-            vk_device.destroy()  # leak reports arrive here, so count messages after it
-    sides = frame.mixed.sides
-    passes = frame.pass_timings()
-    described = {s: frame.devices[s].describe() for s in sides}
-    timings: dict[str, Any] = {
-        **{k: " + ".join(dict.fromkeys(d[k] for d in described.values()))
-           for k in ("device", "driver", "api")},
-        "backend": "+".join(sides), "backends": described,
-        **frame_record(cfg, n, scene, frame.default_light, passes,
-                       timestamps=all(_timestamps(frame.devices[s]) for s in sides)),
-        "bridge_ms_total": sum(p["cpu_ms"] or 0.0 for p in passes
-                               if p["name"] in frame.mixed.bridges),
-        "bridges": [p["name"] for p in passes if p["name"] in frame.mixed.bridges]}
-    if memory is not None:
-        timings["memory"] = memory
-    # the vk side's counters, as a vk-only run reports them
-    culling = culling_counters(frame.executors["vk"]) if on_vk else None
-    if culling is not None:
-        timings["culling"] = culling
-    if accel is not None:
-        timings["accel"] = accel
-    if validation:
-        timings["validation"] = {"messages": len(vk_device.messages),
-                                 "texts": [m.text for m in vk_device.messages[:20]]}
-    return Result(cfg, images, timings, frame)
-
-
-def _timestamps(device: Any) -> bool:
-    # wgpu's Device.caps names WebGPU features, VkDevice.caps vkext's capabilities
-    return bool({"timestamp-query", "timestamp"} & set(device.caps))
+        mixed, sides = prepare(built, backend, devs, alias=alias)
+        frame = start(mixed, sides, scene=scene, camera=camera, size=size, alias=alias)
+    except BaseException:
+        if own:
+            devs.close()
+        raise
+    frame._devices = devs if own else None
+    return frame

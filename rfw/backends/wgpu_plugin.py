@@ -1,0 +1,80 @@
+"""The ``wgpu`` backend as the frame driver sees it (registered in the ``rfw.backends``
+entry-point group): :mod:`rfw.backends.wgpu_backend`'s device and executor behind
+:class:`rfw.backend.Backend`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..backend import BackendBase
+from ..errors import RfwError
+from ..graph import CompiledGraph, compile
+from ..graph.graph import Graph
+from ..passes import Pass
+from .gpu_scene import GpuScene
+from .wgpu_backend import Device, Executor
+
+
+class WgpuBackend(BackendBase):
+    name = "wgpu"
+    auto_variants = False  # without Vulkan's capabilities, auto stands for its last option
+    host_writes_depth = False  # WebGPU refuses write_texture and copies into depth textures
+
+    def make_device(self, *, validation: bool = False, label: str | None = None) -> Device:
+        return Device()
+
+    def owns(self, device: Any) -> bool:
+        return isinstance(device, Device)
+
+    def describe(self, device: Device) -> dict[str, str]:
+        return device.describe()
+
+    def caps(self, device: Device) -> frozenset[str]:
+        return frozenset(device.caps)
+
+    def timestamps(self, device: Device) -> bool:
+        return "timestamp-query" in device.features
+
+    def fit(self, graph: Graph, device: Device, *, alias: bool = True,
+            readback: bool = True) -> tuple[CompiledGraph, Any]:
+        plan = compile(graph)
+        check_extents(plan, device.device.limits.get("max-texture-dimension-2d"), graph.source)
+        return plan, None
+
+    def scene(self, device: Device, scene: Any, camera: Any, size: tuple[int, int]) -> GpuScene:
+        gpu_scene = GpuScene(device.device, scene, camera)
+        gpu_scene.set_viewport(size)
+        return gpu_scene
+
+    def executor(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
+                 slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
+                 alias: bool, fitted: Any) -> Executor:
+        return Executor(device, plan, passes, slots, scene, readback=readback)
+
+    def read_bridge(self, executor: Executor, bridge: str, resource: str) -> np.ndarray:
+        if executor.plan.resource(resource).kind == "buffer":
+            raw = executor.device.device.queue.read_buffer(executor.buffer(resource))
+            return np.frombuffer(raw, np.uint8)
+        return executor.read(resource)
+
+    def write_bridge(self, executor: Executor, bridge: str, resource: str,
+                     data: np.ndarray) -> None:
+        r = executor.plan.resource(resource)
+        if r.kind == "buffer":
+            executor.device.device.queue.write_buffer(executor.buffer(resource), 0,
+                                                      np.ascontiguousarray(data).tobytes())
+            return
+        if r.format == "r32float" and data.dtype == np.uint16:  # depth16unorm's words
+            data = data.astype(np.float32) / np.float32(65535)
+        executor.upload(resource, data)
+
+
+def check_extents(plan: Any, limit: int | None, source: str | None) -> None:
+    """Every image of ``plan`` within the device's 2D limit: a clear error, not a GPU one."""
+    for r in plan.resources:
+        if limit and r.kind == "image" and max(r.width, r.height) > limit:
+            raise RfwError(f"'{r.name}' would be {r.width}x{r.height}, over the device's "
+                           f"limit of {limit} pixels per side (use a smaller --size)",
+                           file=source, element="size")
