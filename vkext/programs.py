@@ -11,11 +11,12 @@ from typing import Any
 
 from rfw.passes import Pass
 from rfw.shaders import ShaderError
+from rfw.spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 
 from .consts import const, ffi, vk
 from .device import VkDevice
+from .sbt import ShaderBindingTable, check_recursion, create_ray_pipeline, shader_group_handles
 from .scene import COMPARE, SCENE_SETS, DescriptorSetLayout, VkObject, VkScene, new
-from .spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
                "task": "VK_SHADER_STAGE_TASK_BIT_EXT", "mesh": "VK_SHADER_STAGE_MESH_BIT_EXT",
@@ -50,7 +51,17 @@ _VERTEX = ((12, "VK_FORMAT_R32G32B32_SFLOAT"), (12, "VK_FORMAT_R32G32B32_SFLOAT"
 
 
 class ShaderModule(VkObject):
+    """One compiled stage: ``vkCreateShaderModule`` of a :class:`rfw.spirv.Spirv`."""
+
     destroy_fn, object_type = "vkDestroyShaderModule", "SHADER_MODULE"
+
+    def __init__(self, device: VkDevice, spv: Any, label: str = ""):
+        words = ffi.new("uint32_t[]", len(spv.code) // 4)
+        ffi.memmove(words, spv.code, len(spv.code))
+        info = new("VkShaderModuleCreateInfo", codeSize=len(spv.code), pCode=words)
+        super().__init__(device, vk.vkCreateShaderModule(device.device, info, None),
+                         label or Path(spv.path).name)
+        self.stage, self.path = spv.stage, Path(spv.path)
 
 
 class PipelineLayout(VkObject):
@@ -76,10 +87,21 @@ class Program:
     push_size: int
     local_size: tuple[int, int, int]
     pipelines: dict[Any, Pipeline] = field(default_factory=dict)
+    device: VkDevice | None = None
 
     @property
     def name(self) -> str:
         return " + ".join(str(p) for p in self.paths)
+
+    @property
+    def handle(self) -> Any:
+        """The pipeline layout's handle (what descriptor sets and push constants bind to)."""
+        return self.pipeline_layout.handle
+
+    @property
+    def push_stages(self) -> int:
+        """The stages push constants reach: every stage of the program."""
+        return self.stage_flags
 
     def sets(self) -> list[int]:
         return sorted({d.set for d in self.descriptors.values()})
@@ -147,11 +169,7 @@ class Programs:
                                       f"and set {d.set} binding {d.binding} ({d.kind}) in "
                                       f"{path}")
                 descriptors[d.name] = d
-            words = ffi.new("uint32_t[]", len(spv.code) // 4)
-            ffi.memmove(words, spv.code, len(spv.code))
-            info = new("VkShaderModuleCreateInfo", codeSize=len(spv.code), pCode=words)
-            modules[spv.stage] = self._own(ShaderModule(
-                dev, vk.vkCreateShaderModule(dev.device, info, None), path.name))
+            modules[spv.stage] = self._own(ShaderModule(dev, spv, path.name))
         # the workgroup a dispatch (or a mesh-task launch) counts in
         local = next((sizes[st] for st in ("comp", "task", "mesh") if st in sizes), (1, 1, 1))
         if kind == "render" and "vert" not in modules:
@@ -207,7 +225,7 @@ class Programs:
         layout = self._own(PipelineLayout(dev, vk.vkCreatePipelineLayout(dev.device, info, None),
                                           f"{paths[0].name}:layout"))
         return Program(tuple(paths), kind, modules, descriptors, layouts, frozenset(scene_sets),
-                       layout, stage_flags, push, local)
+                       layout, stage_flags, push, local, device=dev)
 
     def compute_pipeline(self, prog: Program) -> Pipeline:
         pipe = prog.pipelines.get("compute")
@@ -303,11 +321,9 @@ class Programs:
 
 class RayPipeline:
     """A ray-tracing pipeline made from a :class:`Program`'s modules, with its shader binding
-    table (``vkext.rt.ShaderBindingTable``: raygen, one miss record, one hit record)."""
+    table (``vkext.sbt.ShaderBindingTable``: raygen, one miss record, one hit record)."""
 
     def __init__(self, device: VkDevice, prog: Program, max_recursion: int):
-        from .rt import ShaderBindingTable, check_recursion, create_ray_pipeline
-
         try:
             check_recursion(device, max_recursion, prog.name)
         except ValueError as e:
@@ -344,8 +360,6 @@ class RayPipeline:
         return self.pipeline.handle
 
     def group_handles(self) -> list[bytes]:
-        from .rt import shader_group_handles
-
         return shader_group_handles(self.device, self.pipeline.handle, self.group_count)
 
     def destroy(self) -> None:

@@ -14,6 +14,9 @@ from rfw.graph import Attachment, GraphBuilder
 from rfw.shaders import ShaderError
 from vkext.executor import VkExecutor, fit_plan
 
+ROOT = Path(__file__).resolve().parents[2]
+RAYCAST = ROOT / "vkext" / "shaders" / "raycast"
+
 # one workgroup emits a triangle covering the left half of the target: x in -1..0 for every
 # y in -1..1 (its long edge runs from (-2, -1) to (0, 3))
 MESH_GLSL = """#version 460
@@ -156,3 +159,40 @@ def test_a_render_pass_left_open_is_an_error(vk_device, mesh_pass, monkeypatch):
     monkeypatch.setattr(mesh_pass, "record", record)
     with pytest.raises(ShaderError, match=r"pass 'tri' left a render pass open"):
         _draw(vk_device, mesh_pass("tri"))
+
+
+# ---------------------------------------------------------------------------------------------
+# ray tracing outside a frame graph (vkext.rt) builds through the same cache
+
+
+def test_standalone_ray_pipelines_are_programs(vk_device):
+    from vkext.programs import ShaderModule
+    from vkext.rt import ComputePipeline, HitGroup, RayTracingPipeline
+
+    for cap in ("VK_KHR_ray_tracing_pipeline", "VK_KHR_ray_query"):
+        if cap not in vk_device.caps:
+            pytest.skip(f"{vk_device.name} has no {cap}")
+    before = vk_device.live_objects()
+    rt = RayTracingPipeline(vk_device, RAYCAST / "raycast.rgen.glsl",
+                            [RAYCAST / "raycast.rmiss.glsl"],
+                            [HitGroup(closest=RAYCAST / "raycast.rchit.glsl")])
+    rq = ComputePipeline(vk_device, RAYCAST / "raycast.comp.glsl")
+    try:
+        assert rt.layout.kind == "ray_tracing" and rq.layout.kind == "compute"
+        assert sorted(rt.layout.modules) == ["rchit", "rgen", "rmiss"]
+        # one ShaderModule class for every kind of program
+        assert {type(m) for p in (rt, rq) for m in p.layout.modules.values()} == {ShaderModule}
+        assert rt.counts == {"raygen": 1, "miss": 1, "hit": 1}
+        assert len(rt.group_handles()) == 3
+        assert set(rt.layout.descriptors) == set(rq.layout.descriptors) >= {"tlas", "rays",
+                                                                              "hits"}
+    finally:
+        rt.destroy()
+        rq.destroy()
+    assert vk_device.live_objects() == before
+    # negative control: a miss shader given as the raygen is refused by name
+    with pytest.raises(ValueError, match=r"raycast\.rmiss\.glsl is a rmiss shader, used as "
+                                         r"rgen"):
+        RayTracingPipeline(vk_device, RAYCAST / "raycast.rmiss.glsl",
+                           [RAYCAST / "raycast.rgen.glsl"])
+    assert vk_device.live_objects() == before
