@@ -1,19 +1,17 @@
-"""The import graph of rfw/, vkext/ and passes/ has no circle (issue 12, item 3).
+"""The import graph of rfw/, vkext/ and passes/: no circle, and rfw never imports vkext
+(issue 12, item 3: backends are plug-ins that rfw finds through the ``rfw.backends``
+entry points, so the core stays importable, and testable, without Vulkan).
 
 Every module is parsed with ``ast``: imports at module level and inside functions both count
 (a circle through a function-level import is still a circle, only a hidden one), relative
 imports are resolved against the importing module, and ``from pkg import name`` is an edge to
 ``pkg.name`` where that is a module, else to ``pkg``. Parent packages a dotted import runs
 first are not edges (a package's ``__init__`` importing its own submodules, which import
-their siblings, is the normal shape, not a circle).
+their siblings, is the normal shape, not a circle). ``importlib.import_module("...")`` and
+``__import__("...")`` with a literal name count as imports too.
 
-Still to remove (issue 12, item 3: ``rfw`` never imports ``vkext``, once backends are
-plug-ins), the rfw -> vkext edges today:
-    rfw.render       -> vkext.backend (render_vk), vkext.device (VkDevice),
-                        vkext.mixed (render_mixed)
-    rfw.raycasting   -> vkext.device (VkDevice), vkext.accel (SceneAccel),
-                        vkext.raycast (raycaster and its dtypes)
-    rfw.bench.worker -> vkext.mixed (MixedFrame)
+``python tests/test_import_graph.py`` prints the package-level graph (the closing note of
+issue 12 quotes it).
 """
 
 from __future__ import annotations
@@ -57,6 +55,16 @@ def _targets(node: ast.AST, module: str, is_package: bool) -> list[str]:
     return [f"{base}.{a.name}" for a in node.names]
 
 
+def _dynamic(node: ast.AST) -> list[str]:
+    # import_module("pkg.mod") / __import__("pkg.mod") with a literal name
+    if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+            and isinstance(node.args[0].value, str)):
+        return []
+    f = node.func
+    called = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+    return [node.args[0].value] if called in ("import_module", "__import__") else []
+
+
 def import_graph(root: Path, packages: tuple[str, ...]) -> dict[str, dict[str, int]]:
     """module -> {imported module of ours: first line}, every import anywhere in the file."""
     modules = module_files(root, packages)
@@ -65,12 +73,54 @@ def import_graph(root: Path, packages: tuple[str, ...]) -> dict[str, dict[str, i
         edges: dict[str, int] = {}
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
             if isinstance(node, (ast.Import, ast.ImportFrom)):
-                for target in _targets(node, name, path.name == "__init__.py"):
-                    found = _known(target, modules)
-                    if found and found != name:
-                        edges.setdefault(found, node.lineno)
+                targets = _targets(node, name, path.name == "__init__.py")
+            else:
+                targets = _dynamic(node)
+            for target in targets:
+                found = _known(target, modules)
+                if found and found != name:
+                    edges.setdefault(found, node.lineno)
         graph[name] = edges
     return graph
+
+
+def package_of(module: str, *, top: bool = False) -> str:
+    """The package a module is drawn in: rfw's subpackages on their own (rfw.graph,
+    rfw.backends, ...), rfw's top-level modules as ``rfw``, vkext whole, every pass folder
+    as ``passes``; ``top``: rfw, vkext or passes."""
+    parts = module.split(".")
+    if parts[0] == "rfw" and len(parts) > 2 and not top:
+        return ".".join(parts[:2])
+    return parts[0]
+
+
+def package_graph(graph: dict[str, dict[str, int]], *,
+                  top: bool = False) -> dict[tuple[str, str], int]:
+    """(package, package) -> how many module edges run between them (none within one)."""
+    out: dict[tuple[str, str], int] = {}
+    for a, edges in graph.items():
+        for b in edges:
+            key = (package_of(a, top=top), package_of(b, top=top))
+            if key[0] != key[1]:
+                out[key] = out.get(key, 0) + 1
+    return dict(sorted(out.items()))
+
+
+def show_packages(graph: dict[str, dict[str, int]]) -> str:
+    """The top-level edges, then rfw's subpackages', with module edge counts."""
+    lines = []
+    for top, title in ((True, "packages"), (False, "with rfw's subpackages")):
+        lines.append(f"  {title}:")
+        lines += [f"    {a} -> {b} ({n} module edge{'s' * (n != 1)})"
+                  for (a, b), n in package_graph(graph, top=top).items()]
+    return "\n".join(lines)
+
+
+def edges_into(graph: dict[str, dict[str, int]], src: str,
+               dst: str) -> list[tuple[str, str, int]]:
+    """(module, imported module, line) of every import from package ``src`` into ``dst``."""
+    return [(a, b, line) for a, edges in sorted(graph.items()) for b, line in edges.items()
+            if a.split(".")[0] == src and b.split(".")[0] == dst]
 
 
 def find_cycle(graph: dict[str, dict[str, int]]) -> list[str] | None:
@@ -104,7 +154,42 @@ def test_no_import_cycle() -> None:
     graph = import_graph(ROOT, PACKAGES)
     assert len(graph) > 50 and "vkext.executor" in graph["vkext.backend"]  # it parsed them
     cycle = find_cycle(graph)
-    assert cycle is None, "import circle:\n" + describe(cycle, graph)
+    assert cycle is None, ("import circle:\n" + describe(cycle, graph)
+                           + "\npackage-level import graph:\n" + show_packages(graph))
+
+
+def test_rfw_never_imports_vkext() -> None:
+    graph = import_graph(ROOT, PACKAGES)
+    assert "vkext.executor" in graph["vkext.backend"]  # vkext's own edges were parsed
+    found = edges_into(graph, "rfw", "vkext")
+    assert not found, ("rfw imports vkext (reach it through the rfw.backends entry points):\n"
+                       + "\n".join(f"  {a} -> {b} (line {line})" for a, b, line in found)
+                       + "\npackage-level import graph:\n" + show_packages(graph))
+    assert ("vkext", "rfw") in package_graph(graph)  # the design's direction: it sees edges
+
+
+def test_imports_into_a_forbidden_package_are_found(tmp_path: Path) -> None:
+    # the negative control: a core package reaching into its extension at module level,
+    # inside a function (relative to nothing: absolute) and through import_module
+    _write(tmp_path, {
+        "core/__init__.py": "",
+        "core/a.py": "import ext.x\n",
+        "core/sub/__init__.py": "",
+        "core/sub/b.py": "def f():\n    from ext import y\n    return y\n",
+        "core/c.py": "import importlib\ndef g():\n    return importlib.import_module('ext.x')\n",
+        "core/d.py": "from .a import ext\n",  # an attribute of core.a, not an edge into ext
+        "ext/__init__.py": "",
+        "ext/x.py": "from core import a\n",
+        "ext/y.py": "",
+    })
+    graph = import_graph(tmp_path, ("core", "ext"))
+    assert edges_into(graph, "core", "ext") == [("core.a", "ext.x", 1), ("core.c", "ext.x", 3),
+                                                ("core.sub.b", "ext.y", 2)]
+    assert edges_into(graph, "ext", "core") == [("ext.x", "core.a", 1)]
+    assert "    core -> ext (3 module edges)" in show_packages(graph)
+    # without them, nothing is found
+    _write(tmp_path, {"core/a.py": "", "core/sub/b.py": "", "core/c.py": ""})
+    assert edges_into(import_graph(tmp_path, ("core", "ext")), "core", "ext") == []
 
 
 def _write(root: Path, files: dict[str, str]) -> None:
@@ -147,3 +232,11 @@ def test_absolute_imports_and_attributes_resolve_to_modules(tmp_path: Path) -> N
     assert graph["fake.b"] == {}  # os is not ours
     _write(tmp_path, {"fake/b.py": "VALUE = 1\nfrom fake import a\n"})
     assert find_cycle(import_graph(tmp_path, ("fake",))) == ["fake.a", "fake.b", "fake.a"]
+
+
+if __name__ == "__main__":
+    g = import_graph(ROOT, PACKAGES)
+    print(f"{len(g)} modules in {', '.join(PACKAGES)}; package-level imports:")
+    print(show_packages(g))
+    print(f"circle: {describe(c, g) if (c := find_cycle(g)) else 'none'}; "
+          f"rfw -> vkext imports: {len(edges_into(g, 'rfw', 'vkext'))}")
