@@ -27,6 +27,7 @@ from rfw.passes import Pass
 from rfw.shaders import ShaderError
 from rfw.units import MiB
 
+from . import poison
 from .commands import (
     GLOBAL,
     CommandPool,
@@ -86,6 +87,7 @@ class VkExecutor(FrameExecutor):
                  slots: dict[str, dict[str, str]], scene: VkScene | None = None,
                  readback: tuple[str, ...] = (), *, alias: bool = True,
                  memory_info: dict[str, Any] | None = None):
+        plan, self.poison = poison.prepare(plan)  # schedule fuzzing: poisoned transients
         self.device, self.plan, self.passes, self.slots = device, plan, passes, slots
         self.scene = scene
         self.readback = tuple(readback)
@@ -306,7 +308,10 @@ class VkExecutor(FrameExecutor):
         p = self.passes.get(name)
         try:
             with label(dev, cmd, name):
-                record_barriers(cmd, self._barriers[name], self.resources)
+                barriers = self._barriers[name]
+                if self.poison is not None:  # fill what starts its lifetime here first
+                    barriers = self.poison.fill(cmd, name, barriers, self.resources)
+                record_barriers(cmd, barriers, self.resources)
                 if p is None:
                     return
                 if ts is not None:

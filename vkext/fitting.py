@@ -12,6 +12,7 @@ from rfw.graph.graph import Graph
 from rfw.passes import Pass
 from rfw.shaders import ShaderError
 
+from . import poison
 from .device import VkDevice
 from .memory import memory_options, requirements
 
@@ -36,20 +37,26 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
                               "backend runs every pass on Vulkan (frames that mix backends "
                               "run through rfw.render.render or vkext.mixed.render_mixed)",
                               file=graph.source)
-    return fit_graph(graph, device, alias=alias, readback=readback)
+    # schedule fuzzing (vkext.poison): another valid pass order. Not for a mixed frame's
+    # part: the mixed driver records it in the full plan's order
+    return fit_graph(graph, device, alias=alias, readback=readback,
+                     order_seed=poison.mode().order_seed)
 
 
-def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
-              readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
+def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bool = True,
+              order_seed: int | None = None) -> tuple[CompiledGraph, dict[str, Any]]:
     """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
-    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
+    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here);
+    ``order_seed``: the compiler's, another valid pass order."""
     base = MemoryOptions(alias=alias)
     # the device's capabilities: a pass needing a feature it lacks is refused here, by name
-    plan = compile(graph, caps=device.caps, backend="vk", memory=base)
+    plan = compile(graph, caps=device.caps, backend="vk", memory=base,
+                   order_seed=order_seed)
     opts = memory_options(plan, device, base=base, readback=readback)
     info: dict[str, Any] = {"recompiled": False, "image_alignment": base.image_alignment,
                             "buffer_alignment": base.buffer_alignment, "default_fits": True}
-    fitted = compile(graph, caps=device.caps, backend="vk", memory=opts)
+    fitted = compile(graph, caps=device.caps, backend="vk", memory=opts,
+                     order_seed=order_seed)
     placement = [(r.name, r.bytes, r.offset) for r in plan.resources if r.transient]
     if placement != [(r.name, r.bytes, r.offset) for r in fitted.resources if r.transient]:
         fits = plan_fits(plan, device, readback=readback)

@@ -1,0 +1,241 @@
+"""Schedule fuzzing with poisoned memory: a test mode that proves a plan's aliasing and barriers.
+
+Two switches for the vk backend, off by default:
+
+- **order seed**: the compiler breaks ties in its topological sort at random
+  (``compile(order_seed=N)``), so passes run in another valid order, and lifetimes, memory
+  placement, aliasing and barriers change with it;
+- **poison**: every transient, each frame when its lifetime starts (when it takes over its
+  memory), is filled with a loud pattern before its first planned access: NaN for float
+  formats, magenta for normalized ones, all ones for integer formats and buffers, depth 0.5
+  and stencil 0xA5. The fill waits for the memory's previous occupants as the plan's aliasing
+  barrier does, and the plan's first barrier then starts from the fill.
+
+A correct plan gives the same image under every order, with or without poison, and leaves
+synchronization validation silent: every pass writes what it produces before anything reads
+it. A pass that reads a transient before it is written, or a memory plan that lets two live
+resources share bytes, shows up as NaN or magenta in the image.
+
+Switch them on for a block with :func:`fuzzing`, or for a process with ``RFW_ORDER_SEED=N``
+and ``RFW_POISON=1`` (``rfw run --order-seed N --poison`` sets these). The vk executor asks
+:func:`prepare` for a :class:`Poisoner` and lets it record the fills; ``fit_graph`` asks
+:func:`mode` for the seed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, replace
+from typing import Any
+
+from rfw.errors import RfwError, check_number
+from rfw.graph import CompiledGraph
+from rfw.graph.compile import Barrier
+from rfw.graph.formats import format_info
+from rfw.graph.sync import NONE, State
+
+from .commands import BufferBarrier, ImageBarrier, barrier, image_layout
+from .consts import ffi, lib, vk
+from .memory import Buffer, Image
+
+SEED_ENV, POISON_ENV = "RFW_ORDER_SEED", "RFW_POISON"
+MAX_SEED = 2**32 - 1
+
+# the patterns: loud, and never what a pass that writes its output leaves behind
+NAN = float("nan")
+NORMALIZED = (1.0, 0.0, 1.0, 1.0)  # NaN turns into 0 in unorm/snorm: magenta instead
+DEPTH, STENCIL = 0.5, 0xA5  # depth clears are 1.0 (or 0.0 reversed): neither
+WORD = 0xFFFFFFFF  # buffers: NaN as float, the largest count or index as uint, -1 as int
+
+# the fill is a transfer write; ALL_TRANSFER covers clears and fills alike
+FILLED_IMAGE = State("TRANSFER_DST_OPTIMAL", frozenset({"ALL_TRANSFER"}),
+                     frozenset({"TRANSFER_WRITE"}))
+FILLED_BUFFER = replace(FILLED_IMAGE, layout=None)
+
+# fills recorded in this process (tests check the poison is not vacuous)
+STATS: Counter[str] = Counter()
+
+
+@dataclass(frozen=True)
+class Fuzz:
+    """The test mode in force: ``order_seed`` (None: the compiler's own order) and
+    ``poison``."""
+
+    order_seed: int | None = None
+    poison: bool = False
+
+
+_MODE: ContextVar[Fuzz | None] = ContextVar("rfw_fuzz", default=None)
+
+
+@contextmanager
+def fuzzing(*, order_seed: int | None = None, poison: bool = True) -> Iterator[Fuzz]:
+    """Compile vk plans with ``order_seed`` and poison their transients inside the block."""
+    if order_seed is not None:
+        _check_seed(order_seed, "order_seed")
+    token = _MODE.set(Fuzz(order_seed, bool(poison)))
+    try:
+        yield _MODE.get()
+    finally:
+        _MODE.reset(token)
+
+
+def mode() -> Fuzz:
+    """The mode of the enclosing :func:`fuzzing` block, else of the environment."""
+    m = _MODE.get()
+    if m is not None:
+        return m
+    seed = os.environ.get(SEED_ENV, "").strip()
+    return Fuzz(_seed_from_env(seed) if seed else None, _flag_from_env())
+
+
+def _check_seed(value: Any, key: str) -> int:
+    return check_number(value, key, kind=int, lo=0, hi=MAX_SEED)
+
+
+def _seed_from_env(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise RfwError(f"{SEED_ENV} must be an integer, not {text!r}") from None
+    return _check_seed(value, SEED_ENV)
+
+
+def _flag_from_env() -> bool:
+    text = os.environ.get(POISON_ENV, "").strip().lower()
+    if text in ("", "0", "false", "no", "off"):
+        return False
+    if text in ("1", "true", "yes", "on"):
+        return True
+    raise RfwError(f"{POISON_ENV} must be 1 or 0, not {text!r}")
+
+
+def prepare(plan: CompiledGraph) -> tuple[CompiledGraph, Poisoner | None]:
+    """In poison mode: the plan with transfer-destination usage on its transients (a fill
+    needs it) and a :class:`Poisoner` for it; otherwise the plan unchanged and None."""
+    if not mode().poison:
+        return plan, None
+    resources = tuple(replace(r, usages=r.usages | {"transfer_dst"}) if r.transient else r
+                      for r in plan.resources)
+    plan = replace(plan, resources=resources)
+    return plan, Poisoner(plan)
+
+
+class Poisoner:
+    """Fills each transient with poison where its lifetime starts, every frame."""
+
+    def __init__(self, plan: CompiledGraph):
+        self.plan = plan
+        # acceleration structures have no bytes of their own to poison
+        transient = {r.name for r in plan.resources
+                     if r.transient and r.kind in ("image", "buffer")}
+        # pass -> (resource, its first planned state) for the lifetimes starting there
+        self.starts: dict[str, list[tuple[str, State]]] = {}
+        seen: set[str] = set()
+        for name in plan.order:
+            for a in plan.accesses[name]:
+                if a.resource in transient and a.state is not None and a.resource not in seen:
+                    seen.add(a.resource)
+                    self.starts.setdefault(name, []).append((a.resource, a.state))
+
+    def fill(self, cmd: Any, pass_name: str, barriers: list[Barrier],
+             resources: Mapping[str, Any]) -> list[Barrier]:
+        """Record the fills of the transients whose lifetime starts at ``pass_name`` and
+        return the pass's barriers, those transients' first ones starting from the fill."""
+        starts = self.starts.get(pass_name)
+        if not starts:
+            return barriers
+        planned = {b.resource: b for b in barriers}
+        before_i, before_b, after = [], [], []
+        for name, first in starts:
+            res = resources[name]
+            b = planned.get(name)
+            # wait for the memory's previous occupants as the plan's aliasing barrier does
+            src = b.src if b is not None else State(None, NONE, NONE)
+            filled = FILLED_IMAGE if isinstance(res, Image) else FILLED_BUFFER
+            if isinstance(res, Image):
+                before_i.append(ImageBarrier(res, replace(src, layout="UNDEFINED"), filled))
+            else:
+                before_b.append(BufferBarrier(res, src, filled))
+            after.append(Barrier(pass_name, name, filled, b.dst if b is not None else first))
+        barrier(cmd, before_i, before_b)
+        for name, _ in starts:
+            _fill(cmd, resources[name])
+            STATS["fills"] += 1
+        ours = {name for name, _ in starts}
+        return [b for b in barriers if b.resource not in ours] + after
+
+
+def _fill(cmd: Any, res: Image | Buffer) -> None:
+    if isinstance(res, Buffer):
+        lib.vkCmdFillBuffer(cmd, res.handle, 0, vk.VK_WHOLE_SIZE, WORD)
+        return
+    rng = ffi.new("VkImageSubresourceRange*")
+    rng.aspectMask, rng.levelCount, rng.layerCount = res.aspect, res.mips, res.layers
+    layout = image_layout(FILLED_IMAGE.layout)
+    info = res.info
+    if info.depth or info.stencil:
+        value = ffi.new("VkClearDepthStencilValue*")
+        value.depth, value.stencil = DEPTH, STENCIL
+        lib.vkCmdClearDepthStencilImage(cmd, res.handle, layout, value, 1, rng)
+        return
+    value = ffi.new("VkClearColorValue*")
+    field = {"uint": value.uint32, "sint": value.int32}.get(info.kind, value.float32)
+    for k, v in enumerate(pattern(res.format)):
+        field[k] = v
+    lib.vkCmdClearColorImage(cmd, res.handle, layout, value, 1, rng)
+
+
+def pattern(format: str) -> tuple[float | int, ...]:
+    """The poison a transient of ``format`` holds before its first write (4 channels; depth
+    and stencil images: (depth, stencil))."""
+    info = format_info(format)
+    if info.depth or info.stencil:
+        return (DEPTH, STENCIL)
+    if info.kind == "uint":
+        return (min(WORD, (1 << (info.block_bytes * 8 // info.components)) - 1),) * 4
+    if info.kind == "sint":
+        return (-1,) * 4
+    if info.kind in ("float", "ufloat"):
+        return (NAN,) * 4
+    return NORMALIZED
+
+
+# ---------------------------------------------------------------------------------------------
+# what a fuzzing run reports
+
+
+def count_orders(plan: CompiledGraph, limit: int = 200_000) -> int | None:
+    """How many valid orders the plan's passes have (its edges' linear extensions), counted
+    over the sets of passes that can have run; None past ``limit`` such sets."""
+    index = {n: i for i, n in enumerate(plan.order)}
+    needs = [0] * len(index)
+    for a, b, _ in plan.edges:
+        needs[index[b]] |= 1 << index[a]
+    full = (1 << len(index)) - 1
+    ways: dict[int, int] = {full: 1}  # set of passes run -> orders of the rest
+
+    def count(done: int) -> int | None:
+        if done not in ways:
+            if len(ways) > limit:
+                return None
+            total = 0
+            for i in range(len(index)):
+                if not done >> i & 1 and needs[i] & ~done == 0:
+                    n = count(done | 1 << i)
+                    if n is None:
+                        return None
+                    total += n
+            ways[done] = total
+        return ways[done]
+
+    return count(0)
+
+
+def placement(plan: CompiledGraph) -> tuple[tuple[str, int | None, int | None], ...]:
+    """Where the plan puts its transients: (name, heap, offset), sorted by name."""
+    return tuple(sorted((r.name, r.heap, r.offset) for r in plan.resources if r.transient))
