@@ -18,7 +18,7 @@ from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError
 
-from .commands import barrier, image_layout
+from .commands import barrier, image_layout, record_barriers
 from .consts import const, ffi, lib, vk
 from .fitting import twin_paths
 from .memory import Buffer, Image, ImageView
@@ -70,6 +70,16 @@ class VkPassContext(SlotContext):
         self.frame = executor.frame_index
         self._dispatched = False
         self._rendering: VkRenderPass | None = None
+
+    _step = -1  # the declared step (Pass.steps) the pass is in
+
+    def step(self, index: int) -> None:
+        """Enter step ``index`` of the pass's declared steps: record the barriers the plan
+        puts before it; they, not the blanket barrier between dispatches, order it after the
+        earlier steps."""
+        barriers = self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
+        record_barriers(self.cmd, barriers, self.executor.resources)
+        self._step, self._dispatched = index, False
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:

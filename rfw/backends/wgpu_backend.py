@@ -275,6 +275,14 @@ class PassContext(SlotContext):
     sampled = view
     storage = view
 
+    _step = -1  # the declared step (Pass.steps) the pass is in
+
+    def step(self, index: int) -> None:
+        """Enter step ``index`` of the pass's declared steps: wgpu orders a pass's work
+        itself, so nothing is recorded; the order is checked as on Vulkan."""
+        self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
+        self._step = index
+
     def buffer(self, slot: str) -> Any:
         """The GPU buffer behind a buffer slot (bind it as ``{"buffer": ...}`` or directly)."""
         return self.executor.buffer(self.resource(slot))
