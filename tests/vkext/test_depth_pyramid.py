@@ -169,3 +169,18 @@ def test_vk_records_each_level_barrier_as_it_enters_the_level(vk_device, monkeyp
     monkeypatch.setattr(context, "record_barriers", spy)
     run_vk(vk_device, depth_image())
     assert recorded == [(lv, "hiz.pyramid", (lv - 1, 1)) for lv in range(1, LEVELS)]
+
+
+def test_without_the_planned_barriers_sync_validation_reports_the_hazard(vk_device,
+                                                                         monkeypatch):
+    """Negative control for the test above: the level barriers are what orders the levels."""
+    from vkext import context
+    from vkext.device import VkValidationError
+
+    if not vk_device.sync_validation:
+        pytest.fail("synchronization validation is not available: this control needs it")
+    vk_device.check_validation()
+    monkeypatch.setattr(context, "record_barriers", lambda cmd, barriers, resources: 0)
+    run_vk(vk_device, depth_image())
+    with pytest.raises(VkValidationError, match="READ_AFTER_WRITE"):
+        vk_device.check_validation()  # clears them: the module's device stays usable
