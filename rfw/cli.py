@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -132,13 +133,16 @@ def _run(args: argparse.Namespace) -> int:
     get_backend(backend)  # an unknown name: one line naming the installed ones
     if backend != "vk" and (args.validate or args.no_alias):
         raise GraphError("--validate and --no-alias need --backend vk", file=cfg.source)
+    if backend != "vk" and (args.poison or args.order_seed is not None):
+        raise GraphError("--order-seed and --poison need --backend vk", file=cfg.source)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RfwError("is not a folder", file=str(out), element="--out")
     # this run's paths, checked and cleared first: a failed run leaves no stale results
     clear_outputs(out, cfg.outputs)
-    result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
-                    alias=not args.no_alias)
+    with _fuzzing(args):
+        result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
+                        alias=not args.no_alias)
     formats = {r.name: r.format for r in result.executor.plan.resources}
     written = write_outputs(result, out, formats)
     print(table(result.timings))
@@ -156,6 +160,24 @@ def _run(args: argparse.Namespace) -> int:
         print(f"validation: {checked['messages']} message(s)")
         return 1 if checked["messages"] else 0
     return 0
+
+
+@contextlib.contextmanager
+def _fuzzing(args: argparse.Namespace) -> typing.Iterator[None]:
+    # --order-seed and --poison reach vkext.poison as its environment switches (rfw imports
+    # nothing from vkext), for this run only
+    given = {"RFW_ORDER_SEED": None if args.order_seed is None else str(args.order_seed),
+             "RFW_POISON": "1" if args.poison else None}
+    saved = {k: os.environ.get(k) for k, v in given.items() if v is not None}
+    os.environ.update({k: v for k, v in given.items() if v is not None})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -232,6 +254,12 @@ def parser() -> argparse.ArgumentParser:
                      help="vk: run under the validation layer; any message exits 1")
     run.add_argument("--no-alias", action="store_true",
                      help="vk: give every transient its own allocation (no aliasing)")
+    run.add_argument("--order-seed", type=argtypes.count(0, 2**32 - 1), metavar="N",
+                     help="vk: run the passes in another valid order, ties broken by seed N "
+                     "(schedule fuzzing; a frame that mixes backends keeps its order)")
+    run.add_argument("--poison", action="store_true",
+                     help="vk: fill every transient with NaN or a loud pattern where its "
+                     "lifetime starts, each frame (a correct plan gives the same image)")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a setting, toggle a pass or pick a variant (repeatable)")
     run.add_argument("--out", default="out", help="output folder (default: out)")
