@@ -166,6 +166,8 @@ def test_rfw_never_imports_vkext() -> None:
                        + "\n".join(f"  {a} -> {b} (line {line})" for a, b, line in found)
                        + "\npackage-level import graph:\n" + show_packages(graph))
     assert ("vkext", "rfw") in package_graph(graph)  # the design's direction: it sees edges
+    # nor the built-in passes: they register through the rfw.passes entry points
+    assert not edges_into(graph, "rfw", "passes"), edges_into(graph, "rfw", "passes")
 
 
 def test_imports_into_a_forbidden_package_are_found(tmp_path: Path) -> None:
