@@ -1,5 +1,7 @@
-"""WGSL sources: includes, defines, line mapping for errors, binding reflection, caching.
+"""Shader sources: which files make a pass's program (one rule for both backends), and WGSL.
 
+Built-in passes are written once, in Vulkan GLSL (``rfw.spirv`` compiles and reflects them
+for both backends). WGSL stays for third-party passes that only target wgpu: for those,
 ``#include "name.wgsl"`` searches the shader's own folder, then ``shaders/common``.
 ``#define NAME value``, ``#ifdef``/``#ifndef``/``#else``/``#endif`` select variants; defines
 passed by the host override the file's. Every output line remembers its file and line, so a
@@ -20,6 +22,31 @@ COMMON = Path(__file__).resolve().parents[1] / "shaders" / "common"
 
 class ShaderError(GraphError):
     """A shader that does not preprocess, compile or match its pass: names file and line."""
+
+
+# shader stages by file-name suffix (``<name>.<stage>.glsl``), in pipeline order
+STAGES = ("comp", "vert", "frag", "task", "mesh", "rgen", "rchit", "rahit", "rmiss", "rint",
+          "rcall")
+
+
+def program_files(folder: Path, shader: str, *, owner: str = "") -> list[Path]:
+    """The files that make a pass's program, the one rule both backends follow.
+
+    ``x.<stage>.glsl`` and ``x.wgsl`` name one file; a bare name ``x`` means every
+    ``x.<stage>.glsl`` beside the pass, in stage order (``shader = "forward"`` ->
+    ``forward.vert.glsl`` + ``forward.frag.glsl``). A ShaderError names what is missing."""
+    who = f"pass '{owner}': " if owner else ""
+    if shader.endswith((".glsl", ".wgsl")):
+        path = folder / shader
+        if not path.is_file():
+            raise ShaderError(f"{who}shader {path} not found")
+        return [path]
+    found = [folder / f"{shader}.{stage}.glsl" for stage in STAGES
+             if (folder / f"{shader}.{stage}.glsl").is_file()]
+    if not found:
+        raise ShaderError(f"{who}no shader {shader}.<stage>.glsl in {folder} (stages: "
+                          f"{', '.join(STAGES)})")
+    return found
 
 
 @dataclass(frozen=True)

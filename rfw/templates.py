@@ -1,4 +1,4 @@
-"""``rfw new-pass NAME``: a working pass folder, its shader and its test, from templates."""
+"""``rfw new-pass NAME``: a working pass folder, its GLSL shader and its test, from templates."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from rfw import ComputePass, Settings, Tex2D, register_pass
 class {cls}(ComputePass):
     """Scales the color of ``src`` by ``gain``: replace with your technique."""
 
-    shader = "{name}.comp.wgsl"
+    shader = "{name}.comp.glsl"  # resolved next to this file
     inputs = {{"src": Tex2D(desc="input color")}}
     outputs = {{"dst": Tex2D("rgba16float", size_of="src", desc="output color")}}
 
@@ -30,22 +30,26 @@ class {cls}(ComputePass):
                      o_dst=ctx.storage("dst"), u_params=self.params)
 '''
 
-_COMPUTE_WGSL = '''struct Params {{
-    gain: f32,
-}};
+_COMPUTE_GLSL = '''#version 460
+// {title}: the color of t_src times u_params.gain (replace with your technique); the same
+// SPIR-V runs on --backend wgpu and --backend vk, bindings matched by name
+#extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 
-@group(0) @binding(0) var t_src: texture_2d<f32>;
-@group(0) @binding(1) var o_dst: texture_storage_2d<rgba16float, write>;
-@group(0) @binding(2) var<uniform> u_params: Params;
+layout(local_size_x = 8, local_size_y = 8) in;
 
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3u) {{
-    let size = textureDimensions(o_dst);
-    if (id.x >= size.x || id.y >= size.y) {{
+layout(set = 0, binding = 0) uniform texture2D t_src;
+layout(set = 0, binding = 1, rgba16f) uniform writeonly image2D o_dst;
+layout(set = 0, binding = 2, std140) uniform Params {{
+    float gain;
+}} u_params;  // Settings.pack() writes the std140 layout
+
+void main() {{
+    ivec2 id = ivec2(gl_GlobalInvocationID.xy);
+    if (any(greaterThanEqual(id, imageSize(o_dst)))) {{
         return;  // threads are rounded up to whole workgroups
     }}
-    let c = textureLoad(t_src, vec2i(id.xy), 0);
-    textureStore(o_dst, vec2i(id.xy), vec4f(c.rgb * u_params.gain, c.a));
+    vec4 c = texelFetch(t_src, id, 0);
+    imageStore(o_dst, id, vec4(c.rgb * u_params.gain, c.a));
 }}
 '''
 
@@ -59,7 +63,7 @@ from rfw.graph import Attachment, DepthAttachment
 class {cls}(RenderPass):
     """Draws the scene's base color times ``gain``: replace with your technique."""
 
-    shader = "{name}.wgsl"
+    shader = "{name}"  # {name}.vert.glsl + {name}.frag.glsl, next to this file
     outputs = {{
         "color": Attachment("rgba16float", desc="shaded color"),
         "depth": DepthAttachment("depth32float", desc="scene depth"),
@@ -73,31 +77,34 @@ class {cls}(RenderPass):
                        u_params=self.params)
 '''
 
-_RASTER_WGSL = '''#include "mesh.wgsl"
+_RASTER_VERT = '''#version 460
+// {title}: the scene's transform (clip space is WebGPU's on both backends: scene.glsl)
+#define MESH_VERTEX_INPUT
+#include "mesh.glsl"
 
-struct Params {{
-    gain: f32,
-}};
+layout(location = 0) out vec2 o_uv;
 
-@group(0) @binding(0) var<uniform> u_params: Params;
-
-struct VertexOut {{
-    @builtin(position) clip: vec4f,
-    @location(0) uv: vec2f,
-}};
-
-@vertex
-fn vs_main(v: VertexIn) -> VertexOut {{
-    var o: VertexOut;
-    o.clip = camera.view_proj * (instance.model * vec4f(v.position, 1.0));
-    o.uv = v.uv;
-    return o;
+void main() {{
+    gl_Position = camera.view_proj * (instance.model * vec4(v_position, 1.0));
+    o_uv = v_uv;
 }}
+'''
 
-@fragment
-fn fs_main(i: VertexOut) -> @location(0) vec4f {{
-    let base = material.base_color * textureSample(base_color_tex, material_sampler, i.uv);
-    return vec4f(base.rgb * u_params.gain, 1.0);
+_RASTER_FRAG = '''#version 460
+// {title}: the material's base color times u_params.gain
+#include "mesh.glsl"
+
+layout(set = 0, binding = 0, std140) uniform Params {{
+    float gain;
+}} u_params;
+
+layout(location = 0) in vec2 i_uv;
+layout(location = 0) out vec4 o_color;
+
+void main() {{
+    vec4 base = material.base_color *
+        texture(sampler2D(base_color_tex, material_sampler), i_uv);
+    o_color = vec4(base.rgb * u_params.gain, 1.0);
 }}
 '''
 
@@ -154,11 +161,11 @@ def new_pass(name: str, folder: Path, *, kind: str = "compute",
     module = f"{folder.name}.{name}.{name}" if (folder / "__init__.py").exists() \
         else f"{name}.{name}"
     fields = {"name": name, "cls": cls, "title": title, "module": module}
-    py, wgsl, test = ((_COMPUTE_PY, _COMPUTE_WGSL, _COMPUTE_TEST) if kind == "compute" else
-                      (_RASTER_PY, _RASTER_WGSL, _RASTER_TEST))
-    shader = f"{name}.comp.wgsl" if kind == "compute" else f"{name}.wgsl"
+    py, test = (_COMPUTE_PY, _COMPUTE_TEST) if kind == "compute" else (_RASTER_PY, _RASTER_TEST)
+    shaders = {f"{name}.comp.glsl": _COMPUTE_GLSL} if kind == "compute" else \
+        {f"{name}.vert.glsl": _RASTER_VERT, f"{name}.frag.glsl": _RASTER_FRAG}
     files = {inside(target, "__init__.py"): "", inside(target, f"{name}.py"): py.format(**fields),
-             inside(target, shader): wgsl.format(**fields)}
+             **{inside(target, f): text.format(**fields) for f, text in shaders.items()}}
     test_path = inside(tests if tests is not None else target, f"test_{name}.py")
     if test_path.exists():
         raise GraphError("already exists: not overwritten", file=str(test_path))

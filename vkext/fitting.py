@@ -1,5 +1,5 @@
 """Compiling a graph for a Vulkan device: placement that fits the driver, and the passes'
-GLSL twins checked before any GPU object is made."""
+shader files checked before any GPU object is made."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from rfw.graph import CompiledGraph
 from rfw.graph.compile import MemoryOptions, compile
 from rfw.graph.graph import Graph
 from rfw.passes import Pass
-from rfw.shaders import ShaderError
+from rfw.shaders import ShaderError, program_files
 
 from . import poison
 from .device import VkDevice
@@ -86,38 +86,27 @@ def plan_fits(plan: CompiledGraph, device: VkDevice, *, readback: bool = True) -
 
 
 # ---------------------------------------------------------------------------------------------
-# the passes' GLSL twins
+# the passes' shader files
 
 
-def glsl_twins(folder: Path, shader: str, kind: str) -> list[Path]:
-    """The GLSL files that stand for a pass's WGSL shader (``kind``: compute | render);
-    the first is required, the rest (a fragment shader) optional."""
-    if shader.endswith(".glsl"):
-        return [folder / shader]
-    stem = shader.removesuffix(".wgsl").removesuffix(".comp")
-    if kind == "compute":
-        return [folder / f"{stem}.comp.glsl"]
-    return [folder / f"{stem}.vert.glsl", folder / f"{stem}.frag.glsl"]
-
-
-def twin_paths(pass_: Pass, shader: str | None, kind: str) -> list[Path]:
-    """Existing twins of ``shader`` (default: the pass's), or a ShaderError naming the pass
-    and the missing file."""
+def shader_paths(pass_: Pass, shader: str | None = None) -> list[Path]:
+    """The files of ``shader`` (default: the pass's) by the rule both backends follow
+    (``rfw.shaders.program_files``), or a ShaderError naming the pass and the file: a
+    missing one, or WGSL, which only the wgpu backend runs."""
     name = shader or pass_.shader
+    who = f"pass '{pass_.name}' ({type(pass_).id or type(pass_).__name__})"
     if not name:
-        raise ShaderError(f"pass '{pass_.name}' ({type(pass_).id or type(pass_).__name__}) "
-                          "records work but declares no shader")
-    paths = glsl_twins(pass_.folder(), name, kind)
-    if not paths[0].is_file():
-        raise ShaderError(f"pass '{pass_.name}' ({type(pass_).id or type(pass_).__name__}) "
-                          f"has no GLSL twin of {name}: {paths[0]} is missing (the vk backend "
-                          f"runs {paths[0].name} beside {name})")
-    return [paths[0], *(p for p in paths[1:] if p.is_file())]
+        raise ShaderError(f"{who} records work but declares no shader")
+    paths = program_files(pass_.folder(), name, owner=pass_.name)
+    if paths[0].suffix == ".wgsl":
+        raise ShaderError(f"{who}: {paths[0]} is WGSL, which only --backend wgpu runs (a "
+                          "pass for both backends is written in GLSL)")
+    return paths
 
 
 def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
-    """Every scheduled pass has an instance and GLSL twins of its shader: a ShaderError
-    naming the pass and the missing file, before any GPU object is made."""
+    """Every scheduled pass has an instance and GLSL shader files: a ShaderError naming the
+    pass and the missing (or WGSL) file, before any GPU object is made."""
     for name in plan.order:
         p = passes.get(name)
         if p is None:
@@ -129,7 +118,7 @@ def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
                 continue  # its barriers are recorded; vkext.mixed copies through the host
             raise ShaderError(f"pass '{name}' has no pass instance")
         if p.shader:
-            twin_paths(p, None, "compute" if p.type == "compute" else "render")
+            shader_paths(p)
 
 
 def is_bridge(plan: CompiledGraph, name: str) -> bool:

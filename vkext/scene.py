@@ -38,7 +38,7 @@ from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
 
-# descriptor kinds as vkext.spirv.reflect names them
+# descriptor kinds as rfw.spirv.reflect names them
 DESCRIPTOR_TYPES = {
     "uniform_buffer": "VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER",
     "storage_buffer": "VK_DESCRIPTOR_TYPE_STORAGE_BUFFER",

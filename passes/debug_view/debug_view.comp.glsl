@@ -1,5 +1,5 @@
 #version 460
-// twin of debug_view.comp.wgsl: one texture shown as display color; MODE picks how
+// one texture shown as display color; MODE picks how
 // (0 color, 1 normals, 2 depth, 3 heatmap)
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "color.glsl"

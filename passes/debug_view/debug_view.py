@@ -26,7 +26,7 @@ class DebugViewPass(ComputePass):
     Depth formats bind as ``texture_depth_2d``; other formats read channel values directly.
     """
 
-    shader = "debug_view.comp.wgsl"
+    shader = "debug_view.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {"source": Tex2D(desc="any float, unorm or depth texture")}
     outputs: ClassVar[dict[str, Slot]] = {
         "view": Tex2D("rgba8unorm", size_of="source", desc="display color"),

@@ -1,9 +1,8 @@
 #version 460
-// twin of deferred_lighting.comp.wgsl
+// G-buffer in, linear HDR radiance out (deferred_lighting.py)
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "scene.glsl"
 #include "pbr.glsl"
-#include "shadow.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;
 
@@ -22,6 +21,7 @@ layout(set = 0, binding = 6, std140) uniform Params {
 layout(set = 0, binding = 7) uniform texture2D t_shadow;  // WGSL texture_depth_2d
 layout(set = 0, binding = 8) uniform samplerShadow s_shadow;
 #endif
+#include "shadow.glsl"
 #ifdef HAS_AO
 layout(set = 0, binding = 9) uniform texture2D t_ao;
 layout(set = 0, binding = 10) uniform sampler s_linear;
@@ -66,7 +66,7 @@ void main() {
 #endif
 #ifdef HAS_SHADOW
         if (i == lights.count.y) {
-            e *= sun_shadow(t_shadow, s_shadow, p, n, l, u_params.shadow_bias);
+            e *= sun_shadow(p, n, l, u_params.shadow_bias);
         }
 #endif
         color += brdf(base, m.b, m.g, n, v, l, e);

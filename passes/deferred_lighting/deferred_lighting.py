@@ -12,7 +12,7 @@ class DeferredLightingPass(ComputePass):
     mask (``rt_shadows``: bit i set where light i reaches the pixel, for all lights), or
     both."""
 
-    shader = "deferred_lighting.comp.wgsl"
+    shader = "deferred_lighting.comp.glsl"
     inputs = {
         "albedo": Texture(desc="base color"),
         "normal": Texture(desc="world normal"),

@@ -15,7 +15,7 @@ class DepthPrepassPass(RenderPass):
     materials are left out: without a fragment stage their cut-outs would write depth.
     """
 
-    shader = "depth_prepass.wgsl"
+    shader = "depth_prepass"
     outputs: ClassVar[dict[str, Slot]] = {
         "depth": DepthAttachment("depth32float", desc="scene depth, 0 near 1 far"),
     }

@@ -1,8 +1,7 @@
 #version 460
-// twin of forward.wgsl (fs_main): the deferred lighting model, per fragment
+// the deferred lighting model, per fragment
 #include "mesh.glsl"
 #include "pbr.glsl"
-#include "shadow.glsl"
 
 // forward.Params as Settings.pack() writes it; prepass is the host's switch, declared so the
 // block matches the WGSL struct
@@ -15,6 +14,7 @@ layout(set = 0, binding = 0, std140) uniform Params {
 layout(set = 0, binding = 1) uniform texture2D t_shadow;  // WGSL texture_depth_2d
 layout(set = 0, binding = 2) uniform samplerShadow s_shadow;
 #endif
+#include "shadow.glsl"
 
 layout(location = 0) in vec3 i_world;
 layout(location = 1) in vec3 i_normal;
@@ -36,7 +36,7 @@ void main() {
         vec3 e = light_at(k, i_world, l);
 #ifdef HAS_SHADOW
         if (k == lights.count.y) {
-            e *= sun_shadow(t_shadow, s_shadow, i_world, s.normal, l, u_params.shadow_bias);
+            e *= sun_shadow(i_world, s.normal, l, u_params.shadow_bias);
         }
 #endif
         color += brdf(s.base_color.rgb, s.metallic, s.roughness, s.normal, v, l, e);

@@ -18,7 +18,7 @@ class ForwardPass(DepthPrepassMixin, RenderPass):
     opaque ones behind them, resolve in draw order.
     """
 
-    shader = "forward.wgsl"
+    shader = "forward"
     inputs = {
         "shadow": Texture(optional=True, desc="sun shadow map"),
     }

@@ -1,9 +1,6 @@
 #version 460
-// twin of forward.wgsl (vs_main)
-//
-// invariant: the same expression as depth_prepass.vert.glsl (vk_clip included), so
-// less-equal against the prepass depth passes exactly where this surface is nearest. y is
-// flipped to Vulkan's ndc (vk_clip in scene.glsl); the pipeline keeps WebGPU's front face.
+// invariant: the same expression as depth_prepass.vert.glsl, so less-equal against the
+// prepass depth passes exactly where this surface is nearest
 #define MESH_VERTEX_INPUT
 #include "mesh.glsl"
 
@@ -16,7 +13,7 @@ layout(location = 3) out vec4 o_tangent;
 
 void main() {
     vec4 w = instance.model * vec4(v_position, 1.0);
-    gl_Position = vk_clip(camera.view_proj * w);
+    gl_Position = camera.view_proj * w;
     o_world = w.xyz;
     o_normal = (instance.normal * vec4(v_normal, 0.0)).xyz;
     o_tangent = vec4((instance.model * vec4(v_tangent.xyz, 0.0)).xyz, v_tangent.w);

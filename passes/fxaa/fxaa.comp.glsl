@@ -1,5 +1,5 @@
 #version 460
-// twin of fxaa.comp.wgsl: FXAA 3.11 quality (Lottes), preset 39 step sizes, on
+// FXAA 3.11 quality (Lottes), preset 39 step sizes, on
 // display-encoded color
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "color.glsl"

@@ -18,7 +18,7 @@ class GBufferPass(DepthPrepassMixin, RenderPass):
     overlap each other, or opaque ones behind them, resolve in draw order.
     """
 
-    shader = "gbuffer.wgsl"
+    shader = "gbuffer"
     outputs = {
         "albedo": Attachment("rgba8unorm-srgb", desc="base color (alpha: coverage)"),
         "normal": Attachment("rgba16float", desc="world-space normal"),

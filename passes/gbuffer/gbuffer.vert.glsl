@@ -1,10 +1,6 @@
 #version 460
-// twin of gbuffer.wgsl (vs_main)
-//
-// invariant: the same expression as depth_prepass (whose vk twin must compute it the same
-// way, flip included), so less-equal against the prepass depth passes exactly where this
-// surface is nearest. y is flipped to Vulkan's ndc (vk_clip in scene.glsl); the pipeline
-// keeps WebGPU's front face, VK_FRONT_FACE_COUNTER_CLOCKWISE.
+// invariant: the same expression as depth_prepass.vert.glsl, so less-equal against the
+// prepass depth passes exactly where this surface is nearest
 #define MESH_VERTEX_INPUT
 #include "mesh.glsl"
 
@@ -15,7 +11,7 @@ layout(location = 1) out vec2 o_uv;
 layout(location = 2) out vec4 o_tangent;
 
 void main() {
-    gl_Position = vk_clip(camera.view_proj * (instance.model * vec4(v_position, 1.0)));
+    gl_Position = camera.view_proj * (instance.model * vec4(v_position, 1.0));
     o_normal = (instance.normal * vec4(v_normal, 0.0)).xyz;
     o_tangent = vec4((instance.model * vec4(v_tangent.xyz, 0.0)).xyz, v_tangent.w);
     o_uv = v_uv;

@@ -1,5 +1,5 @@
 #version 460
-// twin of overdraw.wgsl (fs_main): every fragment adds 1 (the pipeline blends one + one)
+// every fragment adds 1 (the pipeline blends one + one)
 
 layout(location = 0) out vec4 o_count;
 

@@ -20,7 +20,7 @@ class OverdrawPass(RenderPass):
     in heatmap mode.
     """
 
-    shader = "overdraw.wgsl"
+    shader = "overdraw"
     outputs: ClassVar[dict[str, Slot]] = {
         "count": Attachment("rgba16float", desc="fragments per pixel, in every channel"),
     }

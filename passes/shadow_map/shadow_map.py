@@ -11,7 +11,7 @@ from rfw.passes import Range
 class ShadowMapPass(RenderPass):
     """Depth of the scene as seen by the sun, for PCF lookups in lighting passes."""
 
-    shader = "shadow_map.wgsl"
+    shader = "shadow_map"
     outputs = {"depth": DepthAttachment("depth32float", desc="sun depth, 0 near 1 far")}
 
     class Params(Settings):

@@ -1,5 +1,5 @@
 #version 460
-// twin of ssao.comp.wgsl: occlusion of a normal-oriented hemisphere, tested against the depth
+// occlusion of a normal-oriented hemisphere, tested against the depth
 // buffer in view space
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "ssao_common.glsl"

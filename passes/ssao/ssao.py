@@ -20,7 +20,7 @@ class SSAOPass(ComputePass):
     discontinuities. 1 means unoccluded.
     """
 
-    shader = "ssao.comp.wgsl"
+    shader = "ssao.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {
         "depth": Tex2D(desc="scene depth, 0 near 1 far (a depth format, or r32float)"),
         "normal": Tex2D(desc="world-space normal (xyz)"),
@@ -50,6 +50,6 @@ class SSAOPass(ComputePass):
         ctx.dispatch(threads=ctx.extent("ao_raw"), defines=defines, t_depth=depth,
                      t_normal=ctx.sampled("normal"), o_ao=ctx.storage("ao_raw"),
                      u_params=self.params)
-        ctx.dispatch(threads=ctx.extent("ao"), shader="ssao_blur.comp.wgsl", defines=defines,
+        ctx.dispatch(threads=ctx.extent("ao"), shader="ssao_blur.comp.glsl", defines=defines,
                      t_depth=depth, t_ao=ctx.storage("ao_raw"), o_ao=ctx.storage("ao"),
                      u_params=self.params)

@@ -1,5 +1,5 @@
 #version 460
-// twin of ssao_blur.comp.wgsl: depth-aware box blur of the raw occlusion, neighbours on other
+// depth-aware box blur of the raw occlusion, neighbours on other
 // surfaces get no weight
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "ssao_common.glsl"

@@ -1,4 +1,4 @@
-// what both ssao dispatches share (twin of ssao_common.wgsl): settings and view-space
+// what both ssao dispatches share: settings and view-space
 // positions from the depth buffer
 #ifndef RFW_SSAO_COMMON_GLSL
 #define RFW_SSAO_COMMON_GLSL

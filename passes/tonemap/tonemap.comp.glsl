@@ -1,5 +1,5 @@
 #version 460
-// twin of tonemap.comp.wgsl
+// linear HDR to display-encoded LDR (tonemap.py)
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 #include "color.glsl"
 

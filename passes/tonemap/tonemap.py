@@ -7,7 +7,7 @@ from rfw import ComputePass, Settings, Tex2D, register_pass
 class TonemapPass(ComputePass):
     """Exposure, then a filmic curve (ACES fit), then sRGB encoding."""
 
-    shader = "tonemap.comp.wgsl"
+    shader = "tonemap.comp.glsl"
     inputs = {"hdr": Tex2D(desc="linear HDR scene color")}
     outputs = {"ldr": Tex2D("rgba8unorm", size_of="hdr", desc="display color")}
 

@@ -1,6 +1,6 @@
 """A ``Scene`` on the GPU: vertex and index buffers, materials, instances, camera, lights.
 
-Layouts follow ``shaders/common/scene.wgsl`` (group 1) and ``mesh.wgsl`` (groups 2 and 3).
+Layouts follow ``shaders/common/scene.glsl`` (group 1) and ``mesh.glsl`` (groups 2 and 3).
 """
 
 from __future__ import annotations
@@ -20,6 +20,31 @@ from .scene_data import (
     mirrored_arrays,
     sun_camera_bytes,
 )
+
+# the scene's bind groups: (name, binding) as scene.glsl and mesh.glsl declare them; a pass
+# that declares one of these groups gets the scene's layout, so the scene's bind groups serve it
+SCENE_GROUPS: dict[int, tuple[tuple[str, int], ...]] = {
+    1: (("camera", 0), ("lights", 1)),
+    2: (("material", 0), ("base_color_tex", 1), ("metal_rough_tex", 2), ("normal_tex", 3),
+        ("occlusion_tex", 4), ("emissive_tex", 5), ("material_sampler", 6)),
+    3: (("instance", 0),),
+}
+
+
+def scene_layout_entries(group: int) -> list[dict]:
+    """Bind group layout entries of a scene group, visible to every stage that may read it."""
+    stages = wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT | wgpu.ShaderStage.COMPUTE
+    out = []
+    for name, binding in SCENE_GROUPS[group]:
+        entry: dict[str, Any] = {"binding": binding, "visibility": stages}
+        if name.endswith("_tex"):
+            entry["texture"] = {"sample_type": "float", "view_dimension": "2d"}
+        elif name.endswith("_sampler"):
+            entry["sampler"] = {"type": "filtering"}
+        else:
+            entry["buffer"] = {"type": "uniform"}
+        out.append(entry)
+    return out
 
 
 class GpuScene:

@@ -17,14 +17,18 @@ from typing import Any
 import numpy as np
 import wgpu
 
+from ..context import check_sampler
 from ..errors import naming
 from ..graph import CompiledGraph
 from ..graph.compile import ResourcePlan
 from ..graph.formats import format_info
 from ..passes import Pass, Settings
-from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, reflect
+from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, program_files
+from ..shaders import reflect as reflect_wgsl
+from ..spirv import DescriptorInfo, ShaderCompileError, Spirv, check_bindings, compile_glsl, reflect
 from ..units import align_up
 from .base import FrameExecutor, SlotContext
+from .gpu_scene import SCENE_GROUPS, VERTEX_BUFFERS, scene_layout_entries
 
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
@@ -132,59 +136,221 @@ def share_textures(plans: list[ResourcePlan], readback: set[str],
 
 
 # ---------------------------------------------------------------------------------------------
-# pipelines from reflected shaders
+# programs: GLSL through SPIR-V (every built-in pass), WGSL for wgpu-only plugins
 
 
 _WG_SIZE = re.compile(r"@workgroup_size\(\s*(\d+)\s*(?:,\s*(\d+)\s*)?(?:,\s*(\d+)\s*)?\)")
 _UNFILTERABLE = {"r32float", "rg32float", "rgba32float"}
+_VISIBLE = {"comp": wgpu.ShaderStage.COMPUTE, "vert": wgpu.ShaderStage.VERTEX,
+            "frag": wgpu.ShaderStage.FRAGMENT}
+_ALL_STAGES = wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT | wgpu.ShaderStage.COMPUTE
+
+
+@dataclass(frozen=True)
+class Binding:
+    """One reflected binding as the bind group needs it."""
+
+    name: str
+    group: int
+    binding: int
+    entry: dict  # the bind group layout entry
+    storage_format: str | None = None  # the texel format a storage texture declares
+    depth: bool = False  # declared a depth texture (sampled with a depth reference)
+    where: str = "?"  # where it is declared: a file, or file:line for WGSL
 
 
 @dataclass
 class Program:
-    source: Source
-    module: Any
-    bindings: dict[str, BindingInfo]
+    paths: tuple[Path, ...]
+    stages: dict[str, tuple[Any, str]]  # comp | vert | frag -> (module, entry point)
+    bindings: dict[str, Binding]
     layouts: list[Any]
     pipeline_layout: Any
     workgroup: tuple[int, int, int] = (1, 1, 1)
     pipelines: dict[Any, Any] = field(default_factory=dict)
 
+    @property
+    def name(self) -> str:
+        return " + ".join(str(p) for p in self.paths)
+
 
 class ShaderCache:
-    """Shader modules and pipelines keyed by preprocessed-source hash."""
+    """Programs keyed by their SPIR-V (or preprocessed WGSL) and the bound formats; bind
+    group layouts shared between programs with the same entries (the scene's groups)."""
 
     def __init__(self, device: Device):
         self.device = device
         self.programs: dict[tuple, Program] = {}
+        self.layouts: dict[str, Any] = {}
+        self.scene_layouts: dict[int, Any] = {}
 
-    def program(self, path: Path, defines: dict[str, object], stage: str,
-                formats: dict[str, str]) -> Program:
+    def program(self, paths: list[Path], defines: dict[str, object], kind: str,
+                formats: dict[str, str], *, owner: str = "") -> Program:
+        """The program of ``paths`` (``rfw.shaders.program_files``) for ``kind``
+        (compute | render), with the layouts the bound ``formats`` need."""
+        if paths[0].suffix == ".wgsl":
+            return self._wgsl(paths[0], defines, kind, formats)
+        try:
+            spirvs = [compile_glsl(p, defines) for p in paths]
+        except ShaderCompileError as e:
+            raise e.about(f"pass '{owner}'") if owner else e from None
+        key = (kind, *(s.key for s in spirvs), tuple(sorted(formats.items())))
+        if key not in self.programs:
+            self.programs[key] = self._glsl(paths, spirvs, kind, formats, owner)
+        return self.programs[key]
+
+    def layout(self, entries: list[dict], label: str) -> Any:
+        key = repr(sorted(entries, key=lambda e: e["binding"]))
+        if key not in self.layouts:
+            self.layouts[key] = self.device.device.create_bind_group_layout(entries=entries,
+                                                                            label=label)
+        return self.layouts[key]
+
+    def _module(self, path: Path, code: bytes | str, explain_error: Any = None) -> Any:
+        try:
+            return self.device.device.create_shader_module(code=code, label=path.name)
+        except Exception as e:  # wgpu raises its own error types for shader problems
+            msg = " ".join(str(e).split())
+            raise ShaderError(explain_error(msg) if explain_error else
+                              f"{path}: wgpu does not take its SPIR-V: {msg}") from None
+
+    def _glsl(self, paths: list[Path], spirvs: list[Spirv], kind: str,
+              formats: dict[str, str], owner: str) -> Program:
+        where = " + ".join(str(p) for p in paths)
+        who = f"pass '{owner}': " if owner else ""
+        stages: dict[str, tuple[Any, str]] = {}
+        found: dict[str, tuple[DescriptorInfo, int, Path]] = {}
+        workgroup = (1, 1, 1)
+        for path, spv in zip(paths, spirvs, strict=True):
+            if spv.stage not in _VISIBLE:
+                raise ShaderError(f"{who}{path} is a {spv.stage} shader: the wgpu backend runs "
+                                  "comp, vert and frag shaders (this pass needs --backend vk)")
+            if spv.stage in stages:
+                raise ShaderError(f"{who}{where} has two {spv.stage} shaders")
+            refl = reflect(spv.code)
+            stages[spv.stage] = (self._module(path, spv.code), refl.entry)
+            if spv.stage == "comp":
+                workgroup = refl.local_size
+            for d in refl.descriptors.values():
+                prior = found.get(d.name)
+                if prior is not None and (prior[0].set, prior[0].binding, prior[0].kind) != (
+                        d.set, d.binding, d.kind):
+                    raise ShaderError(f"{who}'{d.name}' is group {prior[0].set} binding "
+                                      f"{prior[0].binding} in {prior[2]} and group {d.set} "
+                                      f"binding {d.binding} in {path}")
+                vis = _VISIBLE[spv.stage] | (prior[1] if prior else 0)
+                found[d.name] = (d, vis, prior[2] if prior else path)
+        if (kind == "compute") != ("comp" in stages) or (kind == "render" and
+                                                         "vert" not in stages):
+            need = "a comp shader" if kind == "compute" else "a vert shader (and a frag one)"
+            raise ShaderError(f"{who}{where}: a {kind} pass needs {need}")
+        bindings = {name: self._binding(d, vis, formats.get(name), path, who)
+                    for name, (d, vis, path) in found.items()}
+        groups: dict[int, list[Binding]] = defaultdict(list)
+        for b in bindings.values():
+            groups[b.group].append(b)
+        top = max(groups, default=-1)
+        if kind == "render":
+            top = max(top, max(SCENE_GROUPS))
+        layouts = []
+        for g in range(top + 1):
+            mine = groups.get(g, [])
+            scene = SCENE_GROUPS.get(g)
+            if scene is not None and (kind == "render" or mine) and all(
+                    (b.name, b.binding) in scene for b in mine):
+                # the scene's own groups: one layout, so its bind groups serve every pass
+                if g not in self.scene_layouts:
+                    self.scene_layouts[g] = self.device.device.create_bind_group_layout(
+                        entries=scene_layout_entries(g), label=f"scene:group{g}")
+                layouts.append(self.scene_layouts[g])
+                continue
+            if kind == "render" and scene is not None:
+                odd = [b.name for b in mine if (b.name, b.binding) not in scene]
+                raise ShaderError(f"{who}{where} declares {', '.join(odd)} in group {g}, "
+                                  f"which the scene owns ({', '.join(n for n, _ in scene)})")
+            layouts.append(self.layout([b.entry for b in mine], f"{paths[0].name}:group{g}"))
+        dev = self.device.device
+        return Program(tuple(paths), stages, bindings, layouts,
+                       dev.create_pipeline_layout(bind_group_layouts=layouts,
+                                                  label=paths[0].name), workgroup)
+
+    def _binding(self, d: DescriptorInfo, vis: int, fmt: str | None, path: Path,
+                 who: str) -> Binding:
+        entry: dict[str, Any] = {"binding": d.binding, "visibility": vis}
+        declared = None
+        if d.count != 1 or d.kind in ("combined_image_sampler", "acceleration_structure"):
+            what = {"combined_image_sampler": "a combined image sampler (declare a texture "
+                    "and a sampler)", "acceleration_structure": "an acceleration structure "
+                    "(this pass needs --backend vk)"}.get(d.kind, "an array of bindings")
+            raise ShaderError(f"{who}{path}: binding '{d.name}' is {what}: WebGPU has none")
+        if d.kind == "uniform_buffer":
+            entry["buffer"] = {"type": "uniform"}
+        elif d.kind == "storage_buffer":
+            entry["buffer"] = {"type": "storage" if d.writable else "read-only-storage"}
+            if d.writable:
+                entry["visibility"] = vis & ~wgpu.ShaderStage.VERTEX
+        elif d.kind == "sampler":
+            entry["sampler"] = {"type": "comparison" if d.compared else "filtering"}
+        elif d.kind == "storage_image":
+            declared = format_info(d.format).wgpu if d.format else fmt
+            if declared is None:
+                raise ShaderError(f"{who}{path}: storage image '{d.name}' declares no format "
+                                  "(layout(rgba8) and the like) and nothing is bound to it")
+            access = "read-write" if d.readable and d.writable else \
+                "write-only" if d.writable else "read-only"
+            entry["storage_texture"] = {"access": access, "format": declared,
+                                        "view_dimension": d.dim}
+            if d.writable:
+                entry["visibility"] = vis & ~wgpu.ShaderStage.VERTEX
+        else:
+            entry["texture"] = {"sample_type": _sample_type(d, fmt, self.device.features),
+                                "view_dimension": d.dim, "multisampled": d.multisampled}
+        return Binding(d.name, d.set, d.binding, entry, declared, d.compared, str(path))
+
+    def _wgsl(self, path: Path, defines: dict[str, object], kind: str,
+              formats: dict[str, str]) -> Program:
         source = preprocess(path, defines)
-        key = (source.hash, stage, tuple(sorted(formats.items())))
+        key = (source.hash, kind, tuple(sorted(formats.items())))
         if key in self.programs:
             return self.programs[key]
-        dev = self.device.device
-        try:
-            module = dev.create_shader_module(code=source.text, label=path.name)
-        except Exception as e:  # wgpu raises its own error types for WGSL problems
-            raise ShaderError(explain(source, str(e))) from None
-        bindings = reflect(source)
-        vis = wgpu.ShaderStage.COMPUTE if stage == "compute" else \
+        module = self._module(path, source.text, lambda msg: explain(source, msg))
+        vis = wgpu.ShaderStage.COMPUTE if kind == "compute" else \
             wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT
-        groups: dict[int, list[dict]] = defaultdict(list)
         filterable32 = "float32-filterable" in self.device.features
+        bindings = {b.name: Binding(b.name, b.group, b.binding,
+                                    _layout_entry(b, vis, formats.get(b.name), filterable32),
+                                    _storage_format(b) if b.kind == "storage-texture" else None,
+                                    b.type.startswith("texture_depth"),
+                                    _declared_at(source, b.name))
+                    for b in reflect_wgsl(source).values()}
+        groups: dict[int, list[dict]] = defaultdict(list)
         for b in bindings.values():
-            groups[b.group].append(_layout_entry(b, vis, formats.get(b.name), filterable32))
+            groups[b.group].append(b.entry)
+        dev = self.device.device
         layouts = [dev.create_bind_group_layout(entries=groups.get(g, []),
                                                 label=f"{path.name}:group{g}")
                    for g in range(max(groups, default=-1) + 1)]
         m = _WG_SIZE.search(source.text)
         wg = tuple(int(v) if v else 1 for v in m.groups()) if m else (1, 1, 1)
-        prog = Program(source, module, bindings, layouts,
+        stages = {"comp": (module, "main")} if kind == "compute" else \
+            {"vert": (module, "vs_main"), "frag": (module, "fs_main")}
+        prog = Program((path,), stages, bindings, layouts,
                        dev.create_pipeline_layout(bind_group_layouts=layouts,
                                                   label=path.name), wg)
         self.programs[key] = prog
         return prog
+
+
+def _sample_type(d: DescriptorInfo, fmt: str | None, features: tuple[str, ...]) -> str:
+    if d.compared:
+        return "depth"
+    if d.texel != "float":
+        return d.texel
+    # a depth texture read as numbers, or a 32-bit float one without float32-filterable
+    if fmt is not None and (format_info(fmt).depth or (
+            fmt in _UNFILTERABLE and "float32-filterable" not in features)):
+        return "unfilterable-float"
+    return "float"
 
 
 def _layout_entry(b: BindingInfo, visibility: int, fmt: str | None,
@@ -269,10 +435,13 @@ class PassContext(SlotContext):
         r = self.executor.plan.resource(self.resource(slot))
         return r.width, r.height
 
-    def view(self, slot: str) -> Any:
+    def view(self, slot: str, *, mip: int | None = None) -> Any:
+        """The slot's texture view; ``mip``: a view of that one mip level only."""
+        return self.executor.view(self.resource(slot), mip=mip)
+
+    def sampled(self, slot: str) -> Any:
         return self.executor.view(self.resource(slot))
 
-    sampled = view
     storage = view
 
     _step = -1  # the declared step (Pass.steps) the pass is in
@@ -283,6 +452,9 @@ class PassContext(SlotContext):
         self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
         self._step = index
 
+    def mips(self, slot: str) -> int:
+        return self.executor.plan.resource(self.resource(slot)).mips
+
     def buffer(self, slot: str) -> Any:
         """The GPU buffer behind a buffer slot (bind it as ``{"buffer": ...}`` or directly)."""
         return self.executor.buffer(self.resource(slot))
@@ -290,15 +462,34 @@ class PassContext(SlotContext):
     def format(self, slot: str) -> str:
         return wgpu_format(self.executor.plan.resource(self.resource(slot)).format)
 
+    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
+                compare: str | None = None) -> Any:
+        """A sampler made once per executor (rfw.context.PassContext.sampler)."""
+        check_sampler(filter, address, compare)
+        cache = self.executor.__dict__.setdefault("samplers", {})
+        key = (filter, address, compare)
+        if key not in cache:
+            cache[key] = self.device.create_sampler(
+                mag_filter=filter, min_filter=filter, mipmap_filter=filter,
+                address_mode_u=address, address_mode_v=address, address_mode_w=address,
+                compare=compare, label=f"rfw:sampler:{filter}:{address}")
+        return cache[key]
+
     # recording ----------------------------------------------------------------------------
     def _timestamps(self) -> dict | None:
         return self.executor.timestamp_writes(self.pass_.name)
 
-    def program(self, stage: str, *, shader: str | None = None,
+    def program(self, kind: str, *, shader: str | None = None,
                 defines: dict[str, object] | None = None,
                 formats: dict[str, str] | None = None) -> Program:
-        path = self.pass_.folder() / (shader or self.pass_.shader or "")
-        return self.executor.shaders.program(path, defines or {}, stage, formats or {})
+        """The pass's program (``kind``: compute | render) of ``shader`` (default: the
+        pass's), its files found by ``rfw.shaders.program_files``."""
+        name = shader or self.pass_.shader
+        if not name:
+            raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
+        paths = program_files(self.pass_.folder(), name, owner=self.pass_.name)
+        return self.executor.shaders.program(paths, defines or {}, kind, formats or {},
+                                             owner=self.pass_.name)
 
     def bind(self, prog: Program, values: dict[str, Any], *, groups: tuple[int, ...] = (0,),
              cache_key: Any = None) -> list[Any]:
@@ -306,12 +497,11 @@ class PassContext(SlotContext):
         out = []
         for g in groups:
             wanted = [b for b in prog.bindings.values() if b.group == g]
-            missing = [b.name for b in wanted if b.name not in values]
-            if missing:
-                raise ShaderError(f"pass '{self.pass_.name}': shader "
-                                  f"{prog.source.lines[0][0] if prog.source.lines else '?'} "
-                                  f"binds {', '.join(missing)} but the pass gives "
-                                  f"{', '.join(sorted(values)) or 'nothing'}")
+            if prog.layouts[g] is self.executor.shaders.scene_layouts.get(g):
+                # the scene's layout: every binding of the scene's group, used or not
+                wanted = [Binding(n, g, k, {}) for n, k in SCENE_GROUPS[g]]
+            check_bindings(self.pass_.name, prog.name, [b.name for b in wanted], values,
+                           missing=True)
             for b in wanted:
                 self._check_format(prog, b, values[b.name])
             entries = [{"binding": b.binding,
@@ -321,32 +511,23 @@ class PassContext(SlotContext):
                                                      label=f"{self.pass_.name}:g{g}"))
         return out
 
-    def _check_format(self, prog: Program, b: BindingInfo, value: Any) -> None:
+    def _check_format(self, prog: Program, b: Binding, value: Any) -> None:
         # up front: wgpu reports a mismatch late, as its own validation error
         have = self.executor.format_of(value)
-        if have is None or b.kind not in ("storage-texture", "texture"):
+        if have is None:
             return
-        if b.kind == "storage-texture":
-            declared = _storage_format(b)
-            if have == declared:
+        if b.storage_format is not None:
+            if have == b.storage_format:
                 return
-            want = f"storage texture declared {declared}"
-        elif b.type.startswith("texture_depth") and not format_info(have).depth:
-            want = f"{b.type.split('<')[0]} (a depth format)"
+            want = f"storage texture declared {b.storage_format}"
+        elif b.depth and not format_info(have).depth:
+            want = "depth texture (a depth format)"
         else:
             return
         name = getattr(value, "label", "") or "the texture"  # views are labelled by resource
         hint = " (depth made on another backend arrives as r32float)" if "@" in name else ""
-        raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' "
-                          f"({_declared_at(prog.source, b.name)}) is a {want}, but '{name}' "
-                          f"is {have}{hint}")
-
-    def _check_extra(self, prog: Program, values: dict[str, Any], path: str) -> None:
-        extra = [k for k in values if k not in prog.bindings]
-        if extra:
-            raise ShaderError(f"pass '{self.pass_.name}': {path} has no binding named "
-                              f"{', '.join(extra)} (it declares "
-                              f"{', '.join(sorted(prog.bindings)) or 'none'})")
+        raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' ({b.where}) is a "
+                          f"{want}, but '{name}' is {have}{hint}")
 
     def dispatch(self, *, threads: tuple[int, ...], shader: str | None = None,
                  entry: str = "main", defines: dict[str, object] | None = None,
@@ -355,15 +536,16 @@ class PassContext(SlotContext):
         formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
         prog = self.program("compute", shader=shader, defines=defines,
                             formats={k: v for k, v in formats.items() if v})
-        self._check_extra(prog, bindings, shader or self.pass_.shader or "")
+        check_bindings(self.pass_.name, prog.name, prog.bindings, bindings)
         values = {**self.executor.scene_bindings(), **bindings}
         groups = tuple(range(len(prog.layouts)))
         bgs = self.bind(prog, values, groups=groups)
+        module, main = prog.stages["comp"]
+        entry = main if entry == "main" else entry  # WGSL may name another entry point
         pipe = prog.pipelines.get(entry)
         if pipe is None:
             pipe = prog.pipelines[entry] = self.device.create_compute_pipeline(
-                layout=prog.pipeline_layout, compute={"module": prog.module,
-                                                      "entry_point": entry},
+                layout=prog.pipeline_layout, compute={"module": module, "entry_point": entry},
                 label=f"{self.pass_.name}:{entry}")
         cp = self.encoder.begin_compute_pass(label=self.pass_.name,
                                              timestamp_writes=self._timestamps())
@@ -387,28 +569,30 @@ class PassContext(SlotContext):
         formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
         prog = self.program("render", shader=shader, defines=defines,
                             formats={k: v for k, v in formats.items() if v})
-        self._check_extra(prog, {**bindings, "camera": 0, "lights": 0}, shader or
-                          self.pass_.shader or "")
+        check_bindings(self.pass_.name, prog.name, [*prog.bindings, "camera", "lights"],
+                       bindings)
         targets = tuple(self.format(slot) for slot, _ in color)
         dfmt = self.format(depth[0]) if depth is not None else None
         key = ("scene", targets, dfmt, depth_compare, depth_write, cull, str(blend))
         pipe = prog.pipelines.get(key)
         if pipe is None:
             frag = None
-            if targets:
-                frag = {"module": prog.module, "entry_point": "fs_main",
+            if targets and "frag" not in prog.stages:
+                raise ShaderError(f"pass '{self.pass_.name}': {prog.name} has no fragment "
+                                  f"shader to write {', '.join(s for s, _ in color)}")
+            if "frag" in prog.stages and (targets or prog.paths[0].suffix != ".wgsl"):
+                module, main = prog.stages["frag"]
+                frag = {"module": module, "entry_point": main,
                         "targets": [{"format": f, **({"blend": blend} if blend else {})}
                                     for f in targets]}
             ds = None
             if dfmt is not None:
                 ds = {"format": dfmt, "depth_write_enabled": depth_write,
                       "depth_compare": depth_compare}
-            from .gpu_scene import VERTEX_BUFFERS
-
             pipe = prog.pipelines[key] = self.device.create_render_pipeline(
                 layout=prog.pipeline_layout,
-                vertex={"module": prog.module, "entry_point": "vs_main",
-                        "buffers": VERTEX_BUFFERS},
+                vertex={"module": prog.stages["vert"][0], "entry_point":
+                        prog.stages["vert"][1], "buffers": VERTEX_BUFFERS},
                 primitive={"topology": "triangle-list", "cull_mode": cull,
                            "front_face": "ccw"},
                 depth_stencil=ds, fragment=frag, label=f"{self.pass_.name}:scene")
@@ -517,10 +701,17 @@ class Executor(FrameExecutor):
     def buffer(self, resource: str) -> Any:
         return self._buffers[resource]
 
-    def view(self, resource: str) -> Any:
-        if resource not in self._views:
-            self._views[resource] = self.texture(resource).create_view(label=resource)
-        return self._views[resource]
+    def view(self, resource: str, *, mip: int | None = None) -> Any:
+        """The resource's view (every mip), or a view of mip ``mip`` alone."""
+        key = resource if mip is None else f"{resource}@mip{mip}"
+        if key not in self._views:
+            tex = self.texture(resource)
+            if mip is not None and not 0 <= mip < tex.mip_level_count:
+                raise ShaderError(f"'{resource}' has {tex.mip_level_count} mip levels, no "
+                                  f"mip {mip}")
+            self._views[key] = tex.create_view(label=resource) if mip is None else \
+                tex.create_view(base_mip_level=mip, mip_level_count=1, label=resource)
+        return self._views[key]
 
     def format_of(self, value: Any) -> str | None:
         tex = getattr(value, "texture", None)
@@ -539,7 +730,7 @@ class Executor(FrameExecutor):
         self.device.device.queue.write_buffer(buf, 0, data)
         return buf
 
-    def as_resource(self, value: Any, b: BindingInfo, owner: Pass) -> Any:
+    def as_resource(self, value: Any, b: Binding, owner: Pass) -> Any:
         if isinstance(value, Settings):
             return {"buffer": self.uniform(owner.name, b.name, value.pack())}
         if isinstance(value, np.ndarray | bytes):

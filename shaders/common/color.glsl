@@ -1,4 +1,4 @@
-// display encoding (twin of color.wgsl)
+// display encoding
 #ifndef RFW_COLOR_GLSL
 #define RFW_COLOR_GLSL
 

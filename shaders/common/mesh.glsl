@@ -1,4 +1,4 @@
-// scene geometry: vertex layout, material (set 2) and instance (set 3) (twin of mesh.wgsl)
+// scene geometry: vertex layout, material (set 2) and instance (set 3)
 //
 // a vertex shader defines MESH_VERTEX_INPUT before including this file to declare the
 // vertex attributes (WGSL's VertexIn): one buffer per attribute, see gpu_scene.VERTEX_BUFFERS

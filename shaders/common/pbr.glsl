@@ -1,5 +1,5 @@
 // metallic-roughness BRDF (GGX, Smith height-correlated, Schlick) and punctual lights
-// (twin of pbr.wgsl; needs scene.glsl for `lights`)
+// (needs scene.glsl for `lights`)
 #ifndef RFW_PBR_GLSL
 #define RFW_PBR_GLSL
 

@@ -1,7 +1,7 @@
-// camera and lights: set 1, shared by every pass that shades or projects (twin of scene.wgsl)
+// camera and lights: set 1, shared by every pass that shades or projects
 //
-// byte layouts are WGSL's (rfw/backends/gpu_scene.py writes them); std140 gives the same
-// offsets for these members, and the explicit offsets make glslang reject any drift.
+// byte layouts are rfw/backends/scene_data.py's; std140 gives them, and the explicit offsets
+// make glslang reject any drift.
 // matrices are column-major in both languages.
 #ifndef RFW_SCENE_GLSL
 #define RFW_SCENE_GLSL
@@ -40,13 +40,9 @@ vec3 world_from_depth(vec2 p, vec2 size, float depth) {
     return h.xyz / h.w;
 }
 
-// WebGPU clip space to Vulkan's: both map depth 0..1 and framebuffer y downward, but Vulkan's
-// ndc +y points down. negating y puts every vertex at the framebuffer position WebGPU gives
-// it (exactly what a negative-height viewport does), so images, depth and the triangle's
-// framebuffer-space winding are WebGPU's: the pipeline keeps WebGPU's front face
-// (ccw -> VK_FRONT_FACE_COUNTER_CLOCKWISE) and a normal, positive-height viewport.
-vec4 vk_clip(vec4 clip) {
-    return vec4(clip.x, -clip.y, clip.z, clip.w);
-}
+// clip space is WebGPU's (ndc +y up) on both backends: wgpu reads the SPIR-V as is, and the
+// vk backend draws with a negative-height viewport, which puts every vertex at the
+// framebuffer position WebGPU gives it; images, depth and the framebuffer-space winding (so
+// the front face, ccw) are the same on both.
 
 #endif

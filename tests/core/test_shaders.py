@@ -1,10 +1,11 @@
-"""WGSL preprocessing, reflection, and errors that point at the user's file and line."""
+"""Which files make a pass's program; WGSL preprocessing and reflection (for wgpu-only
+plugins); errors that point at the user's file and line, GLSL and WGSL alike."""
 
 from pathlib import Path
 
 import pytest
 
-from rfw.shaders import ShaderError, explain, preprocess, reflect
+from rfw.shaders import ShaderError, explain, preprocess, program_files, reflect
 
 
 def write(tmp: Path, name: str, text: str) -> Path:
@@ -70,9 +71,37 @@ def test_compile_errors_point_at_the_original_file(tmp_path, device):
     bad = write(tmp_path, "bad.comp.wgsl", '#include "inc.wgsl"\n\n@compute @workgroup_size(1)\n'
                 "fn main() {\n    let x: f32 = undefined_thing;\n}\n")
     with pytest.raises(ShaderError) as e:
-        ShaderCache(device).program(bad, {}, "compute", {})
+        ShaderCache(device).program([bad], {}, "compute", {})
     assert f"{bad}:5" in str(e.value)
     assert "undefined_thing" in str(e.value)
+
+
+def test_glsl_compile_errors_point_at_the_original_file(tmp_path, device, monkeypatch):
+    from rfw.backends.wgpu_backend import ShaderCache
+
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+    write(tmp_path, "inc.glsl", "float helper() { return 1.0; }\n")
+    bad = write(tmp_path, "bad.comp.glsl", '#version 460\n#include "inc.glsl"\n'
+                "layout(local_size_x = 1) in;\nvoid main() {\n    float x = undefined_thing;\n}\n")
+    with pytest.raises(ShaderError) as e:
+        ShaderCache(device).program([bad], {}, "compute", {}, owner="p")
+    assert str(e.value).startswith(f"pass 'p': {bad}:5: ")
+    assert "undefined_thing" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_program_files_is_one_rule(tmp_path):
+    for name in ("fwd.vert.glsl", "fwd.frag.glsl", "post.comp.glsl", "old.wgsl"):
+        write(tmp_path, name, "")
+    # a bare name: every <name>.<stage>.glsl beside the pass, in stage order
+    assert program_files(tmp_path, "fwd") == [tmp_path / "fwd.vert.glsl",
+                                              tmp_path / "fwd.frag.glsl"]
+    assert program_files(tmp_path, "post") == [tmp_path / "post.comp.glsl"]
+    assert program_files(tmp_path, "post.comp.glsl") == [tmp_path / "post.comp.glsl"]
+    assert program_files(tmp_path, "old.wgsl") == [tmp_path / "old.wgsl"]
+    with pytest.raises(ShaderError, match=r"pass 'p': no shader nope\.<stage>\.glsl in "):
+        program_files(tmp_path, "nope", owner="p")
+    with pytest.raises(ShaderError, match=r"pass 'p': shader .*gone\.comp\.glsl not found"):
+        program_files(tmp_path, "gone.comp.glsl", owner="p")
 
 
 def test_explain_maps_lines(tmp_path):

@@ -21,10 +21,10 @@ from rfw.graph import GraphBuilder, History, Texture
 from rfw.render import render
 from rfw.scene import default_scene
 from rfw.shaders import ShaderError
+from rfw.spirv import ShaderCompileError
 from vkext.backend import render_vk
 from vkext.commands import one_time
 from vkext.executor import VkExecutor, fit_plan
-from vkext.spirv import ShaderCompileError
 
 from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from vkext.spirv import ShaderCompileError, compile_glsl, reflect
+from rfw.spirv import ShaderCompileError, compile_glsl, reflect
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,8 +18,9 @@ pytestmark = pytest.mark.skipif(shutil.which("glslangValidator") is None,
 
 
 @pytest.fixture(autouse=True)
-def private_cache(private_spirv_cache):
-    pass
+def private_cache(tmp_path, monkeypatch):
+    """A SPIR-V cache of the test's own: shaders compile afresh, nothing shared is touched."""
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
 
 
 def write(folder, name, text):
