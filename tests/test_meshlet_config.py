@@ -1,9 +1,13 @@
 """configs/meshlet.toml: the deferred pipeline on Vulkan with a meshlet/vertex G-buffer
 variant and the culling switches ``culling.cone``, ``culling.frustum``, ``culling.occlusion``
-(two-phase: gbuffer early, hiz, gbuffer_late) and ``culling.triangles``."""
+(two-phase: cull and gbuffer early, hiz, cull_late and gbuffer_late) and
+``culling.triangles``; the meshlet buffers (indirect commands, counters, visibility) are
+graph resources whose barriers the compiler plans and ``rfw graph plan`` prints."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +21,7 @@ from .conftest import tiny_scene
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "meshlet.toml"
 SLOTS = ("albedo", "normal", "material", "emissive", "depth")
-MESHLET_ORDER = ("gbuffer", "hiz", "gbuffer_late", "lighting", "tonemap")
+MESHLET_ORDER = ("cull", "gbuffer", "hiz", "cull_late", "gbuffer_late", "lighting", "tonemap")
 
 
 def _config(*sets: str):
@@ -39,8 +43,9 @@ def test_every_pass_is_pinned_to_vk_and_defaults_cull_everything():
                           "culling.occlusion": "true", "culling.triangles": "false",
                           "debug": "none", "geometry": "meshlet"}
     assert _order(cfg) == MESHLET_ORDER
-    assert _params(cfg, "gbuffer")["phase"] == "early"
-    assert _params(cfg, "gbuffer_late")["phase"] == "late"
+    for early, late in (("cull", "cull_late"), ("gbuffer", "gbuffer_late")):
+        assert _params(cfg, early)["phase"] == "early"
+        assert _params(cfg, late)["phase"] == "late"
 
 
 def test_vertex_geometry_wires_lighting_to_the_vertex_gbuffer():
@@ -61,8 +66,8 @@ def test_geometry_wins_over_the_culling_switches(sets):
 
 def test_occlusion_off_is_one_pass_without_a_pyramid():
     cfg = _config("culling.occlusion=false")
-    assert _order(cfg) == ("gbuffer", "lighting", "tonemap")
-    assert _params(cfg, "gbuffer")["phase"] == "single"
+    assert _order(cfg) == ("cull", "gbuffer", "lighting", "tonemap")
+    assert _params(cfg, "gbuffer")["phase"] == _params(cfg, "cull")["phase"] == "single"
     back = apply_overrides(cfg, ["geometry=vertex", "geometry=meshlet", "culling.occlusion=on"])
     assert back.passes == load_config(CONFIG).passes
 
@@ -73,6 +78,8 @@ def test_switches_take_any_boolean_spelling(spelling):
     for name in ("gbuffer", "gbuffer_late"):
         p = _params(cfg, name)
         assert (p["cone"], p["frustum"]) == (False, False)
+    for name in ("cull", "cull_late"):  # instance culling follows the frustum switch
+        assert _params(cfg, name)["frustum"] is False
 
 
 def test_triangles_and_debug_colors_reach_both_phases():
@@ -123,3 +130,38 @@ def test_both_geometries_render_the_same_image():
     finally:
         device.destroy()
     device.check_validation()
+
+
+def _plan_barriers(*args: str) -> list[str]:
+    out = subprocess.run([sys.executable, "-m", "rfw.cli", "graph", "plan", str(CONFIG), *args],
+                         capture_output=True, text=True, cwd=ROOT, check=False)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith("barriers ("))
+    return [line.strip() for line in lines[start + 1:] if line.startswith("  ")]
+
+
+def test_graph_plan_prints_the_meshlet_buffer_barriers():
+    barriers = _plan_barriers()
+
+    def one(pass_: str, resource: str) -> str:
+        found = [b for b in barriers if b.startswith(f"{pass_} / {resource}:")]
+        assert len(found) == 1, f"{pass_} / {resource}: {found}"
+        return found[0]
+    # the culling pass's commands become indirect draws
+    for cull, draw in (("cull", "gbuffer"), ("cull_late", "gbuffer_late")):
+        assert one(draw, f"{cull}.commands").endswith(
+            "COMPUTE_SHADER:SHADER_STORAGE_WRITE -> DRAW_INDIRECT:INDIRECT_COMMAND_READ")
+    # counters and visibility: compute writes -> task/mesh read-writes -> compute, and the
+    # next frame's clear waits for the last frame's shaders (persistent buffers)
+    for resource in ("cull.counters", "cull.visibility"):
+        assert "COMPUTE_SHADER:SHADER_STORAGE_WRITE -> " \
+            "FRAGMENT_SHADER|MESH_SHADER_EXT|TASK_SHADER_EXT:SHADER_STORAGE_READ|" \
+            "SHADER_STORAGE_WRITE" in one("gbuffer", resource)
+        assert "TASK_SHADER_EXT:SHADER_STORAGE_WRITE -> COMPUTE_SHADER:" in \
+            one("cull_late", resource)
+        assert "TASK_SHADER_EXT:SHADER_STORAGE_WRITE -> COMPUTE_SHADER:" in one("cull", resource)
+        assert one("gbuffer_late", resource)
+    # negative control: a graph that keeps only the culling pass plans no indirect read
+    only_cull = _plan_barriers("--output", "cull.commands")
+    assert only_cull and not any("INDIRECT_COMMAND_READ" in b for b in only_cull)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from .meshlet import meshlet_counters
+
 
 def accel_stats(ex: Any) -> dict[str, Any] | None:
     """The acceleration structures the frame's builder pass made: counts, bytes before and
@@ -19,13 +21,13 @@ def accel_stats(ex: Any) -> dict[str, Any] | None:
 
 def culling_counters(ex: Any) -> dict[str, Any] | None:
     """The last frame's GPU culling counters of the meshlet passes, in timings.json's
-    names. ``culled_occlusion`` is None where no pass runs the occlusion test (no late
-    phase), ``triangles_culled_backface`` where no pass culls triangles."""
-    meshlets = [p for p in ex.passes.values() if getattr(p, "meshlets", None) is not None]
-    last = next((p.meshlets.last for p in meshlets if p.meshlets.last), None)
+    names, read back through the executor (call before it is destroyed).
+    ``culled_occlusion`` is None where no pass runs the occlusion test (no late phase),
+    ``triangles_culled_backface`` where no pass culls triangles."""
+    last = meshlet_counters(ex)
     if not last:
         return None
-    params = [getattr(p, "params", None) for p in meshlets]
+    params = [p.params for p in ex.passes.values() if getattr(p, "type", None) == "mesh"]
     occlusion = any(getattr(q, "phase", None) == "late" and not getattr(q, "freeze", False)
                     for q in params)
     triangles = any(getattr(q, "triangles", False) for q in params)

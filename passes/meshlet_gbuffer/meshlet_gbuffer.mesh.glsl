@@ -1,6 +1,7 @@
 #version 460
 // one meshlet per workgroup: the twin of gbuffer.vert.glsl for the meshlet's vertices (the
-// same expressions, the same y flip, invariant position), and its packed 8-bit triangles.
+// same expressions, WebGPU clip space flipped by the render pass's viewport, invariant
+// position), and its packed 8-bit triangles.
 // passes/gbuffer/gbuffer.frag.glsl shades the result unchanged.
 //
 // F_TRIANGLES culls back-facing triangles here (gl_CullPrimitiveEXT) before the rasterizer
@@ -14,10 +15,15 @@
 layout(local_size_x = 32) in;
 layout(triangles, max_vertices = 64, max_primitives = 124) out;
 
-layout(set = 0, binding = 9, std430) readonly buffer MPositions { vec4 m_positions[]; };
-layout(set = 0, binding = 10, std430) readonly buffer MNormals { vec4 m_normals[]; };
-layout(set = 0, binding = 11, std430) readonly buffer MUvs { vec4 m_uvs[]; };
-layout(set = 0, binding = 12, std430) readonly buffer MTangents { vec4 m_tangents[]; };
+// the scene's CameraBlock (scene.glsl): the camera the mesh shader projects with
+layout(set = 0, binding = 0, std140) uniform view_camera { MCamera m_camera; };
+layout(set = 0, binding = 2, std430) readonly buffer meshlets { uvec4 m_meshlets[]; };
+layout(set = 0, binding = 3, std430) readonly buffer vertices { uint m_vertices[]; };
+layout(set = 0, binding = 4, std430) readonly buffer triangles { uint m_triangles[]; };
+layout(set = 0, binding = 9, std430) readonly buffer positions { vec4 m_positions[]; };
+layout(set = 0, binding = 10, std430) readonly buffer normals { vec4 m_normals[]; };
+layout(set = 0, binding = 11, std430) readonly buffer uvs { vec4 m_uvs[]; };
+layout(set = 0, binding = 12, std430) readonly buffer tangents { vec4 m_tangents[]; };
 
 taskPayloadSharedEXT MPayload payload;
 
@@ -40,11 +46,6 @@ perprimitiveEXT out gl_MeshPerPrimitiveEXT {
 shared vec3 s_screen[64];  // pixels (x right, y up) and w of each vertex
 shared uint s_backface;
 
-// WebGPU clip space to Vulkan's (scene.glsl's vk_clip)
-vec4 vk_clip(vec4 clip) {
-    return vec4(clip.x, -clip.y, clip.z, clip.w);
-}
-
 void main() {
     uint row = payload.meshlets[gl_WorkGroupID.x];
     uvec4 m = m_meshlets[row];
@@ -61,7 +62,7 @@ void main() {
     for (uint v = gl_LocalInvocationIndex; v < vcount; v += 32u) {
         uint k = m_vertices[m.x + v];
         vec4 clip = m_camera.view_proj * (model * vec4(m_positions[k].xyz, 1.0));
-        gl_MeshVerticesEXT[v].gl_Position = vk_clip(clip);
+        gl_MeshVerticesEXT[v].gl_Position = clip;  // WebGPU's clip space (scene.glsl)
         o_normal[v] = (normal * vec4(m_normals[k].xyz, 0.0)).xyz;
         vec4 t = m_tangents[k];
         o_tangent[v] = vec4((model * vec4(t.xyz, 0.0)).xyz, mirrored ? -t.w : t.w);

@@ -2,7 +2,7 @@
 
 from passes.gbuffer.gbuffer import GBufferPass
 from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment, Texture
+from rfw.graph import Attachment, Buffer, DepthAttachment, Storage, Texture
 from rfw.passes import SettingsError
 
 PHASES = ("single", "early", "late")
@@ -11,14 +11,15 @@ PHASES = ("single", "early", "late")
 @register_pass("meshlet_gbuffer")
 class MeshletGBufferPass(RenderPass):
     """The ``gbuffer`` pass's attachments, rasterised from meshlets (64 vertices, 124
-    triangles; ``vkext.meshlet``). GPU-driven: a compute pass culls whole instances against
-    the frustum and writes one indirect command per instance; per material one
-    ``vkCmdDrawMeshTasksIndirectEXT`` launches task shaders that cull 32 meshlets per
-    workgroup (normal cone, bounding sphere against the frustum, and in the late phase the
-    depth pyramid; all conservative); a mesh shader emits the survivors (optionally culling
+    triangles; ``vkext.meshlet``). GPU-driven: a ``meshlet_cull`` pass of the same phase
+    culls whole instances and writes one indirect command per instance (``commands``); per
+    material one ``vkCmdDrawMeshTasksIndirectEXT`` launches task shaders that cull 32
+    meshlets per workgroup (normal cone, bounding sphere against the frustum, and in the
+    late phase the depth pyramid; all conservative), adding to ``counters`` and recording
+    ``visibility`` (both in place); a mesh shader emits the survivors (optionally culling
     back-facing triangles) and ``passes/gbuffer/gbuffer.frag.glsl`` shades them unchanged.
-    Vulkan only (``VK_EXT_mesh_shader``). The counters are read through ``self.meshlets`` (a
-    ``vkext.meshlet.MeshletScene``): ``counters()`` while the scene lives, ``last`` after.
+    Vulkan only (``VK_EXT_mesh_shader``); every buffer is a graph resource, so the compiler
+    plans every barrier. Bindings are reflected from the shaders.
 
     ``phase``: ``single`` (cone and frustum culling in one pass) or two-phase occlusion
     culling as two instances of this pass with a ``depth_pyramid`` between them:
@@ -33,13 +34,19 @@ class MeshletGBufferPass(RenderPass):
     draws nothing and the early phase culls as ``single``: the pyramid is the view's)."""
 
     shader = "meshlet_gbuffer.mesh.glsl"
+    type = "mesh"
     requires = ("VK_EXT_mesh_shader",)
     backend = "vk"
+    inputs = {
+        "commands": Buffer(usage=("indirect",), desc="indirect commands (meshlet_cull)"),
+        "counters": Storage(desc="the frame's culling counters (added to)"),
+        "visibility": Storage(desc="visibility words: read (early), recorded (single, late)"),
+    }
     outputs = dict(GBufferPass.outputs)
 
     class Params(Settings):
         cone: bool = True  # cull meshlets whose normal cone faces away from the camera
-        frustum: bool = True  # cull instances and meshlets outside the frustum
+        frustum: bool = True  # cull meshlets outside the frustum
         phase: str = "single"  # single | early | late (two-phase occlusion culling)
         triangles: bool = False  # cull back-facing triangles in the mesh shader
         colors: bool = False  # debug view: a color per meshlet as the albedo
@@ -50,29 +57,29 @@ class MeshletGBufferPass(RenderPass):
             raise SettingsError(f"{self.name}: setting 'phase' must be one of "
                                 f"{', '.join(PHASES)}, got {self.params.phase!r}")
         if self.params.phase != "late":
-            return {}, dict(self.outputs)
+            return dict(self.inputs), dict(self.outputs)
         # the early phase's G-buffer, loaded and drawn over in place, and the pyramid
         ins = {k: Attachment(desc=f"{k} of the early phase") for k in self.outputs
                if k != "depth"}
         ins["depth"] = DepthAttachment(None, desc="depth of the early phase")
         ins["pyramid"] = Texture(stages=("TASK_SHADER_EXT",),
                                  desc="max-depth pyramid of the early depth (depth_pyramid)")
-        return ins, {}
+        return {**self.inputs, **ins}, {}
 
     def record(self, ctx) -> None:
-        from vkext.executor import ImageBinding
-        from vkext.meshlet import draw_meshlets, meshlet_scene
+        from vkext.meshlet import draw_meshlets, flags_of
 
-        self.meshlets = meshlet_scene(ctx.scene) if ctx.scene is not None else None
         p = self.params
-        late = p.phase == "late"
+        phase = p.phase
+        if p.freeze and phase != "single":
+            if phase == "late":
+                return  # frozen: no occlusion culling (the pyramid is the view's)
+            phase = "single"
+        late = phase == "late"
         clear = None if late else (0.0, 0.0, 0.0, 0.0)
         color = [(k, clear) for k in ("albedo", "normal", "material", "emissive")]
-        pyramid = None
-        if late:
-            name = ctx.resource("pyramid")
-            pyramid = ImageBinding(name, ctx.executor.image(name), ctx.executor.view(name))
-        draw_meshlets(ctx, color=color, depth=("depth", None if late else 1.0), cone=p.cone,
-                      frustum=p.frustum, phase=p.phase, pyramid=pyramid,
-                      triangles=p.triangles, colors=p.colors, freeze=p.freeze,
-                      depth_compare="less-equal")
+        # the cone test is the perspective one (apex to camera position): back faces only
+        flags = flags_of(cone=p.cone, frustum=p.frustum, occlusion=late,
+                         triangles=p.triangles, colors=p.colors)
+        draw_meshlets(ctx, color=color, depth=("depth", None if late else 1.0), flags=flags,
+                      phase=phase, freeze=p.freeze, depth_compare="less-equal", cull="back")

@@ -23,8 +23,14 @@
 
 layout(local_size_x = TASK_GROUP) in;
 
+// vertex_offset, triangle_offset (words), vertex_count, triangle_count
+layout(set = 0, binding = 2, std430) readonly buffer meshlets { uvec4 m_meshlets[]; };
+layout(set = 0, binding = 5, std430) readonly buffer spheres { vec4 m_spheres[]; };
+layout(set = 0, binding = 6, std430) readonly buffer cones { uint m_cones[]; };
+layout(set = 0, binding = 7, std430) readonly buffer cone_apex { vec4 m_cone_apex[]; };
 // one word per (draw, meshlet): 1 if the meshlet was visible at the end of the last frame
-layout(set = 0, binding = 16, std430) buffer MVisibility { uint m_visibility[]; };
+// (a persistent graph buffer, made by passes/meshlet_cull)
+layout(set = 0, binding = 16, std430) buffer visibility { uint m_visibility[]; };
 
 #ifdef OCCLUSION
 // this frame's max-depth pyramid (passes/depth_pyramid) of what the early phase drew:

@@ -32,8 +32,8 @@ from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch
 
 ROOT = Path(__file__).resolve().parents[2]
-OFF = ["gbuffer.cone=false", "gbuffer.frustum=false"]
-ON = ["gbuffer.cone=true", "gbuffer.frustum=true"]
+OFF = ["culling.cone=false", "culling.frustum=false"]
+ON = ["culling.cone=true", "culling.frustum=true"]
 
 
 def _config(name: str, size: str, *sets: str):
@@ -43,8 +43,7 @@ def _config(name: str, size: str, *sets: str):
 def _render(vk_device, scene, name: str, size: str, *sets: str):
     r = render_vk(_config(name, size, *sets), scene=scene, device=vk_device)
     assert r.timings["validation"]["messages"] == 0
-    counters = getattr(r.executor.passes["gbuffer"], "meshlets", None)
-    return r.images["tonemap.ldr"].astype(np.int16), counters.last if counters else None
+    return r.images["tonemap.ldr"].astype(np.int16), r.timings.get("culling")
 
 
 def _expected_total(scene) -> int:
@@ -57,8 +56,9 @@ def _expected_total(scene) -> int:
 
 def _check_counters(c: dict[str, int], scene) -> None:
     assert c["meshlets_total"] == _expected_total(scene)
-    assert c["considered"] == c["meshlets_total"]
-    assert c["drawn"] + c["cone_culled"] + c["frustum_culled"] == c["considered"]
+    assert c["meshlets_considered"] == c["meshlets_total"]
+    assert c["meshlets_drawn"] + c["culled_cone"] + c["culled_frustum"] == \
+        c["meshlets_considered"]
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +69,7 @@ def courtyard():
 def test_config_runs_every_pass_on_vk_with_mesh_shaders():
     cfg = load_config(ROOT / "configs" / "deferred_meshlet.toml")
     assert cfg.entry("gbuffer").use == "meshlet_gbuffer"
+    assert cfg.entry("cull").use == "meshlet_cull"
     assert not cfg.entry("shadow").enabled
     assert all(p.backend == "vk" for p in cfg.passes)
     from passes.gbuffer.gbuffer import GBufferPass
@@ -89,7 +90,7 @@ def test_tiny_scene_matches_the_vertex_path(vk_device):
     assert np.array_equal(on, off)
     for c in (c_off, c_on):
         _check_counters(c, scene)
-    assert c_off["drawn"] == c_off["meshlets_total"] == 2
+    assert c_off["meshlets_drawn"] == c_off["meshlets_total"] == 2
 
 
 def test_courtyard_matches_the_vertex_path_and_culls(vk_device, courtyard):
@@ -111,9 +112,9 @@ def test_courtyard_matches_the_vertex_path_and_culls(vk_device, courtyard):
     assert np.array_equal(on, off)
     _check_counters(c_off, courtyard)
     _check_counters(c_on, courtyard)
-    assert c_off["drawn"] == c_off["meshlets_total"] and c_off["cone_culled"] == 0
-    assert c_on["cone_culled"] > 0 and c_on["frustum_culled"] > 0  # measured: 30 and 447
-    assert c_on["drawn"] < c_on["meshlets_total"]
+    assert c_off["meshlets_drawn"] == c_off["meshlets_total"] and c_off["culled_cone"] == 0
+    assert c_on["culled_cone"] > 0 and c_on["culled_frustum"] > 0  # measured: 30 and 447
+    assert c_on["meshlets_drawn"] < c_on["meshlets_total"]
 
 
 @pytest.mark.parametrize("cone, frustum", [(True, False), (False, True)])
@@ -122,10 +123,10 @@ def test_each_test_alone_is_conservative(vk_device, courtyard, cone, frustum):
         pytest.skip("no VK_EXT_mesh_shader")
     off, _ = _render(vk_device, courtyard, "deferred_meshlet", "96x54", *OFF)
     one, c = _render(vk_device, courtyard, "deferred_meshlet", "96x54",
-                     f"gbuffer.cone={str(cone).lower()}", f"gbuffer.frustum={str(frustum).lower()}")
+                     f"culling.cone={str(cone).lower()}", f"culling.frustum={str(frustum).lower()}")
     assert np.array_equal(one, off)
     _check_counters(c, courtyard)
-    assert (c["cone_culled"] > 0) == cone and (c["frustum_culled"] > 0) == frustum
+    assert (c["culled_cone"] > 0) == cone and (c["culled_frustum"] > 0) == frustum
 
 
 def test_render_and_drop_leaves_no_objects(vk_device):

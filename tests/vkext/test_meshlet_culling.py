@@ -21,7 +21,13 @@ from rfw.meshlets import cached_meshlets, pack_for_gpu
 from rfw.scene import default_scene
 from vkext.backend import render_vk
 from vkext.executor import VkExecutor, fit_plan
-from vkext.meshlet import MAX_TRIANGLES, MAX_VERTICES, meshlet_scene
+from vkext.meshlet import (
+    MAX_TRIANGLES,
+    MAX_VERTICES,
+    meshlet_counters,
+    meshlet_scene,
+    meshlet_visibility,
+)
 from vkext.scene import VkScene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -71,8 +77,7 @@ def _frames(vk_device, scene, cameras, *sets: str, settings=None):
             vscene.camera = cam
             vscene.set_viewport(cfg.size)
             ex.run(1)
-            ms = meshlet_scene(vscene)
-            out.append((ex.read("tonemap.ldr").astype(np.int16), ms.counters()))
+            out.append((ex.read("tonemap.ldr").astype(np.int16), meshlet_counters(ex)))
     finally:
         if ex is not None:
             ex.destroy()
@@ -157,7 +162,8 @@ def test_meshlet_colors_replace_the_albedo(vk_device, courtyard):
 
 def test_frozen_culling_keeps_the_first_camera(vk_device, courtyard):
     cams = _orbit(courtyard, 2, 60.0)
-    frozen = {0: {"gbuffer": {"freeze": True}, "gbuffer_late": {"freeze": True}}}
+    frozen = {0: {name: {"freeze": True} for name in ("cull", "gbuffer", "cull_late",
+                                                      "gbuffer_late")}}
     (_, a), (image, b) = _frames(vk_device, courtyard, cams, settings=frozen)
     # culled from the first camera while viewing from the second: the same meshlets
     assert (b["drawn"], b["frustum_culled"], b["cone_culled"]) == \
@@ -222,9 +228,9 @@ def test_frustum_and_cone_visibility_matches_numpy(vk_device, courtyard):
                         readback=tuple(plan.outputs), memory_info=info)
         ex.run(1)
         ms = meshlet_scene(vscene)
-        gpu = ms.visibility()
+        gpu = meshlet_visibility(ex)
         ref, margins = _reference(courtyard, vscene, ms)
-        counters = ms.counters()
+        counters = meshlet_counters(ex)
     finally:
         if ex is not None:
             ex.destroy()

@@ -1,7 +1,10 @@
-// meshlet data shared by the task, mesh and draw-culling shaders (set 0, written by
-// vkext/meshlet.py). every mesh of the scene lives in one set of arrays: meshlet rows are
-// rebased so that vertex_offset / triangle_offset index the global `m_vertices` /
-// `m_triangles` arrays and meshlet vertices index the global attribute arrays.
+// what the meshlet passes share (passes/meshlet_cull, passes/meshlet_gbuffer): flags,
+// phases, counters, and the set 0 buffers every one of their shaders reads. the buffers are
+// bound by name (the block names): the scene's meshlet data from vkext/meshlet.py, the
+// counters, commands and visibility from the frame graph. every mesh of the scene lives in
+// one set of arrays: meshlet rows are rebased so that vertex_offset / triangle_offset index
+// the global `m_vertices` / `m_triangles` arrays and meshlet vertices index the global
+// attribute arrays.
 #ifndef RFW_MESHLET_GLSL
 #define RFW_MESHLET_GLSL
 
@@ -43,10 +46,8 @@ struct MCamera {
     vec4 position;
 };
 
-// the scene's CameraBlock (scene.glsl): the camera the mesh shader projects with
-layout(set = 0, binding = 0, std140) uniform MCameraBlock { MCamera m_camera; };
-// the camera the culling tests use: a copy of m_camera, kept when culling is frozen
-layout(set = 0, binding = 13, std140) uniform MCullCameraBlock { MCamera m_cull; };
+// the camera the culling tests use: the main camera, or the one kept while culling is frozen
+layout(set = 0, binding = 13, std140) uniform cull_camera { MCamera m_cull; };
 
 struct MInstance {
     mat4 model;
@@ -54,15 +55,9 @@ struct MInstance {
     vec4 bounds;     // x: largest column scale of model, y: 1 if the cone test is valid,
                      // z: -1 if model mirrors (negative determinant), else 1
 };
-layout(set = 0, binding = 1, std430) readonly buffer MInstances { MInstance m_instances[]; };
-// vertex_offset, triangle_offset (words), vertex_count, triangle_count
-layout(set = 0, binding = 2, std430) readonly buffer MMeshlets { uvec4 m_meshlets[]; };
-layout(set = 0, binding = 3, std430) readonly buffer MVertices { uint m_vertices[]; };
-layout(set = 0, binding = 4, std430) readonly buffer MTriangles { uint m_triangles[]; };
-layout(set = 0, binding = 5, std430) readonly buffer MSpheres { vec4 m_spheres[]; };
-layout(set = 0, binding = 6, std430) readonly buffer MCones { uint m_cones[]; };
-layout(set = 0, binding = 7, std430) readonly buffer MConeApex { vec4 m_cone_apex[]; };
-layout(set = 0, binding = 8, std430) buffer MCounters { uint m_counters[C_COUNT]; };
+layout(set = 0, binding = 1, std430) readonly buffer instances { MInstance m_instances[]; };
+// the frame's counters (a graph buffer: the culling pass clears it, every pass adds to it)
+layout(set = 0, binding = 8, std430) buffer counters { uint m_counters[C_COUNT]; };
 
 // one per draw (a mesh instance), sorted by material: a material's draws are one
 // vkCmdDrawMeshTasksIndirectEXT whose gl_DrawIDARB counts from m_push.draw_base
@@ -71,7 +66,7 @@ struct MDraw {
     uvec4 info;      // x: triangles of the mesh
     vec4 sphere;     // the mesh's bounding sphere (object space)
 };
-layout(set = 0, binding = 14, std430) readonly buffer MDraws { MDraw m_draws[]; };
+layout(set = 0, binding = 14, std430) readonly buffer draws { MDraw m_draws[]; };
 
 layout(push_constant) uniform MPush {
     uint draw_base;  // the first draw of this vkCmdDrawMeshTasksIndirectEXT
