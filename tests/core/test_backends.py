@@ -2,7 +2,6 @@
 groups, ``rfw run --backend NAME``, a third-party backend installed as a package, and every
 built-in pass listed in rfw's pyproject.toml."""
 
-import importlib.metadata
 import json
 import os
 import shutil
@@ -144,8 +143,9 @@ def test_every_pass_folder_is_listed_in_pyproject():
     listed = _pyproject_passes()
     assert len(pass_folders(ROOT / "passes")) >= 16
     assert unlisted(ROOT / "passes", listed) == [], "add them to pyproject.toml's rfw.passes"
-    # and installed: an editable install made before the list grew would miss them
-    installed = {ep.name: ep.value for ep in importlib.metadata.entry_points(group="rfw.passes")}
+    # and installed: an editable install made before the list grew would miss them (a tree
+    # run uninstalled reads pyproject.toml itself)
+    installed = {ep.name: ep.value for ep in plugins.entry_points("rfw.passes")}
     assert unlisted(ROOT / "passes", installed) == [], "pip install -e . again"
 
 
