@@ -184,9 +184,6 @@ class Devices:
             self.devices[backend.name] = device
         return self.devices[backend.name]
 
-    def owned(self, backend: Backend) -> bool:
-        return any(b is backend for b, _ in self.made)
-
     def close(self) -> None:
         """Destroy the devices made here, newest first (validation's leak reports arrive
         now, so a run counts messages after this)."""

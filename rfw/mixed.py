@@ -152,7 +152,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                     spec = out.spec if out.spec.type == "buffer" else \
                         out.spec.with_(size=SizeRule.fixed(r.width, r.height))
                     if r.kind != "buffer" and format_info(r.format).depth and \
-                            not get_backend(s, file=graph.source).host_writes_depth:
+                            not get_backend(s, file=graph.source, element=None).host_writes_depth:
                         spec = _depth_as_float(spec, r.format, br, _readers(decls, side,
                                                                             br), graph.source)
                     passes.append(replace(p, inputs=(), outputs=(replace(out, spec=spec),),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
 
 
 def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
-           device: Any = None, devices: Any = (), backend: str = "wgpu",
+           device: Any = None, devices: Iterable[Any] = (), backend: str = "wgpu",
            validation: bool = False, alias: bool = True) -> Result:
     """Build, compile and run ``cfg`` on ``backend`` (a name in the ``rfw.backends``
     entry-point group: ``wgpu``, ``vk`` or an installed one); returns images and timings

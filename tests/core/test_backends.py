@@ -119,6 +119,22 @@ def test_third_party_backend_in_process(demo_site, monkeypatch):
             del sys.modules[name]
 
 
+def test_a_run_on_another_backend_never_loads_vulkan(demo_site, tmp_path):
+    # the driver loads the backends a run names, nothing else: vkext (and the vulkan
+    # bindings) stay out of a frame that does not use them
+    code = ("import sys; from rfw.config import apply_overrides, load_config; "
+            "from rfw.render import render; "
+            f"cfg = apply_overrides(load_config({str(CONFIG)!r}), ['size=20x12']); "
+            "r = render(cfg, backend=sys.argv[1]); "
+            "print(r.timings['backend'], 'vkext' in sys.modules, 'vulkan' in sys.modules)")
+    for name, loaded in (("paint", "False False"), ("vk", "True True")):  # vk: the control
+        done = subprocess.run([sys.executable, "-c", code, name], cwd=tmp_path,
+                              capture_output=True, text=True, check=False,
+                              env={**os.environ, **_with_demo(demo_site)})
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.split() == [name, *loaded.split()]
+
+
 # ---------------------------------------------------------------------------------------------
 # built-in passes: listed in pyproject.toml, found through the rfw.passes entry points
 
