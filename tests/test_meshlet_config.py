@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rfw.config import apply_overrides, build, load_config
-from rfw.graph import GraphError, compile
+from rfw.graph import Buffer, GraphBuilder, GraphError, Storage, Texture, compile
 
 from .conftest import tiny_scene
 
@@ -165,3 +165,28 @@ def test_graph_plan_prints_the_meshlet_buffer_barriers():
     # negative control: a graph that keeps only the culling pass plans no indirect read
     only_cull = _plan_barriers("--output", "cull.commands")
     assert only_cull and not any("INDIRECT_COMMAND_READ" in b for b in only_cull)
+
+
+def _buffer_plan(slot):
+    g = GraphBuilder("buffers", size=(8, 8))
+    g.add_pass("make", "compute").output("buf", Buffer(64))
+    g.add_pass("rw", "compute").input("buf", "make.buf", slot)
+    (g.add_pass("read", "compute").input("buf", "make.buf", Buffer())
+     .output("out", Texture("r32float")))
+    g.output("read.out")
+    return compile(g.build(), size=(8, 8))
+
+
+def test_a_storage_input_writes_a_buffer_in_place():
+    # how meshlet_gbuffer adds to the counters and records visibility: a read-write access,
+    # and the next reader waits for its writes
+    plan = _buffer_plan(Storage())
+    (rw,) = plan.accesses["rw"]
+    assert rw.role == "modify" and rw.state.writes
+    assert [b.src.stages for b in plan.barriers if (b.pass_name, b.resource) ==
+            ("read", "make.buf")] == [frozenset({"COMPUTE_SHADER"})]
+    # negative control: a plain buffer input only reads, and the reader waits for nothing
+    plan = _buffer_plan(Buffer())
+    (r,) = plan.accesses["rw"]
+    assert r.role == "read" and not r.state.writes
+    assert not [b for b in plan.barriers if (b.pass_name, b.resource) == ("read", "make.buf")]

@@ -254,14 +254,14 @@ def scene_of(ctx: Any) -> MeshletScene:
 
 def check_capacity(ctx: Any, ms: MeshletScene) -> None:
     """The graph buffers hold every draw's command and every (draw, meshlet)'s visibility."""
-    for slot, need, setting in (("commands", COMMAND_BYTES * ms.draw_count, "max_draws"),
-                                ("visibility", 4 * ms.instance_meshlet_count,
-                                 "max_meshlets")):
-        have = ctx.buffer(slot).bytes if slot in ctx.slots else need
-        if have < need:
-            raise ShaderError(f"pass '{ctx.pass_.name}': the scene needs {need} bytes of "
-                              f"'{slot}', the graph's buffer has {have} (raise the culling "
-                              f"pass's setting '{setting}')")
+    for slot, size, count, what, setting in (
+            ("commands", COMMAND_BYTES, ms.draw_count, "drawn instances", "max_draws"),
+            ("visibility", 4, ms.instance_meshlet_count, "meshlets over its instances",
+             "max_meshlets")):
+        if slot in ctx.slots and ctx.buffer(slot).bytes < size * count:
+            raise ShaderError(f"pass '{ctx.pass_.name}': the scene has {count} {what}, more "
+                              f"than its '{slot}' buffer holds: set the meshlet_cull pass's "
+                              f"'{setting}' to at least {count}")
 
 
 def flags_of(*, cone: bool = False, frustum: bool = False, occlusion: bool = False,

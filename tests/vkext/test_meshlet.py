@@ -17,6 +17,9 @@ compute every surviving pixel, whichever meshlets are skipped.
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -151,3 +154,24 @@ def test_timings_json_reports_the_culling_counters(vk_device, courtyard):
     assert c["triangles_drawn"] > 0 and c["triangles_culled_backface"] is None
     vertex = render_vk(_config("deferred", "96x54"), scene=courtyard, device=vk_device)
     assert "culling" not in vertex.timings
+
+
+@pytest.mark.parametrize("setting", ["max_meshlets", "max_draws"])
+def test_too_small_meshlet_buffers_fail_in_one_line(vk_device, tmp_path, setting):
+    if "VK_EXT_mesh_shader" not in vk_device.caps:
+        pytest.skip("no VK_EXT_mesh_shader")
+
+    def run(value: int):
+        return subprocess.run(
+            [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" / "deferred_meshlet.toml"),
+             "--size", "32x18", "--frames", "1", "--set", f"cull.{setting}={value}", "--out",
+             str(tmp_path / str(value))], capture_output=True, text=True, cwd=tmp_path,
+            check=False)
+
+    small = run(1)
+    assert small.returncode == 2 and "Traceback" not in small.stderr
+    (line,) = small.stderr.strip().splitlines()
+    assert line.startswith("rfw: error: pass 'cull'") and f"'{setting}'" in line
+    # negative control: the size the message asks for is enough
+    need = int(re.search(r"at least (\d+)", line).group(1))
+    assert run(need).returncode == 0
