@@ -17,14 +17,14 @@ from rfw.graph.formats import format_info
 from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError
+from rfw.spirv import DescriptorInfo
 
 from .commands import barrier, image_layout, record_barriers
 from .consts import const, ffi, lib, vk
-from .fitting import twin_paths
+from .fitting import shader_paths
 from .memory import Buffer, Image, ImageView
 from .programs import Program
 from .scene import BufferRange, Sampler, new, update_descriptors
-from .spirv import DescriptorInfo
 
 _COLOR_ATTACHMENT_LAYOUTS = {"COLOR_ATTACHMENT_OPTIMAL", "GENERAL", "ATTACHMENT_OPTIMAL"}
 
@@ -101,6 +101,9 @@ class VkPassContext(SlotContext):
 
     storage = view
 
+    def mips(self, slot: str) -> int:
+        return self.executor.plan.resource(self.resource(slot)).mips
+
     def buffer(self, slot: str) -> Buffer:
         return self.executor.buffer(self.resource(slot))
 
@@ -132,7 +135,7 @@ class VkPassContext(SlotContext):
         the pass, or paths): a mesh program is its mesh shader plus, in ``stages``, an
         optional task and fragment shader."""
         if kind in ("compute", "render") and not stages:
-            paths = twin_paths(self.pass_, shader, kind)
+            paths = shader_paths(self.pass_, shader)
         else:
             paths = [self._stage_path(n) for n in (shader or self.pass_.shader, *stages)]
         return self.executor.programs.get(self.pass_, paths, defines or {}, kind)
@@ -280,7 +283,7 @@ class VkPassContext(SlotContext):
         stages beside it; bindings as for ``dispatch`` (scene camera and lights by name)."""
         raygen = shader or self.pass_.shader
         names = [raygen, *(n for n in (miss, closest_hit, any_hit) if n)]
-        paths = [twin_paths(self.pass_, n, "compute")[0] for n in names]
+        paths = [shader_paths(self.pass_, n)[0] for n in names]
         prog = self.executor.programs.get(self.pass_, paths, defines or {}, "ray_tracing")
         self._check_extra(prog, bindings)
         values = {**self.executor.scene_bindings(), **bindings}
@@ -436,7 +439,9 @@ class VkPassContext(SlotContext):
 def _viewport(cmd: Any, width: int, height: int) -> None:
     """Viewport and scissor over the whole target."""
     vp = ffi.new("VkViewport*")
-    vp.width, vp.height, vp.maxDepth = float(width), float(height), 1.0
+    # negative height: clip space is WebGPU's (y up) on both backends (scene.glsl)
+    vp.y, vp.height = float(height), -float(height)
+    vp.width, vp.maxDepth = float(width), 1.0
     sc = ffi.new("VkRect2D*")
     sc.extent.width, sc.extent.height = width, height
     lib.vkCmdSetViewport(cmd, 0, 1, vp)

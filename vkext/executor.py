@@ -4,10 +4,9 @@ Transient images and buffers live in the plan's aliased heaps (``plan_heaps``); 
 external and history ones come from a :class:`BlockAllocator`. A frame is one command buffer:
 per pass a debug label, the plan's barriers for that pass (the only synchronization between
 passes: nothing a pass records waits on anything), a timestamp before and after, and the
-pass's unchanged ``record(ctx)``. Passes run their GLSL twins (``X.comp.wgsl`` ->
-``X.comp.glsl``, ``X.wgsl`` -> ``X.vert.glsl`` + ``X.frag.glsl``); layouts are reflected
-from SPIR-V, and image descriptors are written in the layout the plan puts the image in for
-the pass.
+pass's unchanged ``record(ctx)``. Passes run the same GLSL as on wgpu (the files
+``rfw.shaders.program_files`` names); layouts are reflected from SPIR-V, and image
+descriptors are written in the layout the plan puts the image in for the pass.
 """
 
 from __future__ import annotations
@@ -20,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.base import FrameExecutor
+from rfw.context import check_sampler
 from rfw.errors import naming
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
@@ -51,15 +51,12 @@ from .device import VkDevice
 from .fitting import check_passes, fit_graph, fit_plan
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
 from .programs import Programs
-from .scene import COMPARE, Sampler, VkScene, make_sampler
+from .scene import Sampler, VkScene, make_sampler
 
 # the old home of these names: vkext.backend, vkext.mixed and passes import them from here
 __all__ = ["ImageBinding", "PassTiming", "VkExecutor", "check_passes", "fit_graph", "fit_plan"]
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
-# what ctx.sampler offers (WebGPU's names, as vkext.scene.make_sampler takes them)
-FILTERS = ("linear", "nearest")
-ADDRESSES = ("clamp-to-edge", "repeat", "mirror-repeat")
 
 
 @dataclass
@@ -242,11 +239,7 @@ class VkExecutor(FrameExecutor):
     def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
                 compare: str | None = None) -> Sampler:
         """A sampler made once per (filter, address, compare) and kept until ``destroy``."""
-        for what, value, allowed in (("filter", filter, FILTERS), ("address", address, ADDRESSES),
-                                     ("compare", compare, (None, *COMPARE))):
-            if value not in allowed:
-                raise ShaderError(f"sampler {what} '{value}' is none of "
-                                  f"{', '.join(str(a) for a in allowed)}")
+        check_sampler(filter, address, compare)
         key = (filter, address, compare)
         s = self._samplers.get(key)
         if s is None:

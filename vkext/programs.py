@@ -132,7 +132,11 @@ class Programs:
         spirvs = self.compiled.get(memo)
         if spirvs is None:
             try:
-                spirvs = self.compiled[memo] = [compile_glsl(p, defines) for p in paths]
+                # a mesh program never runs on wgpu, and its fragment shader may read the
+                # mesh shader's per-primitive outputs (SPIR-V 1.4): every stage targets 1.3
+                target = "vulkan1.3" if kind == "mesh" else None
+                spirvs = self.compiled[memo] = [compile_glsl(p, defines, target=target)
+                                                for p in paths]
             except ShaderCompileError as e:
                 raise ShaderCompileError(f"{_owner(owner)}: {e}") from None
         key = (kind, *(s.key for s in spirvs))

@@ -2,8 +2,6 @@
 
 from typing import ClassVar
 
-import wgpu
-
 from rfw import ComputePass, Settings, Tex2D, register_pass
 from rfw.graph import Slot
 
@@ -15,7 +13,7 @@ class FXAAPass(ComputePass):
     softens single-pixel features. Luma is taken from the encoded values, as FXAA intends.
     """
 
-    shader = "fxaa.comp.wgsl"
+    shader = "fxaa.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {"ldr": Tex2D(desc="display-encoded color (rgba8unorm)")}
     outputs: ClassVar[dict[str, Slot]] = {
         "color": Tex2D("rgba8unorm", size_of="ldr", desc="anti-aliased display color"),
@@ -27,18 +25,8 @@ class FXAAPass(ComputePass):
         subpixel: float = 0.75  # 0 sharp, 1 soft: how much single-pixel detail is blended
         search_steps: int = 12  # edge-walk iterations per side (1-12)
 
-    def setup(self, executor) -> None:
-        # clamped bilinear reads: the edge walk samples between texels. a wgpu device makes
-        # its own; vk uses the scene's linear sampler (also clamped and bilinear; its linear
-        # mip filter is moot at lod 0 of a one-level image)
-        self.sampler = None
-        device = getattr(executor.device, "device", None)
-        if isinstance(device, wgpu.GPUDevice):
-            self.sampler = device.create_sampler(
-                mag_filter="linear", min_filter="linear", address_mode_u="clamp-to-edge",
-                address_mode_v="clamp-to-edge", label=f"{self.name}:linear")
-
     def record(self, ctx) -> None:
+        # clamped bilinear reads: the edge walk samples between texels
         ctx.dispatch(threads=ctx.extent("color"), t_ldr=ctx.sampled("ldr"),
-                     s_linear=self.sampler or ctx.scene.linear_sampler,
+                     s_linear=ctx.sampler(filter="linear", address="clamp-to-edge"),
                      o_color=ctx.storage("color"), u_params=self.params)

@@ -12,7 +12,9 @@ import pytest
 from rfw import RenderPass
 from rfw.graph import Attachment, GraphBuilder
 from rfw.shaders import ShaderError
-from vkext.executor import VkExecutor, fit_plan
+from vkext.commands import one_time
+from vkext.executor import VkExecutor
+from vkext.fitting import fit_plan
 
 ROOT = Path(__file__).resolve().parents[2]
 RAYCAST = ROOT / "vkext" / "shaders" / "raycast"
@@ -172,6 +174,8 @@ def test_standalone_ray_pipelines_are_programs(vk_device):
     for cap in ("VK_KHR_ray_tracing_pipeline", "VK_KHR_ray_query"):
         if cap not in vk_device.caps:
             pytest.skip(f"{vk_device.name} has no {cap}")
+    with one_time(vk_device):  # the device's shared upload pool lives as long as it
+        pass
     before = vk_device.live_objects()
     rt = RayTracingPipeline(vk_device, RAYCAST / "raycast.rgen.glsl",
                             [RAYCAST / "raycast.rmiss.glsl"],
