@@ -37,18 +37,15 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
                               "backend runs every pass on Vulkan (frames that mix backends "
                               "run through rfw.render.render or vkext.mixed.render_mixed)",
                               file=graph.source)
-    # schedule fuzzing (vkext.poison): another valid pass order. Not for a mixed frame's
-    # part: the mixed driver records it in the full plan's order
-    return fit_graph(graph, device, alias=alias, readback=readback,
-                     order_seed=poison.mode().order_seed)
+    return fit_graph(graph, device, alias=alias, readback=readback)
 
 
-def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bool = True,
-              order_seed: int | None = None) -> tuple[CompiledGraph, dict[str, Any]]:
+def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
+              readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
     """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
-    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here);
-    ``order_seed``: the compiler's, another valid pass order."""
+    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
     base = MemoryOptions(alias=alias)
+    order_seed = _order_seed(graph)
     # the device's capabilities: a pass needing a feature it lacks is refused here, by name
     plan = compile(graph, caps=device.caps, backend="vk", memory=base,
                    order_seed=order_seed)
@@ -72,6 +69,17 @@ def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: b
                            + (f" ({len(padded)} padded by the driver)" if padded else ""))}
         plan = fitted
     return plan, info
+
+
+def _order_seed(graph: Graph) -> int | None:
+    """The schedule-fuzzing order seed (``vkext.poison``) for a frame all on Vulkan; a
+    mixed frame's part (pins elsewhere, or bridges, as rfw.mixed cuts it) keeps its order:
+    its driver records it in the full plan's."""
+    if any(p.enabled and (p.backend not in (None, "vk")
+                          or (p.type == "transfer" and p.name.startswith("bridge.")))
+           for p in graph.passes):
+        return None
+    return poison.mode().order_seed
 
 
 def plan_fits(plan: CompiledGraph, device: VkDevice, *, readback: bool = True) -> bool:

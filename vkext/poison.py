@@ -39,7 +39,7 @@ from rfw.graph.formats import format_info
 from rfw.graph.sync import NONE, State
 
 from .commands import BufferBarrier, ImageBarrier, barrier, image_layout
-from .consts import ffi, lib, vk
+from .consts import const, ffi, lib
 from .memory import Buffer, Image
 
 SEED_ENV, POISON_ENV = "RFW_ORDER_SEED", "RFW_POISON"
@@ -172,7 +172,7 @@ class Poisoner:
 
 def _fill(cmd: Any, res: Image | Buffer) -> None:
     if isinstance(res, Buffer):
-        lib.vkCmdFillBuffer(cmd, res.handle, 0, vk.VK_WHOLE_SIZE, WORD)
+        lib.vkCmdFillBuffer(cmd, res.handle, 0, const("VK_WHOLE_SIZE"), WORD)
         return
     rng = ffi.new("VkImageSubresourceRange*")
     rng.aspectMask, rng.levelCount, rng.layerCount = res.aspect, res.mips, res.layers

@@ -18,7 +18,10 @@ they produced.
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -35,6 +38,8 @@ from vkext import poison
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
+
+from ..golden_util import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml"))
@@ -271,6 +276,29 @@ def test_a_barrier_that_waits_for_nothing_is_reported(deferred_ssao):
     fz.run(replace(plan, barriers=tuple(weak)))
     texts = [m.text for m in fz.device.messages]
     assert any("SYNC-HAZARD" in t and "lighting.hdr" in t for t in texts), texts
+
+
+def test_cli_order_seed_and_poison(deferred_ssao, tmp_path):
+    # rfw run --order-seed N --poison: another order, the same image as the default order's
+    # (one warm-up and one timed frame: two frames, as the fixture's run)
+    fz, plan, reference = deferred_ssao
+    seed = next(s for s in range(50) if fz.plan(s).order != plan.order)
+    cmd = [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs/deferred_ssao_shadows.toml"),
+           "--backend", "vk", "--size", f"{SIZE[0]}x{SIZE[1]}", "--validate", "--poison",
+           "--order-seed", str(seed), "--out", str(tmp_path / "out")]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    timings = json.loads((tmp_path / "out/timings.json").read_text())
+    assert [p["name"] for p in timings["passes"]] == list(fz.plan(seed).order)
+    image = read_png(tmp_path / "out/fxaa.color.png")
+    assert np.array_equal(image, reference["fxaa.color"])
+    # the negative control: the same comparison tells another image apart
+    assert not np.array_equal(image[:, ::-1], reference["fxaa.color"])
+    # and only vk has them: one line, exit 2
+    r = subprocess.run([*cmd[:5], "--backend", "wgpu", "--poison", "--out", str(tmp_path / "w")],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
+    assert "--order-seed and --poison need --backend vk" in r.stderr
 
 
 # ---------------------------------------------------------------------------------------------
