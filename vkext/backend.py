@@ -23,7 +23,8 @@ from rfw.scene.model import Scene
 
 from .commands import read_buffer, read_image, upload_buffer, upload_image
 from .device import VkDevice
-from .executor import VkExecutor, check_passes, fit_graph
+from .executor import VkExecutor
+from .fitting import check_passes, fit_graph
 from .frame_stats import accel_stats, culling_counters
 from .scene import VkScene
 

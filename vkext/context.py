@@ -16,7 +16,7 @@ from rfw.backends.base import SlotContext
 from rfw.graph.formats import format_info
 from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
-from rfw.shaders import ShaderError
+from rfw.shaders import ShaderError, program_files
 from rfw.spirv import DescriptorInfo
 
 from .commands import barrier, image_layout, record_barriers
@@ -132,21 +132,24 @@ class VkPassContext(SlotContext):
                 stages: Sequence[str | Path] = ()) -> Program:
         """The pass's program of ``kind`` (compute | render | mesh | ray_tracing) from
         ``shader`` (default: the pass's) and the files of its other ``stages`` (names beside
-        the pass, or paths): a mesh program is its mesh shader plus, in ``stages``, an
-        optional task and fragment shader."""
+        the pass, or paths; a name names files as ``rfw.shaders.program_files`` does): a
+        mesh program is its mesh shader plus, in ``stages``, an optional task and fragment
+        shader."""
         if kind in ("compute", "render") and not stages:
             paths = shader_paths(self.pass_, shader)
         else:
-            paths = [self._stage_path(n) for n in (shader or self.pass_.shader, *stages)]
+            paths = [p for n in (shader or self.pass_.shader, *stages)
+                     for p in self._stage_paths(n)]
         return self.executor.programs.get(self.pass_, paths, defines or {}, kind)
 
-    def _stage_path(self, name: str | Path | None) -> Path:
+    def _stage_paths(self, name: str | Path | None) -> list[Path]:
         if not name:
             raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
-        path = name if isinstance(name, Path) else self.pass_.folder() / name
-        if not path.is_file():
-            raise ShaderError(f"pass '{self.pass_.name}': shader {path} is missing")
-        return path
+        if isinstance(name, Path):
+            if not name.is_file():
+                raise ShaderError(f"pass '{self.pass_.name}': shader {name} not found")
+            return [name]
+        return program_files(self.pass_.folder(), name, owner=self.pass_.name)
 
     def _check_extra(self, prog: Program, values: dict[str, Any]) -> None:
         extra = [k for k in values if k not in prog.descriptors]

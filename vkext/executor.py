@@ -45,16 +45,13 @@ from .commands import (
     upload_image,
 )
 from .consts import ffi, lib, vk
-from .context import ImageBinding, VkPassContext
+from .context import VkPassContext
 from .descriptors import FrameDescriptors, UniformRing
 from .device import VkDevice
-from .fitting import check_passes, fit_graph, fit_plan
+from .fitting import check_passes
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
 from .programs import Programs
 from .scene import Sampler, VkScene, make_sampler
-
-# the old home of these names: vkext.backend, vkext.mixed and passes import them from here
-__all__ = ["ImageBinding", "PassTiming", "VkExecutor", "check_passes", "fit_graph", "fit_plan"]
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
 

@@ -24,7 +24,8 @@ from rfw.shaders import ShaderError
 from rfw.spirv import ShaderCompileError
 from vkext.backend import render_vk
 from vkext.commands import one_time
-from vkext.executor import VkExecutor, fit_plan
+from vkext.executor import VkExecutor
+from vkext.fitting import fit_graph, fit_plan
 
 from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch
@@ -179,8 +180,8 @@ def test_glsl_compile_error_names_file_and_line(vk_device, tmp_path, monkeypatch
     assert vk_device.live_objects() == before  # the half-built frame was torn down
 
 
-def test_missing_glsl_twin_is_a_clear_error(vk_device, tmp_path, monkeypatch):
-    # fxaa has a twin now: a copy of its folder without it stands in
+def test_missing_shader_is_a_clear_error(vk_device, tmp_path, monkeypatch):
+    # a copy of fxaa's folder without its shader stands in
     folder = tmp_path / "fxaa"
     shutil.copytree(ROOT / "passes" / "fxaa", folder)
     (folder / "fxaa.comp.glsl").unlink()
@@ -188,8 +189,7 @@ def test_missing_glsl_twin_is_a_clear_error(vk_device, tmp_path, monkeypatch):
     cfg = apply_overrides(load_config(ROOT / "configs" / "deferred_ssao_shadows.toml"),
                           ["ao=off", "size=64x36"])
     before = live(vk_device)
-    with pytest.raises(ShaderError, match=r"pass 'fxaa' \(fxaa\) has no GLSL twin of "
-                                          r"fxaa\.comp\.wgsl: .*fxaa\.comp\.glsl is missing"):
+    with pytest.raises(ShaderError, match=r"pass 'fxaa': shader .*fxaa\.comp\.glsl not found"):
         render_vk(cfg, scene=tiny_scene(), device=vk_device)
     assert vk_device.live_objects() == before
 
@@ -218,7 +218,7 @@ def test_binding_mismatch_names_pass_binding_and_file(vk_device, monkeypatch, ex
 class _Accumulate(ComputePass):
     """out = previous frame's out + step (history starts cleared to zero)."""
 
-    shader = "accumulate.comp.wgsl"
+    shader = "accumulate.comp.glsl"
     folder_path: Path = Path()
 
     class Params(Settings):
@@ -272,7 +272,6 @@ def test_history_images_start_in_the_planned_layout(vk_device, tmp_path, monkeyp
 
 def test_a_pass_needing_a_missing_feature_is_refused_by_name(vk_device):
     from rfw.graph import Attachment, GraphBuilder, GraphError
-    from vkext.executor import fit_graph
 
     g = GraphBuilder("needs", size=(8, 8))
     g.add_pass("cull", "compute", requires=["VK_NV_imaginary_feature"]) \

@@ -20,7 +20,8 @@ from rfw.config import apply_overrides, build, load_config
 from rfw.meshlets import cached_meshlets, pack_for_gpu
 from rfw.scene import default_scene
 from vkext.backend import render_vk
-from vkext.executor import VkExecutor, fit_plan
+from vkext.executor import VkExecutor
+from vkext.fitting import fit_plan
 from vkext.meshlet import (
     MAX_TRIANGLES,
     MAX_VERTICES,

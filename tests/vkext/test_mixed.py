@@ -26,7 +26,7 @@ from rfw.render import render
 from rfw.scene import default_scene
 from rfw.shaders import ShaderError
 from vkext.commands import one_time
-from vkext.executor import check_passes, fit_graph, fit_plan
+from vkext.fitting import check_passes, fit_graph, fit_plan
 
 from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch

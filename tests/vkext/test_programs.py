@@ -135,7 +135,7 @@ def test_mesh_programs_share_the_cache(vk_device, mesh_pass):
     (("tri.task.glsl", "tri.frag.glsl"), None),  # the positive control of the two below
     (("tri.vert.glsl",),
      r".*tri\.vert\.glsl has vert shader\(s\), which a mesh program does not run"),
-    (("tri.nothing.glsl",), r"shader .*tri\.nothing\.glsl is missing"),
+    (("tri.nothing.glsl",), r"shader .*tri\.nothing\.glsl not found"),
 ])
 def test_mesh_program_stages_are_checked(vk_device, mesh_pass, monkeypatch, stages, message):
     monkeypatch.setattr(mesh_pass, "stages", stages)
