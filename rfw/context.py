@@ -112,6 +112,10 @@ class RayTracingContext(PassContext, Protocol):
     def set_accel(self, slot: str, accel: Any) -> None:
         """Publish the structures this pass builds for its ``AccelStructure`` output."""
 
+    def build_accel(self, slot: str, accel: Any, *, update: bool = False) -> None:
+        """Record the top-level build (``update``: a refit) of ``accel`` and publish it for
+        the ``AccelStructure`` output ``slot``."""
+
     def trace_rays(self, *, size: tuple[int, ...], shader: str | None = None,
                    miss: str | None = None, closest_hit: str | None = None,
                    any_hit: str | None = None, defines: dict[str, object] | None = None,

@@ -121,6 +121,13 @@ class VkPassContext(SlotContext):
         """Publish the structures this pass builds for its ``AccelStructure`` output."""
         self.executor.accels[self.resource(slot)] = accel
 
+    def build_accel(self, slot: str, accel: Any, *, update: bool = False) -> None:
+        """Record the top-level build (``update``: a refit) of ``accel`` (a
+        ``vkext.accel.SceneAccel``) in this pass and publish it for ``slot``; the plan's
+        barriers order it against the frame's other builds and traces."""
+        self.set_accel(slot, accel)
+        accel.record_tlas(self.cmd, update=update)
+
     def format(self, slot: str) -> str:
         """The format's WebGPU name where it has one (as the wgpu backend answers)."""
         name = self.executor.plan.resource(self.resource(slot)).format

@@ -29,7 +29,8 @@ from .commands import COPY_WRITE, HOST_READ, TimestampPool, barrier, one_time
 from .consts import ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
 from .memory import Buffer, staging_buffer
-from .rt import BindingSet, ComputePipeline, HitGroup, RayTracingPipeline, ShaderBindingTable
+from .rt import BindingSet, ComputePipeline, HitGroup, RayTracingPipeline
+from .sbt import ShaderBindingTable
 
 SHADERS = Path(__file__).resolve().parent / "shaders" / "raycast"
 METHODS = ("ray_query", "ray_pipeline")

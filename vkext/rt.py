@@ -27,11 +27,7 @@ from .buffers import Buffer
 from .consts import const, ffi, lib, vk
 from .device import VkDevice
 from .programs import Program, Programs
-from .sbt import SBT_READ, ShaderBindingTable
 from .scene import DESCRIPTOR_TYPES, VkObject, new
-
-__all__ = ["SBT_READ", "BindingSet", "ComputePipeline", "HitGroup", "RayTracingPipeline",
-           "ShaderBindingTable"]
 
 
 class _Pool(VkObject):

@@ -43,5 +43,4 @@ class AccelBuildPass(Pass):
 
     def record(self, ctx) -> None:
         self.accel = self._scene_accel(ctx.scene)
-        ctx.set_accel("tlas", self.accel)
-        self.accel.record_tlas(ctx.cmd, update=self.params.allow_update)
+        ctx.build_accel("tlas", self.accel, update=self.params.allow_update)
