@@ -2,7 +2,7 @@
 G-buffer pass, as graph buffers."""
 
 from rfw import ComputePass, Settings, register_pass
-from rfw.graph import Buffer, Storage
+from rfw.graph import Buffer, Step, Storage
 from rfw.passes import SettingsError
 
 PHASES = ("single", "early", "late")
@@ -67,6 +67,14 @@ class MeshletCullPass(ComputePass):
                                     "visible at the end of the last frame")
         return {}, outs
 
+    def steps(self) -> tuple[Step, ...]:
+        if self.params.phase == "late":
+            return ()
+        # the clear, then the culling dispatch that counts and writes the commands: the
+        # compiler plans the barrier between them
+        return (Step("clear", writes=("counters", "visibility")),
+                Step("cull", reads="counters", writes=("commands", "counters", "visibility")))
+
     def record(self, ctx) -> None:
         from vkext.meshlet import FRUSTUM, check_capacity, scene_of
 
@@ -83,7 +91,9 @@ class MeshletCullPass(ComputePass):
         if p.phase != "late":
             # nothing was visible before an executor's first frame
             words = ms.instance_meshlet_count if ctx.frame == 0 else 0
+            ctx.step(0)
             ctx.dispatch(threads=(max(13, words),), defines={"CLEAR": 1},
                          push_constants=ms.push(0, phase, count=words), **bindings)
+            ctx.step(1)
         ctx.dispatch(threads=(ms.draw_count,), push_constants=ms.push(
             FRUSTUM if p.frustum else 0, phase), **bindings)

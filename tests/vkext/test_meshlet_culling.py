@@ -243,3 +243,24 @@ def test_frustum_and_cone_visibility_matches_numpy(vk_device, courtyard):
     assert differ == close and differ <= 2, f"{differ} meshlets differ"
     assert sum(int(v.sum()) for v in gpu.values()) == counters["drawn"]
     assert sum(int((~v).sum()) for v in ref.values()) > 400  # the tests do cull
+
+
+def test_the_planned_step_barrier_orders_the_clear_before_the_culling(courtyard, monkeypatch):
+    """Negative control of the zero-message checks above: without the barrier the graph
+    plans between the culling pass's clear and its culling dispatch (steps of one pass, no
+    hand barrier), synchronization validation reports the hazard."""
+    from rfw.graph import CompiledGraph
+    from vkext import VkDevice
+
+    planned = CompiledGraph.barriers_before_step
+    monkeypatch.setattr(CompiledGraph, "barriers_before_step",
+                        lambda self, name, *a: () if name == "cull" else planned(self, name, *a))
+    device = VkDevice(validation=True, label="rfw-tests-meshlet-steps")
+    try:
+        r = render_vk(_config("culling.occlusion=false"), scene=courtyard, device=device,
+                      frames=1)
+        texts = r.timings["validation"]["texts"]
+    finally:
+        device.destroy()
+    # measured: READ_AFTER_WRITE on cull.counters, the culling dispatch after the clear
+    assert any("SYNC-HAZARD" in t and "cull.counters" in t for t in texts), texts
