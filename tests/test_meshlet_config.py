@@ -162,6 +162,10 @@ def test_graph_plan_prints_the_meshlet_buffer_barriers():
             one("cull_late", resource)
         assert "TASK_SHADER_EXT:SHADER_STORAGE_WRITE -> COMPUTE_SHADER:" in one("cull", resource)
         assert one("gbuffer_late", resource)
+        # inside the culling pass: its culling dispatch waits for its clear (steps)
+        assert one("cull step 1 (cull)", f"{resource} all").endswith(
+            "COMPUTE_SHADER:SHADER_STORAGE_WRITE -> COMPUTE_SHADER:SHADER_STORAGE_" +
+            ("READ|SHADER_STORAGE_WRITE" if resource == "cull.counters" else "WRITE"))
     # negative control: a graph that keeps only the culling pass plans no indirect read
     only_cull = _plan_barriers("--output", "cull.commands")
     assert only_cull and not any("INDIRECT_COMMAND_READ" in b for b in only_cull)
