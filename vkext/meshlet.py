@@ -224,10 +224,6 @@ class MeshletScene:
                           self.draw_count if count is None else count,
                           float(viewport[0]), float(viewport[1]))
 
-    def geometry_bytes(self) -> int:
-        """Device bytes of the meshlet path's scene data (meshlets, attributes, draws)."""
-        return sum(b.bytes for b in self.buffers.values())
-
     def destroy(self) -> None:
         """The buffers belong to the scene's allocator, which frees them."""
         self.buffers.clear()
