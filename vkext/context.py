@@ -324,34 +324,15 @@ class VkPassContext(SlotContext):
         rendering; set 0 takes ``bindings``, sets 1-3 are the scene's. Returns the draws."""
         if self.scene is None:
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
-        ex = self.executor
         prog = self.program("render", shader=shader, defines=defines)
         self._check_extra(prog, {**bindings, "camera": 0, "lights": 0})
-        colors = [(self.resource(slot), clear) for slot, clear in color]
-        targets = [ex.image(r) for r, _ in colors]
-        dimage = ex.image(self.resource(depth[0])) if depth is not None else None
-        first = (targets or [dimage])[0]
-        if first is None:
-            raise ShaderError(f"pass '{self.pass_.name}': draw_scene needs a color or depth "
-                              "target")
-        dinfo = dimage.info if dimage is not None else None
-        pipe = ex.programs.graphics_pipeline(
-            prog, colors=[t.vk_format for t in targets],
-            depth=dimage.vk_format if dimage is not None else None,
-            stencil=bool(dinfo and dinfo.stencil), samples=first.samples,
-            depth_compare=depth_compare, depth_write=depth_write, cull=cull, blend=blend)
-        point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
-        own = [s for s in prog.sets() if s not in prog.scene_sets]
-        self._begin_rendering(colors, depth, depth_write, (first.width, first.height))
-        try:
-            vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
-            _viewport(self.cmd, first.width, first.height)
-            self.bind(prog, bindings, point, own)
-            self._push(prog, push_constants)
+        with self.render_pass(color=color, depth=depth, depth_read_only=not depth_write) as rp:
+            rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend)
+            rp.bind(**bindings)
+            if push_constants is not None:
+                rp.push(push_constants)
             return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
                                    alpha=alpha)
-        finally:
-            vk.vkCmdEndRendering(self.cmd)
 
     def render_pass(self, *, color: Sequence[tuple[str, Any]] = (),
                     depth: tuple[str, Any] | None = None,
