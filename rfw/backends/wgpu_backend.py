@@ -20,7 +20,7 @@ import wgpu
 from ..context import check_sampler
 from ..errors import naming
 from ..graph import CompiledGraph
-from ..graph.compile import ResourcePlan
+from ..graph.compile import IMPLIED_CAPS, ResourcePlan
 from ..graph.formats import format_info
 from ..passes import Pass, Settings
 from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, program_files
@@ -626,6 +626,17 @@ class PassContext(SlotContext):
 # the executor
 
 
+def check_caps(passes: dict[str, Pass], caps: frozenset[str]) -> None:
+    """A ShaderError naming the first pass that needs what wgpu lacks (mesh shaders, ray
+    queries, acceleration structures), before any of its work is set up."""
+    for name, p in passes.items():
+        lacking = [c for c in (*IMPLIED_CAPS.get(p.type, ()), *p.requires) if c not in caps]
+        if lacking:
+            raise ShaderError(f"pass '{name}' ({type(p).id or type(p).__name__}) needs "
+                              f"{', '.join(lacking)}, which the wgpu backend does not have "
+                              "(run it on vk: --backend vk, or backend = \"vk\" on the pass)")
+
+
 class Executor(FrameExecutor):
     """Owns the textures of one compiled graph on one device and records its frames."""
 
@@ -665,6 +676,7 @@ class Executor(FrameExecutor):
             self._query_buffer = device.device.create_buffer(
                 size=8 * n, usage=wgpu.BufferUsage.QUERY_RESOLVE | wgpu.BufferUsage.COPY_SRC,
                 label="rfw:timestamps")
+        check_caps(passes, device.caps)
         for p in passes.values():
             p.setup(self)
 
