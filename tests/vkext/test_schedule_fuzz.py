@@ -5,16 +5,22 @@ random ties in the topological sort), each frame with every transient poisoned w
 lifetime starts (``vkext.poison``: NaN, magenta, all ones), under synchronization validation.
 Orders move lifetimes, so memory placement, aliasing and barriers move with them; every order
 must give the default order's unpoisoned image bit for bit (lavapipe is deterministic here:
-the same plan twice, or poisoned, gives identical bytes) and no validation message.
+the same plan twice, or poisoned, gives identical bytes) and no validation message. A config
+that mixes backends keeps its one order (its driver records the vk part in the full plan's
+order) and is poisoned. ``wide`` (below) adds parallel levels the configs lack: most of them
+are chains, with 1 to 4 orders.
 
-The negative controls break a plan three ways and show each is caught: a memory plan that
-lets two live transients share bytes, an order that reads a transient before it is written,
-and a barrier that waits for nothing.
+The negative controls break a plan three ways and show each is caught: two live transients
+sharing bytes (image and sync validation), a pass reading a transient before it is written
+(the image only when poisoned: unpoisoned, lavapipe hands it last frame's bytes; sync
+validation), and a barrier that waits for nothing (sync validation).
 
 ``RFW_FUZZ_ORDERS=N`` tries up to N distinct orders per config (default 4, plus the default
-order); ``-s`` prints, per config, the orders it has, those tried and the memory placements
-they produced.
-"""
+order) and adds variants with more passes; ``-s`` prints, per config, its orders, those
+tried, and the memory placements and barrier plans they produced. Measured on lavapipe
+(Mesa 25, 2 cores): the file in about 50 s; with RFW_FUZZ_ORDERS=40, ``wide`` ran 41 of its
+810 orders (34 placements, 41 barrier plans) and ``meshlet`` with shadows all 12 of its
+orders, every image identical, no validation message."""
 
 from __future__ import annotations
 
@@ -29,7 +35,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rfw.config import build, load_config, resolve_auto
+from rfw.config import apply_overrides, build, load_config, resolve_auto
 from rfw.errors import RfwError
 from rfw.frame import camera_for, load_scene_for
 from rfw.graph import Attachment, CompiledGraph, GraphBuilder, Texture, compile
@@ -47,6 +53,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml"))
 SIZE = (64, 48)
 ORDERS = int(os.environ.get("RFW_FUZZ_ORDERS", "4"))
+LONG = "RFW_FUZZ_ORDERS" in os.environ
 TRIES = 25  # seeds tried per distinct order wanted: the seeded sort is not uniform
 
 # a config with wide parallel levels (two tonemaps, two fxaas, a debug view beside the
@@ -138,13 +145,23 @@ class Fuzzer:
         self.scene.destroy()
 
 
+# variants that add passes, and so orders: the long run takes them too
+VARIANTS = ["deferred+shadow.enabled=true", "deferred_meshlet+shadow.enabled=true",
+            "deferred_ssao_shadows+view=overdraw", "deferred_ssao_shadows+view=ao",
+            "forward+shadow.enabled=true", "forward_prepass+shadow.enabled=true",
+            "meshlet+shadow.enabled=true", "meshlet+culling.occlusion=false",
+            "rt_primary+method=ray_query", "rt_shadows+shadows=ray_pipeline",
+            "rt_shadows+shadows=shadow_map+ao=ssao"]
+
+
 def _config(case: str, tmp_path: Path) -> Any:
-    if case == "wide":
+    name, *sets = case.split("+")
+    if name == "wide":
         path = tmp_path / "wide.toml"
         path.write_text(WIDE)
     else:
-        path = ROOT / "configs" / f"{case}.toml"
-    return replace(load_config(path), size=SIZE)
+        path = ROOT / "configs" / f"{name}.toml"
+    return replace(apply_overrides(load_config(path), sets), size=SIZE)
 
 
 def _orders(fz: Fuzzer, want: int) -> tuple[int | None, list[tuple[int | None, CompiledGraph]]]:
@@ -174,7 +191,7 @@ def _mixed(cfg: Any) -> bool:
     return any(p.enabled and p.backend not in (None, "vk") for p in build(cfg).graph.passes)
 
 
-CASES = [p.stem for p in CONFIGS] + ["wide"]
+CASES = [p.stem for p in CONFIGS] + ["wide"] + (VARIANTS if LONG else [])
 
 
 @pytest.fixture
