@@ -65,7 +65,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         frame.clear_timings()
         frame.run(n)
         images = {name: frame.read(name) for name in frame.plan.outputs}
-        extras = {k: v for s in sides.values()
+        extras = {k: v for s in sides.values()  # e.g. what the frame allocated
                   for k, v in s.backend.collect(frame.executors[s.backend.name]).items()}
     finally:
         if frame is not None:
@@ -74,20 +74,16 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     for s in sides.values():
         extras.update(s.backend.report(frame.executors[s.backend.name], s.device,
                                        validation=validation))
-    if techniques:
-        extras["techniques"] = techniques
+    extras["techniques"] = techniques or None
     timings = _mixed_record(frame, sides) if mix else _record(frame, sides[backend])
     timings.update(frame_record(cfg, n, scene, frame.default_light, timings.pop("passes"),
                                 timestamps=all(s.backend.timestamps(s.device)
                                                for s in sides.values())))
     if mix:
-        bridges = [p for p in timings["passes"] if p["name"] in frame.mixed.bridges]
-        timings["bridge_ms_total"] = sum(p["cpu_ms"] or 0.0 for p in bridges)
-        timings["bridges"] = [p["name"] for p in bridges]
+        timings.update(_bridges(frame, timings["passes"]))
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
-    executor = frame if mix else frame.executors[backend]
-    return Result(cfg, images, timings, executor)
+    return Result(cfg, images, timings, frame if mix else frame.executors[backend])
 
 
 def _record(frame: MixedFrame, side: Any) -> dict[str, Any]:
@@ -104,6 +100,13 @@ def _mixed_record(frame: MixedFrame, sides: dict[str, Any]) -> dict[str, Any]:
                for k in ("device", "driver", "api")},
             "backend": "+".join(sides), "backends": described,
             "passes": frame.pass_timings()}
+
+
+def _bridges(frame: MixedFrame, passes: list[dict[str, Any]]) -> dict[str, Any]:
+    # host copies are wall time, kept out of gpu_ms_total
+    bridges = [p for p in passes if p["name"] in frame.mixed.bridges]
+    return {"bridge_ms_total": sum(p["cpu_ms"] or 0.0 for p in bridges),
+            "bridges": [p["name"] for p in bridges]}
 
 
 def backend_for(cfg: Config) -> str:
