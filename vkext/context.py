@@ -57,7 +57,8 @@ _SHADER_RW = State(None, frozenset({"COMPUTE_SHADER"}),
 
 
 class VkPassContext(SlotContext):
-    """What ``Pass.record`` sees on Vulkan: the wgpu ``PassContext``'s interface."""
+    """What ``Pass.record`` sees on Vulkan: ``rfw.context.PassContext`` and
+    ``RayTracingContext``, plus mesh programs (``program("mesh")``, ``render_pass``)."""
 
     # executor: the vkext.executor.VkExecutor recording the frame (it imports this module)
     def __init__(self, executor: Any, pass_: Pass, cmd: Any, slots: dict[str, str]):

@@ -1,4 +1,4 @@
-"""Run a compiled frame graph on raw Vulkan: the twin of ``rfw.backends.wgpu_backend``.
+"""Run a compiled frame graph on raw Vulkan, as ``rfw.backends.wgpu_backend`` runs it on wgpu.
 
 Transient images and buffers live in the plan's aliased heaps (``plan_heaps``); persistent,
 external and history ones come from a :class:`BlockAllocator`. A frame is one command buffer:
@@ -7,6 +7,12 @@ passes: nothing a pass records waits on anything), a timestamp before and after,
 pass's unchanged ``record(ctx)``. Passes run the same GLSL as on wgpu (the files
 ``rfw.shaders.program_files`` names); layouts are reflected from SPIR-V, and image
 descriptors are written in the layout the plan puts the image in for the pass.
+
+The pass runtime, module by module: :mod:`vkext.fitting` compiles the graph for the device
+and finds each pass's shader files; :mod:`vkext.programs` is the one program and pipeline
+cache (compute, render, mesh, ray tracing); :mod:`vkext.descriptors` holds a frame's
+descriptor sets and uniforms; :mod:`vkext.context` is what a pass records through; this
+module owns the resources and records the frames.
 """
 
 from __future__ import annotations
