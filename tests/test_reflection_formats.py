@@ -1,9 +1,10 @@
 """A storage image's declared format must be the bound resource's, on both backends.
 
 A tiny third-party pass (found through the ``rfw.passes`` entry points of a dist-info written
-into a temporary folder) declares its storage output ``rgba8`` in WGSL and GLSL; the config
-gives the slot another format. Run through the real CLI: the mismatch is one error line
-naming pass, binding, shader file and both formats; the matching format renders.
+into a temporary folder) declares its storage output ``rgba8`` in GLSL (one source for both
+backends) or, wgpu only, in WGSL; the config gives the slot another format. Run through the
+real CLI: the mismatch is one error line naming pass, binding, shader file and both formats;
+the matching format renders; vk refuses the WGSL pass in one line naming pass and file.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from rfw import ComputePass, Tex2D, register_pass
 class FillPass(ComputePass):
     """Writes (0.2, 0.4, 0.6, 1.0) everywhere."""
 
-    shader = "fmt_fill.comp.wgsl"
+    shader = "{shader}"
     outputs = {{"dst": Tex2D("{fmt}", desc="filled image")}}
 
     def record(self, ctx) -> None:
@@ -70,13 +71,13 @@ use = "fmt_fill"
 """
 
 
-def plugin(tmp: Path, fmt: str) -> Path:
+def plugin(tmp: Path, fmt: str, shader: str) -> Path:
     """A site folder holding the pass package and its entry point."""
     site = tmp / "site"
     pkg = site / "rfw_fmt_demo"
     pkg.mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
-    (pkg / "fmt_fill.py").write_text(PASS.format(fmt=fmt))
+    (pkg / "fmt_fill.py").write_text(PASS.format(fmt=fmt, shader=shader))
     (pkg / "fmt_fill.comp.wgsl").write_text(WGSL)
     (pkg / "fmt_fill.comp.glsl").write_text(GLSL)
     info = site / "rfw_fmt_demo-0.1.dist-info"
@@ -86,8 +87,9 @@ def plugin(tmp: Path, fmt: str) -> Path:
     return site
 
 
-def run(tmp: Path, fmt: str, backend: str) -> subprocess.CompletedProcess:
-    site = plugin(tmp, fmt)
+def run(tmp: Path, fmt: str, backend: str,
+        shader: str = "fmt_fill.comp.glsl") -> subprocess.CompletedProcess:
+    site = plugin(tmp, fmt, shader)
     config = tmp / "fmt.toml"
     config.write_text(CONFIG)
     # extended, not replaced: on the GPU machine rfw's dependencies come through PYTHONPATH
@@ -100,25 +102,36 @@ def run(tmp: Path, fmt: str, backend: str) -> subprocess.CompletedProcess:
                           check=False)
 
 
-@pytest.mark.parametrize("backend", ["wgpu", "vk"])
-def test_mismatched_storage_format_is_one_line(tmp_path, backend):
-    done = run(tmp_path, "rgba16float", backend)
+CASES = [("wgpu", "fmt_fill.comp.glsl"), ("vk", "fmt_fill.comp.glsl"),
+         ("wgpu", "fmt_fill.comp.wgsl")]
+
+
+@pytest.mark.parametrize(("backend", "shader"), CASES)
+def test_mismatched_storage_format_is_one_line(tmp_path, backend, shader):
+    done = run(tmp_path, "rgba16float", backend, shader)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
     line = lines[0]
-    shader = "fmt_fill.comp.wgsl" if backend == "wgpu" else "fmt_fill.comp.glsl"
     for part in ("pass 'fill'", "'o_dst'", shader, "rgba8unorm", "rgba16float"):
         assert part in line, line
     assert not (tmp_path / "out" / "timings.json").exists()
 
 
-@pytest.mark.parametrize("backend", ["wgpu", "vk"])
-def test_matching_storage_format_renders(tmp_path, backend):
+@pytest.mark.parametrize(("backend", "shader"), CASES)
+def test_matching_storage_format_renders(tmp_path, backend, shader):
     # negative control: the same pass with the declared format runs and writes its colour
-    done = run(tmp_path, "rgba8unorm", backend)
+    done = run(tmp_path, "rgba8unorm", backend, shader)
     assert done.returncode == 0, done.stderr
     img = np.asarray(Image.open(tmp_path / "out" / "fill.dst.png").convert("RGBA"))
     assert img.shape == (8, 16, 4)
     expected = np.round(np.array([0.2, 0.4, 0.6, 1.0]) * 255)
     assert np.abs(img.reshape(-1, 4) - expected).max() <= 1
+
+
+def test_vk_refuses_a_wgsl_pass_in_one_line(tmp_path):
+    done = run(tmp_path, "rgba8unorm", "vk", "fmt_fill.comp.wgsl")
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert lines[0].startswith("rfw: error: pass 'fill' (fmt_fill): ")
+    assert "fmt_fill.comp.wgsl is WGSL, which only --backend wgpu runs" in lines[0]
