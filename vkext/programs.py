@@ -45,6 +45,8 @@ _BLEND_OP = {"add": "VK_BLEND_OP_ADD", "subtract": "VK_BLEND_OP_SUBTRACT",
 KINDS = {"compute": ("comp",), "render": ("vert", "frag"), "mesh": ("task", "mesh", "frag"),
          "ray_tracing": ("rgen", "rmiss", "rchit", "rahit")}
 RASTER = ("render", "mesh")
+# the device capability a kind of program needs (the others run everywhere)
+NEEDS = {"mesh": "VK_EXT_mesh_shader", "ray_tracing": "VK_KHR_ray_tracing_pipeline"}
 # the scene's vertex buffers (gpu_scene.VERTEX_BUFFERS): one attribute per buffer
 _VERTEX = ((12, "VK_FORMAT_R32G32B32_SFLOAT"), (12, "VK_FORMAT_R32G32B32_SFLOAT"),
            (8, "VK_FORMAT_R32G32_SFLOAT"), (16, "VK_FORMAT_R32G32B32A32_SFLOAT"))
@@ -125,6 +127,10 @@ class Programs:
         if kind not in KINDS:
             raise ShaderError(f"{_owner(owner)}: unknown program kind '{kind}' "
                               f"({', '.join(KINDS)})")
+        need = NEEDS.get(kind)
+        if need is not None and need not in self.device.caps:
+            raise ShaderError(f"{_owner(owner)}: a {kind} program needs {need}, which "
+                              f"{self.device.name} lacks")
         # compile_glsl hashes every include and asks glslang its version: once per variant
         # and file version, not once per dispatch
         memo = (kind, tuple(paths), tuple(sorted((k, str(v)) for k, v in defines.items())),

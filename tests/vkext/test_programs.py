@@ -200,3 +200,11 @@ def test_standalone_ray_pipelines_are_programs(vk_device):
         RayTracingPipeline(vk_device, RAYCAST / "raycast.rmiss.glsl",
                            [RAYCAST / "raycast.rgen.glsl"])
     assert vk_device.live_objects() == before
+
+
+def test_a_mesh_program_needs_mesh_shaders(vk_device, mesh_pass, monkeypatch):
+    _draw(vk_device, mesh_pass("tri"))  # the positive control: the device has them
+    monkeypatch.setattr(vk_device, "caps", vk_device.caps - {"VK_EXT_mesh_shader"})
+    with pytest.raises(ShaderError, match=r"pass 'tri': a mesh program needs "
+                                          r"VK_EXT_mesh_shader, which .* lacks"):
+        _draw(vk_device, mesh_pass("tri"))
