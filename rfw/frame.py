@@ -1,18 +1,26 @@
-"""What every backend's frame driver shares: the ``Result`` of a run, the scene and camera a
-config asks for, and the fields of ``timings.json`` every backend writes. Below
-:mod:`rfw.render` and the backends, so both import it and neither imports the other back."""
+"""A frame of a compiled graph on its backends, and what the frame driver
+(:func:`rfw.render.render`) shares with the backends: the ``Result`` of a run, the scene and
+camera a config asks for, and the fields of ``timings.json`` every backend writes.
+
+``prepare`` fits each backend's part of the graph to its device (the whole graph on one
+backend, or the per-backend parts of a mixed plan, :func:`rfw.mixed.split`), ``start``
+uploads the scene and makes the executors, and the :class:`Frame` runs them."""
 
 from __future__ import annotations
 
 import statistics
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .config import Config, pass_class
+from .backend import Backend, Devices, get_backend
+from .config import Built, Config, pass_class
 from .errors import RfwError
+from .graph import CompiledGraph
+from .mixed import MixedPlan, split
 
 
 @dataclass
@@ -73,3 +81,189 @@ def pinned_elsewhere(cfg: Config, backend: str) -> bool:
 
 def median(values: list[float]) -> float | None:
     return statistics.median(values) if values else None
+
+
+@dataclass
+class BridgeTiming:
+    name: str
+    cpu_ms: list[float] = field(default_factory=list)
+    bytes: int = 0
+
+
+class Frame:
+    """A run of one graph: drives one executor per backend through the full plan's order,
+    bridges in between (a frame on one backend is its executor's own frames).
+
+    ``executors`` maps a backend's name to the executor built on that backend's sub-plan,
+    ``backends`` to its :class:`rfw.backend.Backend` (which copies through the host at
+    bridges), ``devices`` to the device each runs on."""
+
+    def __init__(self, mixed: MixedPlan, executors: dict[str, Any],
+                 backends: dict[str, Backend] | None = None):
+        self.mixed = mixed
+        self.plan = mixed.plan
+        self.executors = executors
+        self.backends = backends if backends is not None else {}
+        self.scenes: list[Any] = []  # each backend's upload of the scene, owned by the frame
+        self.devices: dict[str, Any] = {}
+        self.frame_index = 0
+        self.bridge_timings = {n: BridgeTiming(n) for n in mixed.bridges}
+        self.default_light = False
+        self._devices: Devices | None = None  # devices open_frame made, closed by destroy
+
+    def run(self, frames: int = 1) -> None:
+        if len(self.executors) == 1 and not self.mixed.bridges:
+            for ex in self.executors.values():  # one side: the executor's own frames
+                ex.run(frames)
+            self.frame_index += frames
+            return
+        for _ in range(frames):
+            self.frame()
+
+    def frame(self) -> None:
+        exs = self.executors
+        for ex in exs.values():
+            ex.begin_frame()
+        for name in self.plan.order:
+            br = self.mixed.bridges.get(name)
+            if br is None:
+                exs[self.mixed.side[name]].record(name)
+                continue
+            src, dst = exs[br.src], exs[br.dst]
+            src.record(name)  # vk: the plan's barriers to transfer src
+            dst.record(name)  # vk: ... and to transfer dst, aliasing included
+            src.flush()
+            dst.flush()  # uploads go ahead of unsubmitted work: submit it first
+            t = time.perf_counter()
+            data = self.backends[br.src].read_bridge(src, name, br.resource)
+            self.backends[br.dst].write_bridge(dst, name, br.copy, data)
+            timing = self.bridge_timings[name]
+            timing.cpu_ms.append((time.perf_counter() - t) * 1e3)
+            timing.bytes = int(data.nbytes)
+        for ex in exs.values():
+            ex.end_frame()
+        self.frame_index += 1
+
+    def clear_timings(self) -> None:
+        for ex in self.executors.values():
+            for t in ex.timings.values():
+                t.gpu_ms.clear()
+                t.cpu_ms.clear()
+        for t in self.bridge_timings.values():
+            t.cpu_ms.clear()
+
+    def read(self, resource: str) -> np.ndarray:
+        """An output (or any resource) from the backend that holds it."""
+        return self.executors[self.mixed.owner[resource]].read(resource)
+
+    def pass_timings(self) -> list[dict[str, Any]]:
+        """timings.json's ``passes``: every pass of the full order, bridges included."""
+        out = []
+        for name in self.plan.order:
+            side = self.mixed.side[name]
+            if name in self.mixed.bridges:
+                t = self.bridge_timings[name]
+                out.append({"name": name, "gpu_ms": None, "cpu_ms": median(t.cpu_ms),
+                            "backend": side, "bytes": t.bytes})
+            else:
+                t = self.executors[side].timings[name]
+                out.append({"name": name, "gpu_ms": median(t.gpu_ms),
+                            "cpu_ms": median(t.cpu_ms), "backend": side})
+        return out
+
+    def destroy(self) -> None:
+        """Destroy the executors, then the scenes (then the devices open_frame made)."""
+        for ex in self.executors.values():
+            ex.destroy()
+        for sc in reversed(self.scenes):
+            sc.destroy()
+        self.scenes = []
+        if self._devices is not None:
+            self._devices.close()
+
+
+@dataclass
+class Side:
+    """One backend's part of a frame: its plan fitted to its device."""
+
+    backend: Backend
+    device: Any
+    plan: CompiledGraph
+    fitted: Any  # what the backend's fit hands its executor
+    passes: dict[str, Any]  # pass instances it records
+    outputs: tuple[str, ...]  # graph outputs it holds
+
+
+def prepare(built: Built, backend: str, devices: Devices, *, alias: bool = True,
+            mix: bool = True) -> tuple[MixedPlan, dict[str, Side]]:
+    """Split ``built`` (``split``), then compile each backend's part for its device (fitted
+    to its memory requirements) and check that backend can run its passes. ``mix=False``:
+    the whole graph on ``backend`` (a frame of one side, no bridges)."""
+    if not mix:
+        return _whole(built, backend, devices, alias=alias)
+    mixed = split(built, backend)
+    sides: dict[str, Side] = {}
+    for s in mixed.sides:
+        be = get_backend(s, file=built.graph.source, element=None)
+        device = devices.get(be)
+        outputs = tuple(o for o in mixed.plan.outputs if mixed.owner.get(o) == s)
+        plan, fitted = be.fit(mixed.graphs[s], device, alias=alias, readback=bool(outputs))
+        mixed.check(s, plan)
+        passes = {n: built.passes[n] for n in plan.order if n in built.passes}
+        sides[s] = Side(be, device, plan, fitted, passes, outputs)
+    for side in sides.values():  # e.g. a missing GLSL source fails before any upload
+        side.backend.check(side.plan, side.passes)
+    return mixed, sides
+
+
+def _whole(built: Built, backend: str, devices: Devices, *,
+           alias: bool) -> tuple[MixedPlan, dict[str, Side]]:
+    be = get_backend(backend, file=built.graph.source)
+    device = devices.get(be)
+    plan, fitted = be.fit(built.graph, device, alias=alias, readback=True)
+    be.check(plan, built.passes)  # e.g. a missing GLSL source fails before any upload
+    whole = MixedPlan(plan, backend, dict.fromkeys(plan.order, backend), {},
+                      {backend: built.graph}, built.slots,
+                      {r.name: backend for r in plan.resources})
+    return whole, {backend: Side(be, device, plan, fitted, built.passes, tuple(plan.outputs))}
+
+
+def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera: Any = None,
+          size: tuple[int, int] | None = None, alias: bool = True) -> Frame:
+    """Upload ``scene`` to each backend used and make its executor; the frame owns both."""
+    frame = Frame(mixed, {}, {s: side.backend for s, side in sides.items()})
+    try:
+        for s, side in sides.items():
+            uploaded = None
+            if scene is not None:
+                uploaded = side.backend.scene(side.device, scene, camera,
+                                              size or mixed.plan.size)
+                frame.scenes.append(uploaded)
+            frame.executors[s] = side.backend.executor(
+                side.device, side.plan, side.passes, mixed.slots, uploaded,
+                readback=side.outputs, alias=alias, fitted=side.fitted)
+    except BaseException:
+        frame.destroy()
+        raise
+    frame.devices = {s: side.device for s, side in sides.items()}
+    frame.default_light = bool(frame.scenes and frame.scenes[0].default_light)
+    return frame
+
+
+def open_frame(built: Built, backend: str = "wgpu", *, devices: Any = (), scene: Any = None,
+               camera: Any = None, size: tuple[int, int] | None = None, alias: bool = True,
+               validation: bool = False) -> Frame:
+    """``prepare`` and ``start`` in one: a frame of ``built`` ready to run. ``devices`` is
+    a :class:`rfw.backend.Devices` or devices to use; a backend with passes and none of them
+    gets a device made here (with ``validation``) that the frame's ``destroy()`` releases."""
+    own = not isinstance(devices, Devices)
+    devs = Devices(devices, validation=validation) if own else devices
+    try:
+        mixed, sides = prepare(built, backend, devs, alias=alias)
+        frame = start(mixed, sides, scene=scene, camera=camera, size=size, alias=alias)
+    except BaseException:
+        if own:
+            devs.close()
+        raise
+    frame._devices = devs if own else None
+    return frame

@@ -14,15 +14,17 @@ from .config import MAX_FRAMES, Config, build, resolve_auto
 from .errors import check_number
 from .fileio import atomic_write, inside
 from .frame import (
+    Frame,
     Result,
     camera_for,
     frame_record,
     load_scene_for,
     pass_timings,
     pinned_elsewhere,
+    prepare,
+    start,
 )
 from .graph.formats import format_info
-from .mixed import MixedFrame, prepare, start
 
 # timings.json's fields a backend adds, in this order after the ones every run has
 EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
@@ -44,7 +46,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     (``timings["techniques"]`` reports what they chose).
 
     A config that pins passes to a backend other than ``backend`` runs on both
-    (:mod:`rfw.mixed`): ``backend`` is then the one of unpinned passes, bridges copy
+    (:mod:`rfw.mixed` plans it): ``backend`` is then the one of unpinned passes, bridges copy
     resources across through host memory and are timed as passes of their own."""
     run = get_backend(backend, file=cfg.source)
     if frames is not None:
@@ -86,14 +88,14 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     return Result(cfg, images, timings, frame if mix else frame.executors[backend])
 
 
-def _record(frame: MixedFrame, side: Any) -> dict[str, Any]:
+def _record(frame: Frame, side: Any) -> dict[str, Any]:
     # one backend: its device's fields, then its passes
     ex = frame.executors[side.backend.name]
     return {**side.backend.describe(side.device), "passes": pass_timings(ex.plan.order,
                                                                         ex.timings)}
 
 
-def _mixed_record(frame: MixedFrame, sides: dict[str, Any]) -> dict[str, Any]:
+def _mixed_record(frame: Frame, sides: dict[str, Any]) -> dict[str, Any]:
     # each backend's device fields joined, and every pass with the backend it ran on
     described = {name: s.backend.describe(s.device) for name, s in sides.items()}
     return {**{k: " + ".join(dict.fromkeys(d[k] for d in described.values()))
@@ -102,7 +104,7 @@ def _mixed_record(frame: MixedFrame, sides: dict[str, Any]) -> dict[str, Any]:
             "passes": frame.pass_timings()}
 
 
-def _bridges(frame: MixedFrame, passes: list[dict[str, Any]]) -> dict[str, Any]:
+def _bridges(frame: Frame, passes: list[dict[str, Any]]) -> dict[str, Any]:
     # host copies are wall time, kept out of gpu_ms_total
     bridges = [p for p in passes if p["name"] in frame.mixed.bridges]
     return {"bridge_ms_total": sum(p["cpu_ms"] or 0.0 for p in bridges),

@@ -74,7 +74,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     """Render once; returns the record and the first output as 8-bit RGBA."""
     from ..backends.base import FrameExecutor
     from ..config import apply_overrides, load_config
-    from ..mixed import MixedFrame
+    from ..frame import Frame
     from ..render import render, to_png_array
 
     cfg = load_config(config)
@@ -86,7 +86,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     cfg = apply_overrides(cfg, sets)
     clock = FrameClock()
     clock.patch(FrameExecutor)  # one backend: the executor's own frames
-    clock.patch(MixedFrame)  # mixed: the frame that walks both (its executors' frame() idle)
+    clock.patch(Frame)  # mixed: the frame that walks every side (their own frame() idle)
     try:
         t0 = time.perf_counter()
         result = render(cfg, frames=frames, warmup=warmup, backend=backend)

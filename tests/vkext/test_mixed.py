@@ -20,8 +20,9 @@ import wgpu
 from rfw import ComputePass
 from rfw.cli import main
 from rfw.config import Built, apply_overrides, build, load_config
+from rfw.frame import open_frame
 from rfw.graph import Buffer, GraphBuilder, compile
-from rfw.mixed import open_frame, split
+from rfw.mixed import split
 from rfw.render import render
 from rfw.scene import default_scene
 from rfw.shaders import ShaderError
