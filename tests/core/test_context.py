@@ -130,3 +130,28 @@ def test_builtin_passes_record_through_the_protocol_only(tmp_path):
     bad = tmp_path / "reach.py"
     bad.write_text("def record(self, ctx):\n    return ctx.executor.view('x')\n")
     assert _ctx_attributes(bad) == [(2, "executor")]
+
+
+def test_a_wgpu_pass_is_handed_a_pass_context(device):
+    import numpy as np
+
+    from passes.fxaa.fxaa import FXAAPass
+    from rfw.testing import run_pass
+
+    seen = []
+
+    class Checked(FXAAPass):
+        @classmethod
+        def folder(cls):
+            return FXAAPass.folder()
+
+        def record(self, ctx) -> None:
+            seen.append((isinstance(ctx, PassContext), isinstance(ctx, RayTracingContext)))
+            super().record(ctx)
+
+    ldr = np.zeros((8, 8, 4), np.uint8)
+    ldr[:, 4:] = 255  # one vertical edge
+    out = run_pass(Checked, {"ldr": ("rgba8unorm", ldr)}, device=device)["color"]
+    assert seen == [(True, False)]
+    # fxaa ran with the protocol's sampler: the edge is softened, the flat areas are not
+    assert out[0, 0, 0] == 0 and out[0, 7, 0] == 255 and 0 < out[4, 4, 0] < 255

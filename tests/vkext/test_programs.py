@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from rfw import RenderPass
+from rfw.context import PassContext, RayTracingContext
 from rfw.graph import Attachment, GraphBuilder
 from rfw.shaders import ShaderError
 from vkext.commands import one_time
@@ -63,6 +64,8 @@ class _MeshPass(RenderPass):
         return cls.folder_path
 
     def record(self, ctx) -> None:
+        # what a vk pass is handed implements the protocols (checked at run time too)
+        assert isinstance(ctx, PassContext) and isinstance(ctx, RayTracingContext)
         prog = ctx.program("mesh", stages=self.stages)
         with ctx.render_pass(color=[("color", (0.0, 0.0, 0.0, 0.0))]) as rp:
             rp.use(prog, cull=self.cull)
