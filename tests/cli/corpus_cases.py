@@ -674,6 +674,9 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
 }
 """
 
+# the same pass with its GLSL source, which both backends run
+PLUGIN_GLSL_PY = PLUGIN_PY.replace("corpus_copy.comp.wgsl", "corpus_copy.comp.glsl")
+
 GLSL = """#version 460
 #extension GL_EXT_samplerless_texture_functions : require
 layout(local_size_x = 8, local_size_y = 8) in;
@@ -689,7 +692,7 @@ void main() {
 }
 """
 
-# deferred, not forward: every pass here has a GLSL twin, so the vk backend runs it too
+# a small frame both backends run
 PLUGIN_CONFIG = """name = "corpus"
 scene = "tri.obj"
 size = [32, 18]
@@ -771,16 +774,27 @@ def shader_cases() -> list[Case]:
                 wgsl=('#include "nope.wgsl"\n' + w).encode()),
         _shader("plugin-import-error", "corpus_copy", module="import nonexistent_module_xyz\n"),
         _shader("plugin-syntax-error", "corpus_copy", module="def broken(:\n"),
-        _shader("glsl-syntax-error", f"{gf}:8", backend="vk",
-                glsl=g.replace("ivec2 p =", "ivec2 p = =").encode()),
-        _shader("glsl-missing-binding", gf, copy, "t_src", backend="vk",
+        _shader("wgsl-on-vk", wf, copy, "only --backend wgpu runs", backend="vk"),
+        *(c for b in ("vk", "wgpu") for c in _glsl_cases(b, g, gf, copy)),
+    ]
+
+
+def _glsl_cases(backend: str, g: str, gf: str, copy: str) -> list[Case]:
+    """The GLSL source's errors, the same one line on either backend (file and line)."""
+    tail = "" if backend == "vk" else "-wgpu"
+    kw = {"backend": backend, "module": PLUGIN_GLSL_PY, "wgsl": None}
+    return [
+        _shader(f"glsl-syntax-error{tail}", f"{gf}:8",
+                glsl=g.replace("ivec2 p =", "ivec2 p = =").encode(), **kw),
+        _shader(f"glsl-missing-binding{tail}", gf, copy, "t_src",
                 glsl=g.replace("layout(set = 0, binding = 0) uniform texture2D t_src;\n",
-                               "").replace("texelFetch(t_src, p, 0)", "vec4(1.0)").encode()),
-        _shader("glsl-wrong-storage-format", gf, copy, "o_dst", backend="vk",
-                glsl=g.replace("rgba8)", "rgba16f)").encode()),
-        _shader("glsl-invalid-utf8", f"{gf}:14", backend="vk",
-                glsl=g.encode() + b"// \xff\xfe\n"),
-        _shader("glsl-missing-file", gf, copy, backend="vk", glsl=None),
+                               "").replace("texelFetch(t_src, p, 0)", "vec4(1.0)").encode(),
+                **kw),
+        _shader(f"glsl-wrong-storage-format{tail}", gf, copy, "o_dst",
+                glsl=g.replace("rgba8)", "rgba16f)").encode(), **kw),
+        _shader(f"glsl-invalid-utf8{tail}", f"{gf}:14", glsl=g.encode() + b"// \xff\xfe\n",
+                **kw),
+        _shader(f"glsl-missing-file{tail}", gf, copy, glsl=None, **kw),
     ]
 
 
@@ -897,10 +911,13 @@ class Accepted:
 
 ACCEPTED = [
     # the corpus pass unbroken: the shader cases are only meaningful if this renders
+    # the plugin's one GLSL source on both backends, and a WGSL-only plugin on wgpu
     Accepted("plugin-pass-wgpu", ("run", "c.toml", "--backend", "wgpu"),
-             plugin_files(WGSL.encode(), GLSL.encode()), env=PLUGIN_ENV),
+             plugin_files(None, GLSL.encode(), PLUGIN_GLSL_PY), env=PLUGIN_ENV),
     Accepted("plugin-pass-vk", ("run", "c.toml", "--backend", "vk"),
-             plugin_files(WGSL.encode(), GLSL.encode()), env=PLUGIN_ENV),
+             plugin_files(None, GLSL.encode(), PLUGIN_GLSL_PY), env=PLUGIN_ENV),
+    Accepted("plugin-pass-wgsl-wgpu", ("run", "c.toml", "--backend", "wgpu"),
+             plugin_files(WGSL.encode(), None), env=PLUGIN_ENV),
     Accepted("gltf-mirrored-node", ("run", FORWARD, "--scene", "m.gltf"),
              {"m.gltf": _node_scene(scale=[-1, 1, 1], translation=[2, 0, 0])}),
     Accepted("gltf-zero-scale-node", ("run", FORWARD, "--scene", "z.gltf"),
