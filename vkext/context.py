@@ -17,7 +17,7 @@ from rfw.graph.formats import format_info
 from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError, program_files
-from rfw.spirv import DescriptorInfo
+from rfw.spirv import DescriptorInfo, check_bindings
 
 from .commands import barrier, image_layout, record_barriers
 from .consts import const, ffi, lib, vk
@@ -160,11 +160,7 @@ class VkPassContext(SlotContext):
         return program_files(self.pass_.folder(), name, owner=self.pass_.name)
 
     def _check_extra(self, prog: Program, values: dict[str, Any]) -> None:
-        extra = [k for k in values if k not in prog.descriptors]
-        if extra:
-            raise ShaderError(f"pass '{self.pass_.name}': {prog.name} has no binding named "
-                              f"{', '.join(extra)} (it declares "
-                              f"{', '.join(sorted(prog.descriptors)) or 'none'})")
+        check_bindings(self.pass_.name, prog.name, prog.descriptors, values)
 
     def bind(self, prog: Program, values: dict[str, Any], point: int,
              sets: Sequence[int] | None = None) -> None:
@@ -176,11 +172,8 @@ class VkPassContext(SlotContext):
                             key=lambda d: d.binding)
             if not wanted:
                 continue
-            missing = [d.name for d in wanted if d.name not in values]
-            if missing:
-                raise ShaderError(f"pass '{self.pass_.name}': shader {prog.name} binds "
-                                  f"{', '.join(missing)} but the pass gives "
-                                  f"{', '.join(sorted(values)) or 'nothing'}")
+            check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
+                           missing=True)
             handle = self._scene_set(prog, s, values, wanted)
             if handle is None:
                 entries = [(d.binding, d.kind, max(1, d.count)) for d in wanted]
