@@ -5,7 +5,7 @@ A pass is a class in ``passes/<id>/<id>.py`` with its shader beside it::
     @register_pass("tonemap")
     class TonemapPass(ComputePass):
         \"\"\"Exposure, then a filmic curve, then display encoding.\"\"\"
-        shader = "tonemap.comp.wgsl"
+        shader = "tonemap.comp.glsl"
         inputs = {"hdr": Tex2D(desc="linear HDR scene color")}
         outputs = {"ldr": Tex2D("rgba8unorm", size_of="hdr", desc="display color")}
 

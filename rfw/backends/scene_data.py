@@ -1,6 +1,6 @@
 """The scene's GPU-visible bytes, shared by the wgpu and Vulkan backends.
 
-Layouts follow ``shaders/common/scene.wgsl`` (group 1) and ``mesh.wgsl`` (groups 2 and 3);
+Layouts follow ``shaders/common/scene.glsl`` (group 1) and ``mesh.glsl`` (groups 2 and 3);
 the GLSL twins declare the same offsets.
 """
 
