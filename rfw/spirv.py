@@ -16,6 +16,7 @@ Vulkan 1.3.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
@@ -82,7 +83,8 @@ def _glslang() -> str:
     return exe
 
 
-def _glslang_version(exe: str) -> str:
+@functools.lru_cache(maxsize=8)
+def _glslang_version(exe: str) -> str:  # asked once per process, not once per compile
     out = subprocess.run([exe, "--version"], capture_output=True, text=True, check=False)
     return out.stdout.splitlines()[0] if out.stdout else ""
 
@@ -93,6 +95,7 @@ class Spirv:
     stage: str
     code: bytes
     key: str
+    sources: tuple[Path, ...] = ()  # the file and every file it includes
 
 
 def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
@@ -117,7 +120,7 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
     cached = cache_dir() / f"{key}.spv"
     code = _cached(cached)
     if code is not None:
-        return Spirv(path, stage, code, key)
+        return Spirv(path, stage, code, key, tuple(seen))
     with tempfile.TemporaryDirectory(prefix="rfw-glsl-") as tmp:
         out = Path(tmp) / "out.spv"
         source = _with_include_extension(path, Path(tmp))
@@ -134,7 +137,7 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
     except OSError as e:  # the compile stands; only later runs pay for it again
         warn(f"{cache_dir()}: cannot write the SPIR-V cache ({e.strerror or e}); "
              "shaders are compiled every run")
-    return Spirv(path, stage, code, key)
+    return Spirv(path, stage, code, key, tuple(seen))
 
 
 def _cached(path: Path) -> bytes | None:

@@ -183,6 +183,9 @@ class ShaderCache:
         self.programs: dict[tuple, Program] = {}
         self.layouts: dict[str, Any] = {}
         self.scene_layouts: dict[int, Any] = {}
+        # (files, defines) -> their SPIR-V and the stamps of every source they read: a
+        # dispatch looks its program up without hashing sources or asking glslang
+        self.compiled: dict[tuple, tuple[list[Spirv], tuple]] = {}
 
     def program(self, paths: list[Path], defines: dict[str, object], kind: str,
                 formats: dict[str, str], *, owner: str = "") -> Program:
@@ -190,14 +193,23 @@ class ShaderCache:
         (compute | render), with the layouts the bound ``formats`` need."""
         if paths[0].suffix == ".wgsl":
             return self._wgsl(paths[0], defines, kind, formats)
-        try:
-            spirvs = [compile_glsl(p, defines) for p in paths]
-        except ShaderCompileError as e:
-            raise e.about(f"pass '{owner}'") if owner else e from None
+        spirvs = self._spirv(paths, defines, owner)
         key = (kind, *(s.key for s in spirvs), tuple(sorted(formats.items())))
         if key not in self.programs:
             self.programs[key] = self._glsl(paths, spirvs, kind, formats, owner)
         return self.programs[key]
+
+    def _spirv(self, paths: list[Path], defines: dict[str, object], owner: str) -> list[Spirv]:
+        memo = (tuple(paths), tuple(sorted((k, str(v)) for k, v in defines.items())))
+        hit = self.compiled.get(memo)
+        if hit is not None and hit[1] == _stamps(s for spv in hit[0] for s in spv.sources):
+            return hit[0]
+        try:
+            spirvs = [compile_glsl(p, defines) for p in paths]
+        except ShaderCompileError as e:
+            raise e.about(f"pass '{owner}'") if owner else e from None
+        self.compiled[memo] = (spirvs, _stamps(s for spv in spirvs for s in spv.sources))
+        return spirvs
 
     def layout(self, entries: list[dict], label: str) -> Any:
         key = repr(sorted(entries, key=lambda e: e["binding"]))
@@ -339,6 +351,18 @@ class ShaderCache:
                                                   label=path.name), wg)
         self.programs[key] = prog
         return prog
+
+
+def _stamps(paths: Any) -> tuple:
+    """When and how large each file is: a changed include recompiles (hot reload)."""
+    out = []
+    for p in paths:
+        try:
+            st = p.stat()
+            out.append((p, st.st_mtime_ns, st.st_size))
+        except OSError:
+            out.append((p, None, None))
+    return tuple(out)
 
 
 def _sample_type(d: DescriptorInfo, fmt: str | None, features: tuple[str, ...]) -> str:
