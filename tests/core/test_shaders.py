@@ -130,3 +130,20 @@ def test_invalid_utf8_names_file_and_line(tmp_path, where):
     # negative control: the same bytes, valid UTF-8, preprocess
     bad_file.write_text(bad.decode("latin-1"))
     assert "return 2.0" in preprocess(main).text
+
+
+def test_an_edited_include_recompiles(tmp_path, device, monkeypatch):
+    # the wgpu program cache skips hashing on a hit, but not past a changed include
+    from rfw.backends.wgpu_backend import ShaderCache
+
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+    inc = write(tmp_path, "k.glsl", "const uint K = 1u;\n")
+    main = write(tmp_path, "m.comp.glsl", '#version 460\n#include "k.glsl"\n'
+                 "layout(local_size_x = 1) in;\n"
+                 "layout(set = 0, binding = 0) buffer B { uint v; } b_out;\n"
+                 "void main() { b_out.v = K; }\n")
+    cache = ShaderCache(device)
+    first = cache.program([main], {}, "compute", {})
+    assert cache.program([main], {}, "compute", {}) is first
+    inc.write_text("const uint K = 22u;  // longer, so the size changes too\n")
+    assert cache.program([main], {}, "compute", {}) is not first
