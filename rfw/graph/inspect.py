@@ -83,8 +83,9 @@ def _barriers(c: CompiledGraph) -> list[str]:
         out += [_barrier_line(b, f"{b.pass_name} / {b.resource}") for b in entry.get(name, ())]
         for b in inside.get(name, ()):
             step = c.steps[name][b.step] if b.step is not None else "?"
+            part = "" if b.mips is None and b.bytes is None else f" {b.part()}"
             out.append(_barrier_line(b, f"{b.pass_name} step {b.step} ({step}) / "
-                                        f"{b.resource} {b.part()}"))
+                                        f"{b.resource}{part}"))
     return out
 
 
