@@ -30,12 +30,13 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
+from functools import reduce
 from typing import Any
 
 from rfw.errors import RfwError, check_number
 from rfw.graph import CompiledGraph
-from rfw.graph.compile import Barrier
 from rfw.graph.formats import format_info
+from rfw.graph.plan import Barrier
 from rfw.graph.sync import NONE, State
 
 from .commands import BufferBarrier, ImageBarrier, barrier, image_layout
@@ -149,24 +150,24 @@ class Poisoner:
         starts = self.starts.get(pass_name)
         if not starts:
             return barriers
-        planned = {b.resource: b for b in barriers}
-        before_i, before_b, after = [], [], []
+        ours = {name for name, _ in starts}
+        images, buffers, after = [], [], []
         for name, first in starts:
             res = resources[name]
-            b = planned.get(name)
+            planned = [b for b in barriers if b.resource == name]
             # wait for the memory's previous occupants as the plan's aliasing barrier does
-            src = b.src if b is not None else State(None, NONE, NONE)
-            filled = FILLED_IMAGE if isinstance(res, Image) else FILLED_BUFFER
+            src = reduce(State.merge, (b.src for b in planned), State(None, NONE, NONE))
             if isinstance(res, Image):
-                before_i.append(ImageBarrier(res, replace(src, layout="UNDEFINED"), filled))
+                images.append(ImageBarrier(res, replace(src, layout="UNDEFINED"), FILLED_IMAGE))
             else:
-                before_b.append(BufferBarrier(res, src, filled))
-            after.append(Barrier(pass_name, name, filled, b.dst if b is not None else first))
-        barrier(cmd, before_i, before_b)
+                buffers.append(BufferBarrier(res, src, FILLED_BUFFER))
+            filled = FILLED_IMAGE if isinstance(res, Image) else FILLED_BUFFER
+            after += [replace(b, src=filled, aliased=()) for b in planned] or \
+                [Barrier(pass_name, name, filled, first)]
+        barrier(cmd, images, buffers)
         for name, _ in starts:
             _fill(cmd, resources[name])
             STATS["fills"] += 1
-        ours = {name for name, _ in starts}
         return [b for b in barriers if b.resource not in ours] + after
 
 
