@@ -36,7 +36,7 @@ from .blas import (
 from .geometry import SceneGeometry
 from .plan import PlanRecorder, build_graph, compiled, refit_graph
 from .stats import BuildTimer, accel_stats
-from .structure import PREFER, AccelerationStructure, build_flags, scratch_alignment, scratch_buffer
+from .structure import PREFER, AccelerationStructure, build_flags, scratch_buffer, scratch_multiple
 from .tlas import ALPHA_MASK, TopLevel, instance_records
 
 
@@ -63,8 +63,9 @@ class SceneAccel:
 
     ``blas[m]`` is mesh ``m``'s structure (None for a mesh without triangles), shared by
     every instance of the mesh; ``tlas`` the top level; ``transforms`` the instances' current
-    (N, 4, 4) world matrices; ``geometry`` the triangles' buffers (:mod:`.geometry`). ``build_plan`` is the compiled plan of the one-time build,
-    ``refit_plan`` that of the last :meth:`update`.
+    (N, 4, 4) world matrices; ``geometry`` the triangles' buffers (:mod:`.geometry`).
+    ``build_plan`` is the compiled plan of the one-time build, ``refit_plan`` that of the
+    last :meth:`update`.
     """
 
     def __init__(self, device: VkDevice, scene: Scene, *, prefer: str | None = "fast_trace",
@@ -129,7 +130,7 @@ class SceneAccel:
         if len(scene.instances) >= 1 << 24:
             raise ValueError(f"{len(scene.instances)} instances: instanceCustomIndex holds 24 "
                              "bits")
-        align = scratch_alignment(dev)
+        align = scratch_multiple(dev)
         compact_flag = ("VK_BUILD_ACCELERATION_STRUCTURE_ALLOW_COMPACTION_BIT_KHR",) \
             if self.compact else ()
         jobs = blas_jobs(dev, self.geometry, build_flags(self.prefer, *compact_flag))

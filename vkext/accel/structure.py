@@ -106,7 +106,7 @@ def build_range(count: int) -> tuple[Any, Any]:
     return rng, ffi.new("VkAccelerationStructureBuildRangeInfoKHR*[1]", [rng])
 
 
-def scratch_alignment(device: VkDevice) -> int:
+def scratch_multiple(device: VkDevice) -> int:
     """Scratch addresses of builds are multiples of this."""
     return int(device.extension_properties["VK_KHR_acceleration_structure"]
                ["minAccelerationStructureScratchOffsetAlignment"])
