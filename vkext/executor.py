@@ -266,7 +266,7 @@ class VkExecutor(FrameExecutor):
         return out
 
     # frames -------------------------------------------------------------------------------
-    # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
+    # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
     def begin_frame(self) -> None:
         """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded
         and wait, ``end_frame`` to finish. Descriptors and uniforms live until the next
@@ -292,7 +292,7 @@ class VkExecutor(FrameExecutor):
         """Record pass ``name``: its debug label, the plan's barriers for it, a timestamp
         before and after, and ``record(ctx)``. A pass without an instance (a bridge's side
         on this device) records its barriers only: the copy itself goes through the host
-        (``vkext.mixed``), between flushes."""
+        (``rfw.frame``), between flushes."""
         dev, cmd, ts = self.device, self.cmd, self.timestamps
         if not self._recording:
             vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(

@@ -35,7 +35,7 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
         if p.enabled and p.backend not in (None, "vk"):
             raise ShaderError(f"pass '{p.name}' is pinned to backend '{p.backend}': the vk "
                               "backend runs every pass on Vulkan (frames that mix backends "
-                              "run through rfw.render.render or vkext.mixed.render_mixed)",
+                              "run through rfw.render.render)",
                               file=graph.source)
     return fit_graph(graph, device, alias=alias, readback=readback)
 
@@ -120,10 +120,10 @@ def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
         if p is None:
             if is_bridge(plan, name) and len(plan.accesses[name]) > 1:
                 raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
-                                  "them, and runs through vkext.mixed (each backend gets its "
+                                  "them, and runs through rfw.render.render (each backend gets its "
                                   "part of it)")
             if is_bridge(plan, name):
-                continue  # its barriers are recorded; vkext.mixed copies through the host
+                continue  # its barriers are recorded; rfw.frame copies through the host
             raise ShaderError(f"pass '{name}' has no pass instance")
         if p.shader:
             shader_paths(p)

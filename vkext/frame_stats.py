@@ -1,6 +1,6 @@
 """What a Vulkan frame reports about its executor beside the timings: the acceleration
-structures its builder pass made and the meshlet passes' culling counters. Shared by
-:mod:`vkext.backend` and :mod:`vkext.mixed`."""
+structures its builder pass made and the meshlet passes' culling counters, for
+:class:`vkext.backend.VkBackend` (one-backend and mixed frames alike)."""
 
 from __future__ import annotations
 

@@ -677,7 +677,7 @@ class Executor(FrameExecutor):
         self.shaders = ShaderCache(device)
         self.frame_index = 0
         self.timings = {name: PassTiming(name) for name in plan.order}
-        # a bridge's side on this backend (vkext.mixed): the host copies, nothing is recorded
+        # a bridge's side on this backend (rfw.frame): the host copies, nothing is recorded
         self._bridges = tuple(name for name in plan.order if name not in passes and
                               name.startswith("bridge.") and all(
                                   a.usages <= {"transfer_src", "transfer_dst"}
@@ -685,7 +685,7 @@ class Executor(FrameExecutor):
         for name in self._bridges:
             if len(plan.accesses[name]) > 1:
                 raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
-                                  "them, and runs through rfw.render.render (vkext.mixed "
+                                  "them, and runs through rfw.render.render (rfw.frame "
                                   "gives each backend its part of it)")
         self._textures: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
@@ -788,7 +788,7 @@ class Executor(FrameExecutor):
         return {"query_set": self._query_set, "beginning_of_pass_write_index": k,
                 "end_of_pass_write_index": k + 1}
 
-    # a frame driven pass by pass (mixed-backend frames: vkext.mixed) ----------------------
+    # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
     def begin_frame(self) -> None:
         """Start a frame; ``record`` passes into it, ``flush`` to run what was recorded."""
         self._encoder: Any = None
@@ -802,7 +802,7 @@ class Executor(FrameExecutor):
     def record(self, name: str) -> None:
         """Record pass ``name`` into the frame's open command encoder (made on first use).
 
-        A bridge's side of the plan (``vkext.mixed``: the copy goes through the host between
+        A bridge's side of the plan (``rfw.frame``: the copy goes through the host between
         flushes, and WebGPU tracks the usage itself) records nothing."""
         if name in self._bridges:
             return
