@@ -1,6 +1,7 @@
 """Every config in ``configs/`` on both backends, through the real CLI: one GLSL source (one
 SPIR-V for comp, vert and frag) gives the same image with ``--backend wgpu`` and
-``--backend vk``.
+``--backend vk``; starting from an empty SPIR-V cache, the vk run compiles nothing the wgpu
+run did not.
 
 A config whose passes need Vulkan (mesh shaders, acceleration structures, ray tracing) is
 listed in ``VK_ONLY``: its passes are pinned to vk, so ``--backend wgpu`` leaves them there;
@@ -14,6 +15,7 @@ keeps that bar where it holds and falls back to ``golden_util.assert_similar`` e
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -47,19 +49,22 @@ VK_ONLY = {
 }
 
 
-def rfw(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+def rfw(*args: str, cwd: Path = ROOT, env: dict[str, str] | None = None
+        ) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, check=False)
+                          capture_output=True, text=True, check=False,
+                          env={**os.environ, **(env or {})})
 
 
-def render(config: Path, backend: str, out: Path, sets: list[str]) -> dict[str, np.ndarray]:
+def render(config: Path, backend: str, out: Path, sets: list[str],
+           cache: Path | None = None) -> dict[str, np.ndarray]:
     """The config's output images, rendered by the CLI on ``backend`` (vk: under the
     validation layers with synchronization validation, where any message fails the run)."""
     args = ["run", str(config), "--backend", backend, "--size", SIZE, "--frames", "1",
             "--out", str(out), *(["--validate"] if backend == "vk" else [])]
     for s in sets:
         args += ["--set", s]
-    done = rfw(*args)
+    done = rfw(*args, env={"RFW_CACHE_SPIRV": str(cache)} if cache else None)
     assert done.returncode == 0, f"{config.name} on {backend}: {done.stdout}{done.stderr}"
     images = {p.name: read_png(p) for p in sorted(out.glob("*.png"))}
     assert images, f"{config.name} on {backend} wrote no image"
@@ -76,8 +81,12 @@ def test_every_config_is_placed():
 @pytest.mark.parametrize("name", sorted(PORTABLE))
 def test_wgpu_and_vk_render_the_same(name, tmp_path):
     config = ROOT / "configs" / f"{name}.toml"
-    wgpu = render(config, "wgpu", tmp_path / "wgpu", PORTABLE[name])
-    vk = render(config, "vk", tmp_path / "vk", PORTABLE[name])
+    cache = tmp_path / "spirv"  # a fresh SPIR-V cache: what each backend compiles shows
+    wgpu = render(config, "wgpu", tmp_path / "wgpu", PORTABLE[name], cache)
+    compiled = sorted(cache.iterdir())
+    vk = render(config, "vk", tmp_path / "vk", PORTABLE[name], cache)
+    # one SPIR-V for both: the vk run finds every module in the wgpu run's cache
+    assert compiled and sorted(cache.iterdir()) == compiled
     assert wgpu.keys() == vk.keys()
     for image in wgpu:
         if name in IDENTICAL:
