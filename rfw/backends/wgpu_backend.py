@@ -230,6 +230,24 @@ class ShaderCache:
               formats: dict[str, str], owner: str) -> Program:
         where = " + ".join(str(p) for p in paths)
         who = f"pass '{owner}': " if owner else ""
+        stages, found, workgroup = self._stages(paths, spirvs, who, where)
+        if (kind == "compute") != ("comp" in stages) or (kind == "render" and
+                                                         "vert" not in stages):
+            need = "a comp shader" if kind == "compute" else "a vert shader (and a frag one)"
+            raise ShaderError(f"{who}{where}: a {kind} pass needs {need}")
+        bindings = {name: self._binding(d, vis, formats.get(name), path, who)
+                    for name, (d, vis, path) in found.items()}
+        layouts = self._group_layouts(kind, bindings, f"{who}{where}", paths[0].name)
+        dev = self.device.device
+        return Program(tuple(paths), stages, bindings, layouts,
+                       dev.create_pipeline_layout(bind_group_layouts=layouts,
+                                                  label=paths[0].name), workgroup)
+
+    def _stages(self, paths: list[Path], spirvs: list[Spirv], who: str, where: str
+                ) -> tuple[dict[str, tuple[Any, str]], dict[str, tuple[DescriptorInfo, int, Path]],
+                           tuple[int, int, int]]:
+        """A module per stage, and every binding with the stages that see it (a name is
+        one binding in every stage that declares it)."""
         stages: dict[str, tuple[Any, str]] = {}
         found: dict[str, tuple[DescriptorInfo, int, Path]] = {}
         workgroup = (1, 1, 1)
@@ -240,6 +258,8 @@ class ShaderCache:
             if spv.stage in stages:
                 raise ShaderError(f"{who}{where} has two {spv.stage} shaders")
             refl = reflect(spv.code)
+            for d in refl.descriptors.values():  # before naga gives its own, vaguer error
+                _check_portable(d, path, who)
             stages[spv.stage] = (self._module(path, spv.code), refl.entry)
             if spv.stage == "comp":
                 workgroup = refl.local_size
@@ -252,12 +272,12 @@ class ShaderCache:
                                       f"binding {d.binding} in {path}")
                 vis = _VISIBLE[spv.stage] | (prior[1] if prior else 0)
                 found[d.name] = (d, vis, prior[2] if prior else path)
-        if (kind == "compute") != ("comp" in stages) or (kind == "render" and
-                                                         "vert" not in stages):
-            need = "a comp shader" if kind == "compute" else "a vert shader (and a frag one)"
-            raise ShaderError(f"{who}{where}: a {kind} pass needs {need}")
-        bindings = {name: self._binding(d, vis, formats.get(name), path, who)
-                    for name, (d, vis, path) in found.items()}
+        return stages, found, workgroup
+
+    def _group_layouts(self, kind: str, bindings: dict[str, Binding], where: str,
+                       label: str) -> list[Any]:
+        """One bind group layout per group index; the scene's groups (all of them in a
+        render program) take the scene's shared layout."""
         groups: dict[int, list[Binding]] = defaultdict(list)
         for b in bindings.values():
             groups[b.group].append(b)
@@ -278,23 +298,15 @@ class ShaderCache:
                 continue
             if kind == "render" and scene is not None:
                 odd = [b.name for b in mine if (b.name, b.binding) not in scene]
-                raise ShaderError(f"{who}{where} declares {', '.join(odd)} in group {g}, "
-                                  f"which the scene owns ({', '.join(n for n, _ in scene)})")
-            layouts.append(self.layout([b.entry for b in mine], f"{paths[0].name}:group{g}"))
-        dev = self.device.device
-        return Program(tuple(paths), stages, bindings, layouts,
-                       dev.create_pipeline_layout(bind_group_layouts=layouts,
-                                                  label=paths[0].name), workgroup)
+                raise ShaderError(f"{where} declares {', '.join(odd)} in group {g}, which the "
+                                  f"scene owns ({', '.join(n for n, _ in scene)})")
+            layouts.append(self.layout([b.entry for b in mine], f"{label}:group{g}"))
+        return layouts
 
     def _binding(self, d: DescriptorInfo, vis: int, fmt: str | None, path: Path,
                  who: str) -> Binding:
         entry: dict[str, Any] = {"binding": d.binding, "visibility": vis}
         declared = None
-        if d.count != 1 or d.kind in ("combined_image_sampler", "acceleration_structure"):
-            what = {"combined_image_sampler": "a combined image sampler (declare a texture "
-                    "and a sampler)", "acceleration_structure": "an acceleration structure "
-                    "(this pass needs --backend vk)"}.get(d.kind, "an array of bindings")
-            raise ShaderError(f"{who}{path}: binding '{d.name}' is {what}: WebGPU has none")
         if d.kind == "uniform_buffer":
             entry["buffer"] = {"type": "uniform"}
         elif d.kind == "storage_buffer":
@@ -351,6 +363,15 @@ class ShaderCache:
                                                   label=path.name), wg)
         self.programs[key] = prog
         return prog
+
+
+def _check_portable(d: DescriptorInfo, path: Path, who: str) -> None:
+    """A ShaderError for a binding WebGPU has no counterpart of."""
+    if d.count != 1 or d.kind in ("combined_image_sampler", "acceleration_structure"):
+        what = {"combined_image_sampler": "a combined image sampler (declare a texture and a "
+                "sampler)", "acceleration_structure": "an acceleration structure (this pass "
+                "needs --backend vk)"}.get(d.kind, "an array of bindings")
+        raise ShaderError(f"{who}{path}: binding '{d.name}' is {what}: WebGPU has none")
 
 
 def _stamps(paths: Any) -> tuple:

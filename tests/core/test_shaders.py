@@ -147,3 +147,49 @@ def test_an_edited_include_recompiles(tmp_path, device, monkeypatch):
     assert cache.program([main], {}, "compute", {}) is first
     inc.write_text("const uint K = 22u;  // longer, so the size changes too\n")
     assert cache.program([main], {}, "compute", {}) is not first
+
+
+RASTER_VERT = """#version 460
+#define MESH_VERTEX_INPUT
+#include "mesh.glsl"
+void main() { gl_Position = camera.view_proj * (instance.model * vec4(v_position, 1.0)); }
+"""
+
+
+@pytest.mark.parametrize(("files", "kind", "message"), [
+    # a stage only the vk backend runs
+    ({"m.mesh.glsl": "#version 460\n#extension GL_EXT_mesh_shader : require\n"
+                     "layout(local_size_x = 1) in;\n"
+                     "layout(triangles, max_vertices = 3, max_primitives = 1) out;\n"
+                     "void main() { SetMeshOutputsEXT(0, 0); }\n"},
+     "render", r"m\.mesh\.glsl is a mesh shader: the wgpu backend runs comp, vert and frag"),
+    # WebGPU has no combined image samplers
+    ({"c.comp.glsl": "#version 460\nlayout(local_size_x = 1) in;\n"
+                     "layout(set = 0, binding = 0) uniform sampler2D t_src;\n"
+                     "layout(set = 0, binding = 1, rgba8) uniform writeonly image2D o_dst;\n"
+                     "void main() { imageStore(o_dst, ivec2(0), texture(t_src, vec2(0.5))); }\n"},
+     "compute", r"binding 't_src' is a combined image sampler .*WebGPU has none"),
+    # group 1 of a raster program is the scene's
+    ({"s.vert.glsl": RASTER_VERT.replace(
+        "void main", "layout(set = 1, binding = 5) uniform Extra { vec4 x; } u_extra;\nvoid main"
+    ).replace("vec4(v_position, 1.0)", "vec4(v_position, 1.0) + u_extra.x")},
+     "render", r"declares u_extra in group 1, which the scene owns \(camera, lights\)"),
+])
+def test_wgpu_refuses_what_it_cannot_run(tmp_path, device, monkeypatch, files, kind, message):
+    from rfw.backends.wgpu_backend import ShaderCache
+
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+    paths = [write(tmp_path, name, text) for name, text in files.items()]
+    with pytest.raises(ShaderError, match=message):
+        ShaderCache(device).program(paths, {}, kind, {}, owner="p")
+
+
+def test_wgpu_takes_a_scene_raster_program(tmp_path, device, monkeypatch):
+    # negative control of the scene-group refusal: the plain vertex shader is accepted, and
+    # its groups 1-3 are the scene's shared layouts
+    from rfw.backends.wgpu_backend import ShaderCache
+
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+    cache = ShaderCache(device)
+    prog = cache.program([write(tmp_path, "ok.vert.glsl", RASTER_VERT)], {}, "render", {})
+    assert prog.layouts[1:] == [cache.scene_layouts[g] for g in (1, 2, 3)]
