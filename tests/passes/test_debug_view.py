@@ -26,7 +26,7 @@ def linear_depth(d: np.ndarray, near: float, far: float) -> np.ndarray:
 
 
 def turbo(x: np.ndarray) -> np.ndarray:
-    """Mikhailov's polynomial turbo map, as debug_view.comp.wgsl evaluates it."""
+    """Mikhailov's polynomial turbo map, as debug_view.comp.glsl evaluates it."""
     x = np.clip(x.astype(np.float64), 0.0, 1.0)
     v4 = np.stack([np.ones_like(x), x, x * x, x * x * x], axis=-1)
     v2 = v4[..., 2:4] * v4[..., 2:3]
