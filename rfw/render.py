@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 
 from .backend import Devices, get_backend
-from .config import MAX_FRAMES, Config, build, resolve_auto
-from .errors import check_number
+from .config import MAX_FRAMES, Config, build, pass_class, resolve_auto
+from .errors import RfwError, check_number
 from .fileio import atomic_write, inside
 from .frame import (
     Frame,
@@ -49,6 +49,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     (:mod:`rfw.mixed` plans it): ``backend`` is then the one of unpinned passes, bridges copy
     resources across through host memory and are timed as passes of their own."""
     run = get_backend(backend, file=cfg.source)
+    check_outputs(cfg)
     if frames is not None:
         check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
     devs = Devices((device, *devices), validation=validation)
@@ -86,6 +87,18 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
     return Result(cfg, images, timings, frame if mix else frame.executors[backend])
+
+
+def check_outputs(cfg: Config) -> None:
+    """A run needs something to render: without outputs the graph culls every pass."""
+    if cfg.outputs:
+        return
+    last = [e for e in cfg.passes if e.enabled][-1:]
+    slots = list(pass_class(cfg, last[0]).outputs) if last else []
+    hint = f' (e.g. outputs = ["{last[0].name}.{slots[0]}"])' if slots else ""
+    raise RfwError("names no outputs, so every pass would be culled and nothing rendered: "
+                   "list the resources to write as images" + hint, file=cfg.source,
+                   element="outputs")
 
 
 def _record(frame: Frame, side: Any) -> dict[str, Any]:

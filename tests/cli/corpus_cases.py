@@ -383,6 +383,10 @@ def config_cases() -> list[Case]:
         _cfg("outputs-unknown", b.replace('outputs = ["tonemap.ldr"]', 'outputs = ["tonemap.hdr"]'),
              "tonemap.hdr"),
         _cfg("outputs-int", b.replace('outputs = ["tonemap.ldr"]', "outputs = [5]"), "outputs"),
+        # without outputs every pass is culled: once a traceback from a zero-query set
+        _cfg("outputs-none", b.replace('outputs = ["tonemap.ldr"]\n', ""), "outputs",
+             "tonemap.ldr"),
+        _cfg("outputs-empty", b.replace('outputs = ["tonemap.ldr"]', "outputs = []"), "outputs"),
         _cfg("outputs-escape", b.replace('outputs = ["tonemap.ldr"]',
                                          'outputs = ["tonemap.ldr/../../../x"]'), "outputs"),
         _cfg("pass-is-int", _top("pass = 5").replace(b, "") + 'name = "x"\n', "pass"),
