@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rfw.backends.scene_data import SCENE_GROUPS
 from rfw.passes import Pass
 from rfw.shaders import ShaderError
 from rfw.spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
@@ -16,7 +17,7 @@ from rfw.spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 from .consts import const, ffi, vk
 from .device import VkDevice
 from .sbt import ShaderBindingTable, check_recursion, create_ray_pipeline, shader_group_handles
-from .scene import COMPARE, SCENE_SETS, DescriptorSetLayout, VkObject, VkScene, new
+from .scene import COMPARE, DescriptorSetLayout, VkObject, VkScene, new
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
                "task": "VK_SHADER_STAGE_TASK_BIT_EXT", "mesh": "VK_SHADER_STAGE_MESH_BIT_EXT",
@@ -196,22 +197,22 @@ class Programs:
             by_set[d.set].append(d)
         top = max(by_set, default=-1)
         if kind in RASTER and self.scene is not None:
-            top = max(top, max(SCENE_SETS))
+            top = max(top, max(SCENE_GROUPS))
         layouts, scene_sets = [], set()
         for s in range(top + 1):
             mine = by_set.get(s, [])
             # the scene's layouts are for raster and compute stages: ray-tracing programs
             # get their own layouts (and per-frame sets holding the same buffers)
-            scene_like = kind != "ray_tracing" and self.scene is not None and s in SCENE_SETS \
-                and all(
-                (d.name, d.binding, d.kind) in SCENE_SETS[s] for d in mine)
-            if kind in RASTER and s in SCENE_SETS and self.scene is not None:
+            scene_like = kind != "ray_tracing" and self.scene is not None and \
+                s in SCENE_GROUPS and all(
+                    (d.name, d.binding, d.kind) in SCENE_GROUPS[s] for d in mine)
+            if kind in RASTER and s in SCENE_GROUPS and self.scene is not None:
                 if not scene_like:
                     odd = [d.name for d in mine if (d.name, d.binding, d.kind)
-                           not in SCENE_SETS[s]]
+                           not in SCENE_GROUPS[s]]
                     raise ShaderError(f"{owner}: {where} declares "
                                       f"{', '.join(odd)} in set {s}, which the scene owns "
-                                      f"({', '.join(n for n, _, _ in SCENE_SETS[s])})")
+                                      f"({', '.join(n for n, _, _ in SCENE_GROUPS[s])})")
                 layouts.append(self.scene.layouts[s].handle)
                 scene_sets.add(s)
             elif scene_like and mine:

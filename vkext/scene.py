@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.scene_data import (
+    SCENE_GROUPS,
     instance_bytes,
     lights_bytes,
     main_camera_bytes,
@@ -49,15 +50,6 @@ DESCRIPTOR_TYPES = {
     "acceleration_structure": "VK_DESCRIPTOR_TYPE_ACCELERATION_STRUCTURE_KHR",
 }
 
-# the scene's sets as shaders/common/scene.glsl and mesh.glsl declare them: (name, binding, kind)
-SCENE_SETS: dict[int, tuple[tuple[str, int, str], ...]] = {
-    1: (("camera", 0, "uniform_buffer"), ("lights", 1, "uniform_buffer")),
-    2: (("material", 0, "uniform_buffer"), ("base_color_tex", 1, "sampled_image"),
-        ("metal_rough_tex", 2, "sampled_image"), ("normal_tex", 3, "sampled_image"),
-        ("occlusion_tex", 4, "sampled_image"), ("emissive_tex", 5, "sampled_image"),
-        ("material_sampler", 6, "sampler")),
-    3: (("instance", 0, "uniform_buffer"),),
-}
 CAMERA_BYTES = 304  # CameraBlock
 LIGHTS_BYTES = 1120  # LightsBlock
 
@@ -234,7 +226,7 @@ def update_descriptors(device: VkDevice, writes: Sequence[tuple[Any, int, str, t
 
 
 def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
-    return DescriptorSetLayout(device, [(b, kind, 1) for _, b, kind in SCENE_SETS[index]],
+    return DescriptorSetLayout(device, [(b, kind, 1) for _, b, kind in SCENE_GROUPS[index]],
                                _flags(SHADER_STAGES), label=f"scene:set{index}")
 
 
@@ -453,7 +445,7 @@ class VkScene:
 
     def _descriptor_sets(self) -> None:
         dev, scene = self.device, self.scene
-        self.layouts = {i: self._own(scene_set_layout(dev, i)) for i in SCENE_SETS}
+        self.layouts = {i: self._own(scene_set_layout(dev, i)) for i in SCENE_GROUPS}
         n_mat, n_inst = len(scene.materials), len(scene.instances)
         self.pool = self._own(DescriptorPool(
             dev, 2 + n_mat + n_inst, {"uniform_buffer": 4 + n_mat + n_inst,

@@ -12,6 +12,7 @@ import wgpu
 
 from ..scene.model import Camera, Scene, is_mirrored
 from .scene_data import (
+    SCENE_GROUPS,
     instance_bytes,
     lights_bytes,
     main_camera_bytes,
@@ -21,13 +22,11 @@ from .scene_data import (
     sun_camera_bytes,
 )
 
-# the scene's bind groups: (name, binding) as scene.glsl and mesh.glsl declare them; a pass
-# that declares one of these groups gets the scene's layout, so the scene's bind groups serve it
-SCENE_GROUPS: dict[int, tuple[tuple[str, int], ...]] = {
-    1: (("camera", 0), ("lights", 1)),
-    2: (("material", 0), ("base_color_tex", 1), ("metal_rough_tex", 2), ("normal_tex", 3),
-        ("occlusion_tex", 4), ("emissive_tex", 5), ("material_sampler", 6)),
-    3: (("instance", 0),),
+# wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these three)
+_ENTRIES: dict[str, tuple[str, dict[str, str]]] = {
+    "uniform_buffer": ("buffer", {"type": "uniform"}),
+    "sampled_image": ("texture", {"sample_type": "float", "view_dimension": "2d"}),
+    "sampler": ("sampler", {"type": "filtering"}),
 }
 
 
@@ -35,15 +34,9 @@ def scene_layout_entries(group: int) -> list[dict]:
     """Bind group layout entries of a scene group, visible to every stage that may read it."""
     stages = wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT | wgpu.ShaderStage.COMPUTE
     out = []
-    for name, binding in SCENE_GROUPS[group]:
-        entry: dict[str, Any] = {"binding": binding, "visibility": stages}
-        if name.endswith("_tex"):
-            entry["texture"] = {"sample_type": "float", "view_dimension": "2d"}
-        elif name.endswith("_sampler"):
-            entry["sampler"] = {"type": "filtering"}
-        else:
-            entry["buffer"] = {"type": "uniform"}
-        out.append(entry)
+    for _, binding, kind in SCENE_GROUPS[group]:
+        key, layout = _ENTRIES[kind]
+        out.append({"binding": binding, "visibility": stages, key: dict(layout)})
     return out
 
 

@@ -12,6 +12,17 @@ import numpy as np
 
 from ..scene.model import Camera, Light, Material, Mesh, Scene
 
+# the scene's groups (Vulkan: sets) as scene.glsl and mesh.glsl declare them: (name, binding,
+# kind as rfw.spirv reflects it). Both backends build their scene layouts from this one table,
+# and a pass that declares one of these groups binds the scene's own
+SCENE_GROUPS: dict[int, tuple[tuple[str, int, str], ...]] = {
+    1: (("camera", 0, "uniform_buffer"), ("lights", 1, "uniform_buffer")),
+    2: (("material", 0, "uniform_buffer"), ("base_color_tex", 1, "sampled_image"),
+        ("metal_rough_tex", 2, "sampled_image"), ("normal_tex", 3, "sampled_image"),
+        ("occlusion_tex", 4, "sampled_image"), ("emissive_tex", 5, "sampled_image"),
+        ("material_sampler", 6, "sampler")),
+    3: (("instance", 0, "uniform_buffer"),),
+}
 MAX_LIGHTS = 16
 DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
                     name="rfw default sun")

@@ -28,7 +28,8 @@ from ..shaders import reflect as reflect_wgsl
 from ..spirv import DescriptorInfo, ShaderCompileError, Spirv, check_bindings, compile_glsl, reflect
 from ..units import align_up
 from .base import FrameExecutor, SlotContext
-from .gpu_scene import SCENE_GROUPS, VERTEX_BUFFERS, scene_layout_entries
+from .gpu_scene import VERTEX_BUFFERS, scene_layout_entries
+from .scene_data import SCENE_GROUPS
 
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
@@ -287,7 +288,7 @@ class ShaderCache:
         layouts = []
         for g in range(top + 1):
             mine = groups.get(g, [])
-            scene = SCENE_GROUPS.get(g)
+            scene = [(n, b) for n, b, _ in SCENE_GROUPS.get(g, ())] or None
             if scene is not None and (kind == "render" or mine) and all(
                     (b.name, b.binding) in scene for b in mine):
                 # the scene's own groups: one layout, so its bind groups serve every pass
@@ -510,15 +511,7 @@ class PassContext(SlotContext):
     def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
                 compare: str | None = None) -> Any:
         """A sampler made once per executor (rfw.context.PassContext.sampler)."""
-        check_sampler(filter, address, compare)
-        cache = self.executor.__dict__.setdefault("samplers", {})
-        key = (filter, address, compare)
-        if key not in cache:
-            cache[key] = self.device.create_sampler(
-                mag_filter=filter, min_filter=filter, mipmap_filter=filter,
-                address_mode_u=address, address_mode_v=address, address_mode_w=address,
-                compare=compare, label=f"rfw:sampler:{filter}:{address}")
-        return cache[key]
+        return self.executor.sampler(filter=filter, address=address, compare=compare)
 
     # recording ----------------------------------------------------------------------------
     def _timestamps(self) -> dict | None:
@@ -544,7 +537,7 @@ class PassContext(SlotContext):
             wanted = [b for b in prog.bindings.values() if b.group == g]
             if prog.layouts[g] is self.executor.shaders.scene_layouts.get(g):
                 # the scene's layout: every binding of the scene's group, used or not
-                wanted = [Binding(n, g, k, {}) for n, k in SCENE_GROUPS[g]]
+                wanted = [Binding(n, g, k, {}) for n, k, _ in SCENE_GROUPS[g]]
             check_bindings(self.pass_.name, prog.name, [b.name for b in wanted], values,
                            missing=True)
             for b in wanted:
@@ -711,6 +704,7 @@ class Executor(FrameExecutor):
         self._textures: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
+        self._samplers: dict[tuple[str, str, str | None], Any] = {}
         self._allocate()
         self._timestamp_enabled = "timestamp-query" in device.features
         self._query_set = None
@@ -776,6 +770,19 @@ class Executor(FrameExecutor):
 
     def scene_bindings(self) -> dict[str, Any]:
         return self.scene.bindings() if self.scene is not None else {}
+
+    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
+                compare: str | None = None) -> Any:
+        """A sampler made once per (filter, address, compare) and kept by the executor."""
+        check_sampler(filter, address, compare)
+        key = (filter, address, compare)
+        s = self._samplers.get(key)
+        if s is None:
+            s = self._samplers[key] = self.device.device.create_sampler(
+                mag_filter=filter, min_filter=filter, mipmap_filter=filter,
+                address_mode_u=address, address_mode_v=address, address_mode_w=address,
+                compare=compare, label=f"rfw:sampler:{filter}:{address}")
+        return s
 
     def uniform(self, owner: str, name: str, data: bytes) -> Any:
         key = (owner, name)
@@ -927,6 +934,7 @@ class Executor(FrameExecutor):
         for b in self._uniforms.values():
             b.destroy()
         self._uniforms.clear()
+        self._samplers.clear()
         if self._query_set is not None:
             self._query_set.destroy()
             self._query_buffer.destroy()
