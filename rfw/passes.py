@@ -16,14 +16,17 @@ A pass is a class in ``passes/<id>/<id>.py`` with its shader beside it::
             ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
                          s_ldr=ctx.storage("ldr"), u_params=self.params)
 
-Synchronization is the graph's: no pass records a barrier. A pass whose work comes in
-ordered steps over parts of its resources (one dispatch per mip of a chain, say) declares
-them in ``steps()``: each :class:`rfw.graph.Step` names the parts (``Part(slot, mips=(first,
-count))`` of an image, ``bytes=(offset, size)`` of a buffer, or a bare slot name for all of
-it) it reads and writes. The compiler plans the barriers between steps as it plans those
-between passes, and ``record`` calls ``ctx.step(i)`` before recording step ``i``'s work: on
-Vulkan that records the barriers planned before step ``i``, on wgpu (which orders a pass's
-dispatches itself) nothing. A pass that declares steps must write its resources in them.
+Synchronization is the graph's: no pass records a barrier, and no backend adds one of its
+own inside a pass. The work of one step is unordered: two dispatches (or traces) recorded
+without a step between them may run at the same time, so neither may read what the other
+writes. A pass whose work depends on its own earlier work (a blur reading what the dispatch
+before it wrote, one dispatch per mip of a chain) declares ordered steps in ``steps()``: each
+:class:`rfw.graph.Step` names the parts (``Part(slot, mips=(first, count))`` of an image,
+``bytes=(offset, size)`` of a buffer, or a bare slot name for all of it) it reads and writes.
+The compiler plans the barriers between steps as it plans those between passes, and
+``record`` calls ``ctx.step(i)`` before recording step ``i``'s work: on Vulkan that records
+the barriers planned before step ``i``, on wgpu (which orders a pass's dispatches itself)
+nothing. A pass that declares steps must write its resources in them.
 """
 
 from __future__ import annotations

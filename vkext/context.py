@@ -14,12 +14,11 @@ import numpy as np
 
 from rfw.backends.base import SlotContext
 from rfw.graph.formats import format_info
-from rfw.graph.sync import State
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError, program_files
 from rfw.spirv import DescriptorInfo, check_bindings
 
-from .commands import barrier, image_layout, record_barriers
+from .commands import image_layout, record_barriers
 from .consts import const, ffi, lib, vk
 from .fitting import shader_paths
 from .memory import Buffer, Image, ImageView
@@ -50,12 +49,6 @@ def _check_storage_format(what: str, d: DescriptorInfo, view: ImageView, resourc
                       f"'{resource}' is {have.wgpu or have.name} ({have.vk})")
 
 
-# one dispatch's shader writes, made visible to the next dispatch of the same pass
-_SHADER_WRITE = State(None, frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_WRITE"}))
-_SHADER_RW = State(None, frozenset({"COMPUTE_SHADER"}),
-                   frozenset({"SHADER_READ", "SHADER_WRITE"}))
-
-
 class VkPassContext(SlotContext):
     """What ``Pass.record`` sees on Vulkan: ``rfw.context.PassContext`` and
     ``RayTracingContext``, plus mesh programs (``program("mesh")``, ``render_pass``)."""
@@ -69,18 +62,17 @@ class VkPassContext(SlotContext):
         self.scene = executor.scene
         self.device = executor.device
         self.frame = executor.frame_index
-        self._dispatched = False
         self._rendering: VkRenderPass | None = None
 
     _step = -1  # the declared step (Pass.steps) the pass is in
 
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps: record the barriers the plan
-        puts before it; they, not the blanket barrier between dispatches, order it after the
-        earlier steps."""
+        puts before it, which order it after the earlier steps (the work inside one step is
+        unordered: no barrier is recorded between its dispatches)."""
         barriers = self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
         record_barriers(self.cmd, barriers, self.executor.resources)
-        self._step, self._dispatched = index, False
+        self._step = index
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:
@@ -268,11 +260,8 @@ class VkPassContext(SlotContext):
         vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
         self.bind(prog, values, point)
         self._push(prog, push_constants)
-        # a pass's dispatches run in order, as on wgpu: each sees the shader writes of the
-        # ones before it (the plan's barriers only order passes)
-        if self._dispatched:
-            barrier(self.cmd, memory_barriers=[(_SHADER_WRITE, _SHADER_RW)])
-        self._dispatched = True
+        # no barrier here: dispatches of one step are unordered (rfw.passes), and a pass
+        # whose dispatches depend on each other declares steps
         t = (*threads, 1, 1)[:3]
         vk.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
                                      for i in range(3)))

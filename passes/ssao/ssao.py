@@ -3,7 +3,7 @@
 from typing import ClassVar
 
 from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.graph import Slot
+from rfw.graph import Slot, Step
 from rfw.graph.formats import format_info
 
 
@@ -18,6 +18,9 @@ class SSAOPass(ComputePass):
     the point fade out by two radii, so silhouettes leave no halo on what lies far behind them.
     A second dispatch blurs the noise away with weights that drop to zero across depth
     discontinuities. 1 means unoccluded.
+
+    The two dispatches are declared steps (the blur reads the occlusion the first writes):
+    the compiled graph plans the barrier on ``ao_raw`` between them.
     """
 
     shader = "ssao.comp.glsl"
@@ -43,13 +46,19 @@ class SSAOPass(ComputePass):
         blur_radius: int = 2  # blur kernel half-width in half-resolution texels (0: off)
         blur_depth: float = 0.05  # relative depth difference at which blur weights reach 0
 
+    def steps(self) -> tuple[Step, ...]:
+        return (Step("occlusion", writes="ao_raw"),
+                Step("blur", reads="ao_raw", writes="ao"))
+
     def record(self, ctx) -> None:
         # depth buffers bind as texture_depth_2d, copies (tests, readbacks) as plain floats
         defines = {"DEPTH_TEXTURE": 1} if format_info(ctx.format("depth")).depth else {}
         depth = ctx.sampled("depth")
+        ctx.step(0)
         ctx.dispatch(threads=ctx.extent("ao_raw"), defines=defines, t_depth=depth,
                      t_normal=ctx.sampled("normal"), o_ao=ctx.storage("ao_raw"),
                      u_params=self.params)
+        ctx.step(1)
         ctx.dispatch(threads=ctx.extent("ao"), shader="ssao_blur.comp.glsl", defines=defines,
                      t_depth=depth, t_ao=ctx.storage("ao_raw"), o_ao=ctx.storage("ao"),
                      u_params=self.params)
