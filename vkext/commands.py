@@ -21,7 +21,7 @@ from rfw.graph.formats import format_info
 from rfw.graph.sync import State
 
 from .buffers import Buffer, staging_buffer
-from .consts import const, ffi, flag_name, vk
+from .consts import const, ffi, flag_name, lib, vk
 from .device import VkDevice
 from .images import Image, aspect_flags, numpy_dtype
 
@@ -442,6 +442,38 @@ def _texel_bytes(fmt: str, aspect: int) -> int:
     if info.depth and info.stencil:  # packed: depth copies out as 4 bytes, stencil as 1
         return 1 if aspect == vk.VK_IMAGE_ASPECT_STENCIL_BIT else 4
     return info.block_bytes
+
+
+def record_upload(cmd: Any, staging: Buffer, *,
+                  buffers: Sequence[tuple[Buffer, int, int]] = (),
+                  images: Sequence[tuple[Image, Sequence[tuple[int, int, int, int]]]] = (),
+                  buffers_to: State | None = None,
+                  images_to: State | str = "SHADER_READ_ONLY_OPTIMAL") -> None:
+    """Record copies out of ``staging`` (written by the host before the submit) and their
+    barriers: ``buffers`` are (dst, staging offset, bytes) into offset 0 of dst, ``images``
+    (image, [(staging offset, mip, width, height)]) of fresh images (their old contents are
+    discarded). Afterwards the images are in ``images_to`` and the buffers' bytes are
+    visible to ``buffers_to`` (default: every stage)."""
+    barrier(cmd, [ImageBarrier(img, "UNDEFINED", TRANSFER_DST) for img, _ in images])
+    for dst, offset, size in buffers:
+        vk.vkCmdCopyBuffer(cmd, staging.handle, dst.handle, 1,
+                           [vk.VkBufferCopy(srcOffset=offset, dstOffset=0, size=size)])
+    for img, regions in images:
+        arr = ffi.new("VkBufferImageCopy[]", len(regions))
+        for i, (offset, mip, w, h) in enumerate(regions):
+            r = arr[i]
+            r.bufferOffset = offset
+            r.imageSubresource.aspectMask = img.aspect
+            r.imageSubresource.mipLevel = mip
+            r.imageSubresource.layerCount = 1
+            r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, h, 1
+        lib.vkCmdCopyBufferToImage(cmd, staging.handle, img.handle,
+                                   image_layout(TRANSFER_DST.layout), len(regions), arr)
+    after = buffers_to or State(None, frozenset({"ALL_COMMANDS"}),
+                                frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
+    # one memory barrier covers every buffer copied
+    barrier(cmd, [ImageBarrier(img, TRANSFER_DST, images_to) for img, _ in images],
+            memory_barriers=[(COPY_WRITE, after)] if buffers else ())
 
 
 def upload_image(device: VkDevice, image: Image, array: Any,

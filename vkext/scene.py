@@ -34,7 +34,7 @@ from rfw.scene.model import Camera, Scene, is_mirrored
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import TRANSFER_DST, ImageBarrier, barrier, one_time
+from .commands import one_time, record_upload
 from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
@@ -67,9 +67,12 @@ COMPARE = {"never": "VK_COMPARE_OP_NEVER", "less": "VK_COMPARE_OP_LESS",
            "greater": "VK_COMPARE_OP_GREATER", "not-equal": "VK_COMPARE_OP_NOT_EQUAL",
            "greater-equal": "VK_COMPARE_OP_GREATER_OR_EQUAL", "always": "VK_COMPARE_OP_ALWAYS"}
 
-# what shaders read scene data in: the upload's barrier makes it visible to all of them
-_SCENE_READ = ("VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "VERTEX_SHADER", "FRAGMENT_SHADER",
-               "COMPUTE_SHADER")
+# who reads the scene's buffers and textures: the upload makes its copies visible to them
+_SCENE_READ = State(None, frozenset({"VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "VERTEX_SHADER",
+                                     "FRAGMENT_SHADER", "COMPUTE_SHADER"}),
+                    frozenset({"VERTEX_ATTRIBUTE_READ", "INDEX_READ", "UNIFORM_READ"}))
+_SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
+                 frozenset({"SHADER_SAMPLED_READ"}))
 
 
 def _flags(names: Iterable[str]) -> int:
@@ -269,38 +272,11 @@ class _Upload:
         staging = staging_buffer(device, self.size, label="scene:upload")
         try:
             staging.write(np.concatenate(self.parts))
-            shader_read = _state("SHADER_READ_ONLY_OPTIMAL", ("FRAGMENT_SHADER", "COMPUTE_SHADER"),
-                                 ("SHADER_SAMPLED_READ",))
             with one_time(device, label="scene upload") as cmd:
-                barrier(cmd, [ImageBarrier(img, "UNDEFINED", TRANSFER_DST)
-                              for img, _ in self.images])
-                for dst, offset, n in self.buffers:
-                    region = ffi.new("VkBufferCopy*")
-                    region.srcOffset, region.dstOffset, region.size = offset, 0, n
-                    lib.vkCmdCopyBuffer(cmd, staging.handle, dst.handle, 1, region)
-                for img, regions in self.images:
-                    arr = ffi.new("VkBufferImageCopy[]", len(regions))
-                    for i, (offset, mip, w, h) in enumerate(regions):
-                        r = arr[i]
-                        r.bufferOffset = offset
-                        r.imageSubresource.aspectMask = img.aspect
-                        r.imageSubresource.mipLevel = mip
-                        r.imageSubresource.layerCount = 1
-                        r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, h, 1
-                    lib.vkCmdCopyBufferToImage(cmd, staging.handle, img.handle,
-                                               const("VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL"),
-                                               len(regions), arr)
-                copied = _state(None, ("COPY",), ("TRANSFER_WRITE",))
-                read = _state(None, _SCENE_READ, ("VERTEX_ATTRIBUTE_READ", "INDEX_READ",
-                                                  "UNIFORM_READ"))
-                barrier(cmd, [ImageBarrier(img, TRANSFER_DST, shader_read)
-                              for img, _ in self.images], memory_barriers=[(copied, read)])
+                record_upload(cmd, staging, buffers=self.buffers, images=self.images,
+                              buffers_to=_SCENE_READ, images_to=_SAMPLED)
         finally:
             staging.destroy()
-
-
-def _state(layout: str | None, stages: Iterable[str], access: Iterable[str]) -> State:
-    return State(layout, frozenset(stages), frozenset(access))
 
 
 @dataclass
