@@ -374,6 +374,7 @@ TRANSFER_DST = State("TRANSFER_DST_OPTIMAL", frozenset({"COPY"}), frozenset({"TR
 TRANSFER_SRC = State("TRANSFER_SRC_OPTIMAL", frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
 HOST_READ = State(None, frozenset({"HOST"}), frozenset({"HOST_READ"}))
 COPY_WRITE = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_WRITE"}))
+COPY_READ = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
 
 
 def copy_image_to_buffer(cmd: Any, image: Image, buffer: Buffer, *, mip: int = 0,
@@ -562,20 +563,29 @@ def upload_buffer(device: VkDevice, buffer: Buffer, array: Any,
         staging.destroy()
 
 
+def copy_to_host(cmd: Any, buffer: Buffer, staging: Buffer, size: int, *,
+                 offset: int = 0) -> None:
+    """Record a copy of ``size`` bytes at ``offset`` of ``buffer`` into offset 0 of the
+    host-visible ``staging`` and make them visible to the host (read them after the submit
+    has finished). The copy must already wait for the buffer's writers (a barrier to
+    ``COPY_READ``)."""
+    vk.vkCmdCopyBuffer(cmd, buffer.handle, staging.handle, 1,
+                       [vk.VkBufferCopy(srcOffset=offset, dstOffset=0, size=size)])
+    barrier(cmd, buffer_barriers=[BufferBarrier(staging, COPY_WRITE, HOST_READ, 0, size)])
+
+
 def read_buffer(device: VkDevice, buffer: Buffer, src: State | str | None = None, *,
                 dtype: Any = np.uint8, offset: int = 0, size: int | None = None) -> np.ndarray:
     """Read ``buffer`` back; ``src`` is how it was last written (default: any stage)."""
     size = buffer.bytes - offset if size is None else size
     before = src if isinstance(src, State) else \
         State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
-    read = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
     staging = staging_buffer(device, size, readback=True, label=f"{buffer.label}:read")
     try:
         with one_time(device, label=f"read {buffer.label}") as cmd:
-            barrier(cmd, buffer_barriers=[BufferBarrier(buffer, before, read, offset, size)])
-            vk.vkCmdCopyBuffer(cmd, buffer.handle, staging.handle, 1,
-                               [vk.VkBufferCopy(srcOffset=offset, dstOffset=0, size=size)])
-            barrier(cmd, buffer_barriers=[BufferBarrier(staging, COPY_WRITE, HOST_READ)])
+            barrier(cmd, buffer_barriers=[BufferBarrier(buffer, before, COPY_READ, offset,
+                                                        size)])
+            copy_to_host(cmd, buffer, staging, size, offset=offset)
         return staging.read(dtype)
     finally:
         staging.destroy()

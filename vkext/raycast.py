@@ -12,6 +12,12 @@ Rays go through in batches of at most ``batch`` rays: per batch one submit copie
 from a staging buffer to device-local memory, traces, and copies the hits back, so memory
 stays bounded (about 100 bytes a ray of the batch, staging included) for any ray count.
 Timestamps around each trace (the copies excluded) give ``last["gpu_ms"]`` and Mrays/s.
+
+A batch is a tiny frame graph (:func:`batch_graph`: copy the rays in, trace, copy the hits
+out), compiled once; its barriers are recorded by ``vkext.accel.plan.PlanRecorder``, as the
+acceleration-structure builds record theirs. Both buffers persist from batch to batch, so
+the plan also orders a batch's copy of the rays after the last batch's trace read them, and
+its trace after the last batch's hits were copied out.
 """
 
 from __future__ import annotations
@@ -22,10 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from rfw.graph.sync import State
+from rfw.graph import Buffer as BufferSlot
+from rfw.graph import CompiledGraph, Graph, GraphBuilder
 
 from .accel import SceneAccel
-from .commands import COPY_WRITE, HOST_READ, TimestampPool, barrier, one_time
+from .accel.plan import PlanRecorder, compiled
+from .commands import TimestampPool, copy_to_host, one_time
 from .consts import ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
 from .memory import Buffer, staging_buffer
@@ -43,8 +51,24 @@ HIT_DTYPE = np.dtype([("t", "<f4"), ("primitive", "<i4"), ("instance", "<i4"), (
                       ("v", "<f4")])
 assert RAY_DTYPE.itemsize == 32 and HIT_DTYPE.itemsize == 20
 
-_COPY_READ = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
-_SHADER_STAGE = {"ray_query": "COMPUTE_SHADER", "ray_pipeline": "RAY_TRACING_SHADER_KHR"}
+# the pass type that traces: its shader stages read the rays and write the hits
+_PASS_TYPE = {"ray_query": "compute", "ray_pipeline": "ray_tracing"}
+
+
+def batch_graph(method: str) -> Graph:
+    """One batch of ``method``: ``rays`` copies the rays in (buffer ``rays``), ``trace``
+    reads them and writes buffer ``hits``, ``hits`` copies those out. Both buffers are
+    external (persistent): a plan compiled from this starts from how the last batch left
+    them."""
+    g = GraphBuilder("raycast", size=(1, 1))
+    g.add_pass("rays", "transfer").output(
+        "rays", BufferSlot(usage=("transfer_dst",), external=True), name="rays")
+    t = g.add_pass("trace", _PASS_TYPE[method])
+    t.input("rays", "rays", BufferSlot(usage=("storage",)))
+    t.output("hits", BufferSlot(usage=("storage",), external=True), name="hits")
+    g.add_pass("hits", "transfer", side_effect=True).input(
+        "hits", "hits", BufferSlot(usage=("transfer_src",)))
+    return g.build()
 
 
 def pick_method(device: VkDevice, method: str = "auto") -> str:
@@ -75,6 +99,7 @@ class Raycaster:
         self._tables: dict[int, ShaderBindingTable] = {}  # by hit-record count
         self.timer = None
         self.last: dict[str, Any] = {}
+        self.plan: CompiledGraph = compiled(batch_graph(self.method))
         try:
             if self.method == "ray_query":
                 self.pipeline = ComputePipeline(device, SHADERS / "raycast.comp.glsl",
@@ -140,32 +165,13 @@ class Raycaster:
             made.append(bindings)
             bindings.write(tlas=accel.tlas, rays=ray_buf, hits=hit_buf)
             sbt = self._table(accel.hit_records) if self.method == "ray_pipeline" else None
-            stage = frozenset({_SHADER_STAGE[self.method]})
-            read = State(None, stage, frozenset({"SHADER_STORAGE_READ"}))
-            write = State(None, stage, frozenset({"SHADER_STORAGE_WRITE"}))
             gpu_ns = 0
             for start in range(0, n, per):
                 k = min(per, n - start)
                 ray_up.write(rays[start:start + k])
                 with one_time(dev, label=f"{self.label}: {k} rays") as cmd:
-                    copy = ffi.new("VkBufferCopy*")
-                    copy.size = k * RAY_DTYPE.itemsize
-                    lib.vkCmdCopyBuffer(cmd, ray_up.handle, ray_buf.handle, 1, copy)
-                    # rays copied before the shader reads them; the last batch's hits read
-                    # out before the shader writes this batch's
-                    barrier(cmd, buffer_barriers=[(ray_buf, COPY_WRITE, read),
-                                                  (hit_buf, _COPY_READ, write)])
-                    if self.timer is not None:
-                        self.timer.reset(cmd)
-                        self.timer.write(cmd, "ALL_COMMANDS", 0)
-                    self._record(cmd, bindings, sbt, k)
-                    if self.timer is not None:
-                        self.timer.write(cmd, "ALL_COMMANDS", 1)
-                    barrier(cmd, buffer_barriers=[(hit_buf, write, _COPY_READ)])
-                    copy = ffi.new("VkBufferCopy*")
-                    copy.size = k * HIT_DTYPE.itemsize
-                    lib.vkCmdCopyBuffer(cmd, hit_buf.handle, hit_down.handle, 1, copy)
-                    barrier(cmd, buffer_barriers=[(hit_down, COPY_WRITE, HOST_READ)])
+                    self._record_batch(cmd, PlanRecorder(self.plan), k, bindings, sbt,
+                                       ray_up, ray_buf, hit_buf, hit_down)
                 out[start:start + k] = hit_down.read(HIT_DTYPE, k)
                 if self.timer is not None:
                     t0, t1 = self.timer.results()
@@ -179,6 +185,24 @@ class Raycaster:
             self.last["gpu_ms"] = gpu_ns / 1e6
             self.last["mrays_per_s"] = n / max(gpu_ns, 1) * 1e3
         return out
+
+    def _record_batch(self, cmd: Any, plan: PlanRecorder, k: int, bindings: BindingSet,
+                      sbt: ShaderBindingTable | None, ray_up: Buffer, ray_buf: Buffer,
+                      hit_buf: Buffer, hit_down: Buffer) -> None:
+        # the work of each pass of batch_graph, behind the barriers its plan puts before it
+        plan.enter(cmd, "rays")
+        copy = ffi.new("VkBufferCopy*")
+        copy.size = k * RAY_DTYPE.itemsize
+        lib.vkCmdCopyBuffer(cmd, ray_up.handle, ray_buf.handle, 1, copy)
+        plan.enter(cmd, "trace")
+        if self.timer is not None:
+            self.timer.reset(cmd)
+            self.timer.write(cmd, "ALL_COMMANDS", 0)
+        self._record(cmd, bindings, sbt, k)
+        if self.timer is not None:
+            self.timer.write(cmd, "ALL_COMMANDS", 1)
+        plan.enter(cmd, "hits")
+        copy_to_host(cmd, hit_buf, hit_down, k * HIT_DTYPE.itemsize)
 
     def _record(self, cmd: Any, bindings: BindingSet, sbt: ShaderBindingTable | None,
                 count: int) -> None:
