@@ -69,7 +69,8 @@ class _MeshPass(RenderPass):
         prog = ctx.program("mesh", stages=self.stages)
         with ctx.render_pass(color=[("color", (0.0, 0.0, 0.0, 0.0))]) as rp:
             rp.use(prog, cull=self.cull)
-            rp.bind(u_color=np.array([1.0, 0.5, 0.25, 1.0], np.float32).tobytes())
+            # whole multiples of 1/255: 0.5 is a rounding tie (lavapipe 128, NVIDIA 127)
+            rp.bind(u_color=np.array([1.0, 128 / 255, 64 / 255, 1.0], np.float32).tobytes())
             rp.push(np.array([self.shift, 0, 0, 0], np.float32).tobytes())
             rp.draw_mesh_tasks(1)
 
@@ -107,7 +108,7 @@ def test_a_mesh_program_draws_through_the_render_pass(vk_device, mesh_pass, monk
                                                        stages):
     monkeypatch.setattr(mesh_pass, "stages", stages)
     img = _draw(vk_device, mesh_pass("tri"))
-    # the left half is the triangle's color (rgba8unorm of 1, 0.5, 0.25), the right cleared
+    # the left half is the triangle's color (rgba8unorm of 1, 128/255, 64/255), the right cleared
     assert np.all(img[:, :8] == [255, 128, 64, 255])
     assert np.all(img[:, 8:] == 0)
     # negative control: the pushed shift moves the triangle into the right half, and the
