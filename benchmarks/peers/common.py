@@ -9,8 +9,13 @@ from typing import Any
 
 import numpy as np
 
-# the one light every raster peer shades with: rfw's sun direction, lambert plus ambient
+# rfw's `flat` technique (passes/flat), which every raster peer renders: per vertex,
+# base colour x (AMBIENT + (1 - AMBIENT) x max(n.l, 0)) with the scene's sun, unencoded
 AMBIENT = 0.25
+# rfw.backends.scene_data's suns: its default for a scene without lights, and the shadow
+# direction where no light is directional
+DEFAULT_SUN = (-0.35, -1.0, -0.45)
+NO_SUN = (-0.3, -1.0, -0.2)
 
 
 class Unavailable(Exception):
@@ -31,7 +36,8 @@ class Geometry:
         return len(self.indices)
 
     def shaded_colors(self) -> np.ndarray:
-        """Per-vertex lambert colour, for peers that take colours rather than shaders."""
+        """rfw's ``flat`` colour of each vertex, for peers that take colours rather than
+        shaders (interpolated across the triangle, as rfw's is)."""
         lam = np.clip(self.normals @ self.light_dir, 0.0, 1.0)[:, None]
         return np.clip(self.colors * (AMBIENT + (1 - AMBIENT) * lam), 0.0, 1.0)
 
@@ -50,6 +56,9 @@ def geometry(scene: Any) -> Geometry:
     for inst in scene.instances:
         m = scene.meshes[inst.mesh]
         t = np.asarray(inst.transform, np.float64)
+        det = np.linalg.det(t[:3, :3]) if np.isfinite(t).all() else 0.0
+        if det == 0.0:
+            continue  # rfw skips instances it cannot draw
         p = m.positions.astype(np.float64) @ t[:3, :3].T + t[:3, 3]
         n = m.normals.astype(np.float64) @ np.linalg.inv(t[:3, :3])  # inverse transpose
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
@@ -57,13 +66,22 @@ def geometry(scene: Any) -> Geometry:
         pos.append(p.astype(np.float32))
         nrm.append(n.astype(np.float32))
         col.append(np.broadcast_to(c, (len(p), 3)))
-        idx.append(m.indices.reshape(-1, 3).astype(np.uint32) + base)
+        tri = m.indices.reshape(-1, 3).astype(np.uint32) + base
+        # a mirroring transform turns the winding round: rfw swaps two corners, so do we
+        idx.append(tri[:, [0, 2, 1]] if det < 0 else tri)
         base += len(p)
-    sun = next((li for li in scene.lights if li.kind == "directional"), None)
-    d = -np.asarray(sun.direction if sun else (0.3, -1.0, 0.2), np.float64)
+    d = -np.asarray(sun_direction(scene), np.float64)
     return Geometry(np.concatenate(pos), np.concatenate(nrm),
                     np.concatenate(col).astype(np.float32), np.concatenate(idx),
                     (d / np.linalg.norm(d)).astype(np.float32), scene.name)
+
+
+def sun_direction(scene: Any) -> tuple[float, float, float]:
+    """The direction rfw's sun travels (rfw.backends.scene_data.lights_bytes' choice)."""
+    if not scene.lights:
+        return DEFAULT_SUN
+    sun = next((li for li in scene.lights[:16] if li.kind == "directional"), None)
+    return tuple(sun.direction) if sun else NO_SUN
 
 
 def primary_rays(camera: Any, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,4 +1,4 @@
-"""moderngl on a headless EGL context: the scene in one draw, lambert plus ambient.
+"""moderngl on a headless EGL context: rfw's ``flat`` technique, the scene in one draw.
 
 GPU time from a GL_TIME_ELAPSED query around each frame's clear and draw; wall time with a
 glFinish at the end of the frame."""
@@ -11,21 +11,22 @@ import numpy as np
 
 from .common import AMBIENT, Geometry, Unavailable, time_frames
 
+# passes/flat's shading: lambert per vertex, interpolated, stored unencoded
 VERT = """
 #version 330
-uniform mat4 u_viewproj;
+uniform mat4 u_viewproj; uniform vec3 u_light; uniform float u_ambient;
 in vec3 in_pos; in vec3 in_nrm; in vec3 in_col;
-out vec3 v_nrm; out vec3 v_col;
-void main() { v_nrm = in_nrm; v_col = in_col; gl_Position = u_viewproj * vec4(in_pos, 1.0); }
+out vec3 v_col;
+void main() {
+    float lam = max(dot(normalize(in_nrm), u_light), 0.0);
+    v_col = in_col * (u_ambient + (1.0 - u_ambient) * lam);
+    gl_Position = u_viewproj * vec4(in_pos, 1.0);
+}
 """
 FRAG = """
 #version 330
-uniform vec3 u_light; uniform float u_ambient;
-in vec3 v_nrm; in vec3 v_col; out vec4 f_color;
-void main() {
-    float lam = max(dot(normalize(v_nrm), u_light), 0.0);
-    f_color = vec4(v_col * (u_ambient + (1.0 - u_ambient) * lam), 1.0);
-}
+in vec3 v_col; out vec4 f_color;
+void main() { f_color = vec4(v_col, 1.0); }
 """
 
 
@@ -40,7 +41,8 @@ def measure(geo: Geometry, camera: Any, width: int, height: int, *, frames: int,
     except Exception as e:
         raise Unavailable(f"no EGL context: {e}") from None
     try:
-        ctx.enable(moderngl.DEPTH_TEST)
+        # rfw culls back faces (counter-clockwise fronts, as GL's default)
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         prog = ctx.program(vertex_shader=VERT, fragment_shader=FRAG)
         vp = camera.projection(width / height).astype(np.float64) @ camera.view()
         # opengl clip z is -w..w: rfw's matrix maps to 0..1, remap z' = 2z - w

@@ -1,5 +1,6 @@
-"""pyvista/VTK off screen (VTK picks EGL without a display): the scene as one PolyData with
-per-vertex lambert colours, lighting off. Wall time of ``Render()`` plus
+"""pyvista/VTK off screen (VTK picks EGL without a display): rfw's ``flat`` technique as one
+PolyData with per-vertex colours (``Geometry.shaded_colors``), lighting off, back faces
+culled. Wall time of ``Render()`` plus
 ``WaitForCompletion()``; VTK has no per-frame GPU timer in its Python API."""
 
 from __future__ import annotations
@@ -28,7 +29,11 @@ def measure(geo: Geometry, camera: Any, width: int, height: int, *, frames: int,
     except Exception as e:
         raise Unavailable(f"no off-screen render window: {e}") from None
     try:
-        p.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+        p.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False,
+                   culling="back")
+        # one sample per pixel, as rfw (pyvista's theme turns on 8x MSAA)
+        p.disable_anti_aliasing()
+        p.ren_win.SetMultiSamples(0)
         p.set_background("black")
         p.camera.position = tuple(camera.position)
         p.camera.focal_point = tuple(camera.target)
