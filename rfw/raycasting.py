@@ -1,18 +1,19 @@
-"""``rfw.raycast``: closest hits of many rays against triangles, on the GPU.
+"""``rfw.RayScene`` and ``rfw.raycast``: closest hits of many rays against triangles, on the GPU.
 
-Defined here and exported lazily by ``rfw`` (``rfw.raycast``); the module has another name
-so that importing it never turns the attribute ``rfw.raycast`` into a module.
+Defined here and exported lazily by ``rfw`` (``rfw.RayScene``, ``rfw.raycast``); the module has
+another name so that importing it never turns the attribute ``rfw.raycast`` into a module.
 
 The numpy face of a backend's ray casting: check the arrays, hand them to the first
-installed backend (``rfw.backends`` entry points) that has a ``raycast`` method (``vk``:
-``vkext.backend.VkBackend.raycast`` builds the acceleration structures, casts and
-destroys them), hand back arrays. rfw imports no backend itself, so ``import rfw`` never
-loads Vulkan.
+installed backend (``rfw.backends`` entry points) that has a ``ray_scene`` method (``vk``:
+``vkext.backend.VkBackend.ray_scene``), hand back arrays. rfw imports no backend itself, so
+``import rfw`` never loads Vulkan.
 
-Each call builds its acceleration structures and destroys them afterwards; the pipeline of a
-method stays with the device (the default device is made on first use and destroyed at
-exit). For many casts against one scene, hold a ``vkext.accel.SceneAccel`` and a
-``vkext.raycast.Raycaster`` instead.
+A :class:`RayScene` builds its acceleration structures once and keeps them, with the ray
+and hit buffers, for every :meth:`RayScene.cast`; :func:`raycast` is the one-shot
+convenience (a scene made, cast once and closed). The default device is made on first use
+and destroyed at exit. Rays are checked where the GPU reads them (finite origins and
+directions, no zero direction): a bad ray is not traced and the cast raises naming the
+argument and the first bad row, as it does for shapes and dtypes before any GPU work.
 """
 
 from __future__ import annotations
@@ -27,43 +28,60 @@ from .errors import RfwError
 from .scene.model import Instance, Mesh, Scene
 
 _default_device: Any = None
+METHODS = ("auto", "ray_query", "ray_pipeline")
 
 
-def _floats(name: str, a: Any, width: int) -> np.ndarray:
+def _floats(name: str, a: Any, width: int, *, finite: bool = False) -> np.ndarray:
     arr = np.asarray(a)
     if arr.dtype.kind not in "fiu":  # floats, or integers that convert exactly enough
-        raise ValueError(f"{name} must be a real-valued (float) array, got dtype {arr.dtype}")
+        raise RfwError(f"{name} must be a real-valued (float) array, got dtype {arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] != width:
-        raise ValueError(f"{name} must have shape (N, {width}), got {arr.shape}")
+        raise RfwError(f"{name} must have shape (N, {width}), got {arr.shape}")
     out = np.ascontiguousarray(arr, np.float32)
-    bad = ~np.isfinite(out).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{name} has non-finite values (first in row {int(np.argmax(bad))})")
+    if finite:
+        bad = ~np.isfinite(out).all(axis=1)
+        if bad.any():
+            raise RfwError(f"{name} has non-finite values (first in row {int(np.argmax(bad))})")
     return out
 
 
-def _interval(name: str, value: Any, n: int) -> np.ndarray:
-    arr = np.asarray(value, np.float64)
+def _interval(name: str, value: Any, n: int) -> np.ndarray | float:
+    """A number stays a number (the GPU gets it once); anything else is (n,) float32."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiu":
+        raise RfwError(f"{name} must be a number or a float array, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
     if arr.ndim > 1 or (arr.ndim == 1 and arr.shape != (n,)):
-        raise ValueError(f"{name} must be a number or have shape ({n},), got {arr.shape}")
-    arr = np.broadcast_to(arr, (n,))
+        raise RfwError(f"{name} must be a number or have shape ({n},), got {arr.shape}")
     if np.isnan(arr).any() or (arr < 0).any():
-        raise ValueError(f"{name} must be non-negative and not NaN")
+        raise RfwError(f"{name} must be non-negative and not NaN")
+    if arr.ndim == 0:
+        return float(np.float32(arr))
     return arr.astype(np.float32)
 
 
+def _intervals(t_min: Any, t_max: Any, n: int, names: tuple[str, str],
+               ) -> tuple[np.ndarray | float, np.ndarray | float]:
+    lo, hi = _interval(names[0], t_min, n), _interval(names[1], t_max, n)
+    below = np.asarray(hi) < np.asarray(lo)
+    if below.any():
+        first = int(np.argmax(below)) if below.ndim else 0
+        raise RfwError(f"{names[1]} is below {names[0]} (first in ray {first})")
+    return lo, hi
+
+
 def _mesh_scene(vertices: Any, indices: Any) -> Scene:
-    v = _floats("vertices", vertices, 3)
+    v = _floats("vertices", vertices, 3, finite=True)
     if len(v) == 0:
-        raise ValueError("vertices is empty")
+        raise RfwError("vertices is empty")
     idx = np.asarray(indices)
     if idx.dtype.kind not in "iu":
-        raise ValueError(f"indices must be an integer array, got dtype {idx.dtype}")
+        raise RfwError(f"indices must be an integer array, got dtype {idx.dtype}")
     if idx.ndim != 2 or idx.shape[1] != 3:
-        raise ValueError(f"indices must have shape (T, 3), got {idx.shape}")
+        raise RfwError(f"indices must have shape (T, 3), got {idx.shape}")
     if idx.size and (int(idx.min()) < 0 or int(idx.max()) >= len(v)):
-        raise ValueError(f"indices must lie in [0, {len(v)}) (the vertex count), found "
-                         f"{int(idx.min())}..{int(idx.max())}")
+        raise RfwError(f"indices must lie in [0, {len(v)}) (the vertex count), found "
+                       f"{int(idx.min())}..{int(idx.max())}")
     zeros = np.zeros((len(v), 4), np.float32)
     mesh = Mesh("raycast", v, zeros[:, :3], zeros[:, :2], zeros,
                 np.ascontiguousarray(idx, np.uint32).reshape(-1))
@@ -74,10 +92,10 @@ def _caster() -> Backend:
     """The first installed backend that casts rays."""
     for name in installed():
         backend = get_backend(name, element=None)
-        if hasattr(backend, "raycast"):
+        if hasattr(backend, "ray_scene"):
             return backend
     raise RfwError(f"no installed backend casts rays (rfw.backends: "
-                   f"{', '.join(installed()) or 'none'})", element="rfw.raycast")
+                   f"{', '.join(installed()) or 'none'})", element="rfw.RayScene")
 
 
 def _device(backend: Backend) -> Any:
@@ -88,79 +106,195 @@ def _device(backend: Backend) -> Any:
     return _default_device
 
 
-def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
-            directions: Any = None, tmin: Any = 0.0, tmax: Any = np.inf, *,
-            scene: Scene | None = None, device: Any = None, method: str = "auto",
-            batch: int | None = None) -> dict[str, np.ndarray]:
-    """Closest hit of each ray ``origins[i] + t * directions[i]``, ``tmin <= t <= tmax``.
+class RayScene:
+    """Triangles on the GPU, ready for many casts: the device, the acceleration structures
+    (BLAS and TLAS, built once) and the ray and hit buffers are kept between casts.
 
     Parameters
     ----------
     vertices, indices
-        A triangle mesh: float (V, 3) positions and integer (T, 3) vertex indices. Or
-        leave them out and give ``scene``: every instance of an :class:`rfw.scene.Scene`.
-    origins, directions
-        Float (R, 3) arrays. Directions need not be unit length: ``t`` is in their units.
-    tmin, tmax
-        Numbers or (R,) arrays, non-negative; ``tmax`` may be infinite.
+        A triangle mesh: float (V, 3) positions and integer (T, 3) vertex indices. For every
+        instance of a loaded :class:`rfw.scene.Scene`, use :meth:`from_scene`.
     device
         The ray-casting backend's device, a ``vkext.VkDevice`` (default: one made on first
-        use and kept).
+        use and kept until exit).
     method
         ``"ray_query"`` (compute shader), ``"ray_pipeline"`` (raygen, miss and closest-hit
         shaders through a shader binding table) or ``"auto"``: ray queries where the device
         has them, else the pipeline.
     batch
         Rays per GPU submit (default on vk ``vkext.raycast.DEFAULT_BATCH``, about a million):
-        memory stays bounded whatever the ray count.
+        memory stays bounded whatever the ray count. The buffers grow to the largest batch
+        cast so far and never shrink.
+
+    Use it as a context manager, or call :meth:`close`; a closed scene refuses to cast.
+
+    Raises
+    ------
+    RfwError
+        (a ValueError) for arrays of the wrong shape or dtype, non-finite vertices, indices
+        out of range, no vertices, or a bad ``method``/``batch``; the message names the
+        argument.
+    """
+
+    def __init__(self, vertices: Any, indices: Any, *, device: Any = None,
+                 method: str = "auto", batch: int | None = None):
+        try:
+            scene = _mesh_scene(vertices, indices)
+        except RfwError as e:
+            raise e.about("rfw.RayScene") from None
+        self._open(scene, device, method, batch, instances=False)
+
+    @classmethod
+    def from_scene(cls, scene: Scene, *, device: Any = None, method: str = "auto",
+                   batch: int | None = None) -> RayScene:
+        """Every instance of ``scene`` (one BLAS per mesh, the TLAS places them); the hits
+        then also name the ``instance`` (index into ``scene.instances``)."""
+        if not isinstance(scene, Scene):
+            raise RfwError(f"scene must be an rfw.scene.Scene, got {type(scene).__name__}",
+                           element="RayScene.from_scene")
+        self = cls.__new__(cls)
+        self._open(scene, device, method, batch, instances=True)
+        return self
+
+    def _open(self, scene: Scene, device: Any, method: str, batch: int | None, *,
+              instances: bool) -> None:
+        self._scene = None
+        if method not in METHODS:
+            raise RfwError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not {method!r}",
+                           element="rfw.RayScene")
+        if batch is not None and (isinstance(batch, bool) or not isinstance(batch, int)
+                                  or batch < 1):
+            raise RfwError(f"batch must be a positive integer, got {batch!r}",
+                           element="rfw.RayScene")
+        backend = _caster()
+        self.device = device if device is not None else _device(backend)
+        self.instances = instances
+        self._scene = backend.ray_scene(self.device, scene, method=method, batch=batch)
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close` (or once its device was destroyed)."""
+        return self._scene is None or bool(getattr(self._scene, "closed", False))
+
+    @property
+    def last(self) -> dict[str, Any]:
+        """The last cast's ray and batch counts and times: ``wall_ms`` (copies and waits
+        included) and, where the device has timestamps, ``gpu_ms`` of the traces alone."""
+        return dict(self._scene.last) if not self.closed else {}
+
+    def cast(self, origins: Any, directions: Any, *, t_min: Any = 0.0,
+             t_max: Any = np.inf) -> dict[str, np.ndarray]:
+        """Closest hit of each ray ``origins[i] + t * directions[i]``, ``t_min <= t <= t_max``.
+
+        Parameters
+        ----------
+        origins, directions
+            Float (R, 3) arrays (float32 C-contiguous ones are copied to the GPU as they
+            are). Directions need not be unit length: ``t`` is in their units.
+        t_min, t_max
+            Numbers or (R,) arrays, non-negative; ``t_max`` may be infinite.
+
+        Returns
+        -------
+        dict of numpy arrays
+            ``t`` float32 (R,), ``inf`` where the ray misses; ``primitive`` int32 (R,), the
+            triangle (row of ``indices``, or of the instance's mesh), -1 on a miss;
+            ``barycentrics`` float32 (R, 2), the weights of the triangle's 2nd and 3rd
+            vertices; from :meth:`from_scene`, also ``instance`` int32 (R,).
+
+        Raises
+        ------
+        RfwError
+            (a ValueError) for a closed scene, arrays of the wrong shape or dtype, rows that
+            differ in number, non-finite origins or directions, zero directions, or a bad
+            ``t_min``/``t_max``; the message names the argument.
+        """
+        return self._cast(origins, directions, t_min, t_max, "RayScene.cast")
+
+    def _cast(self, origins: Any, directions: Any, t_min: Any, t_max: Any, element: str,
+              names: tuple[str, str] = ("t_min", "t_max")) -> dict[str, np.ndarray]:
+        if self.closed:
+            raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
+        try:
+            o = _floats("origins", origins, 3)
+            d = _floats("directions", directions, 3)
+            if len(o) != len(d):
+                raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
+            lo, hi = _intervals(t_min, t_max, len(o), names)
+            keys = ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
+            return self._scene.cast(o, d, lo, hi, hits=keys)
+        except RfwError as e:
+            raise e.about(element) from None
+
+    def close(self) -> None:
+        """Free the acceleration structures and buffers now (safe to call twice); the
+        device stays."""
+        if self._scene is not None:
+            self._scene.destroy()
+            self._scene = None
+
+    def __enter__(self) -> RayScene:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else f"method {self._scene.method}"
+        return f"<rfw.RayScene {state}>"
+
+
+def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
+            directions: Any = None, tmin: Any = 0.0, tmax: Any = np.inf, *,
+            scene: Scene | None = None, device: Any = None, method: str = "auto",
+            batch: int | None = None) -> dict[str, np.ndarray]:
+    """Closest hit of each ray ``origins[i] + t * directions[i]``, ``tmin <= t <= tmax``:
+    a :class:`RayScene` made, cast once and closed. For many casts against one scene, keep
+    a :class:`RayScene` (its acceleration structures are built once).
+
+    Parameters
+    ----------
+    vertices, indices
+        A triangle mesh: float (V, 3) positions and integer (T, 3) vertex indices. Or
+        leave them out and give ``scene``: every instance of an :class:`rfw.scene.Scene`.
+    origins, directions, tmin, tmax
+        As ``t_min``/``t_max`` of :meth:`RayScene.cast`.
+    device, method, batch
+        As for :class:`RayScene`.
 
     Returns
     -------
     dict of numpy arrays
-        ``t`` float32 (R,), ``inf`` where the ray misses; ``primitive`` int32 (R,), the
-        triangle (row of ``indices``, or of the instance's mesh), -1 on a miss;
-        ``barycentrics`` float32 (R, 2), the weights of the triangle's 2nd and 3rd vertices;
-        with ``scene``, also ``instance`` int32 (R,), the index into ``scene.instances``.
+        :meth:`RayScene.cast`'s: ``t``, ``primitive``, ``barycentrics`` and, with ``scene``,
+        ``instance``.
 
     Raises
     ------
-    ValueError
-        For arrays of the wrong shape or dtype, non-finite values, indices out of range, or
-        a bad ``tmin``/``tmax``/``method``; the message names the argument.
+    RfwError
+        (a ValueError) as :class:`RayScene` and :meth:`RayScene.cast`; the message names the
+        argument.
     """
+    element = "rfw.raycast"
     if scene is None:
         if vertices is None or indices is None:
-            raise ValueError("give vertices and indices, or scene=")
-        target = _mesh_scene(vertices, indices)
-    else:
-        if vertices is not None or indices is not None:
-            raise ValueError("give vertices and indices, or scene=, not both")
-        if not isinstance(scene, Scene):
-            raise ValueError(f"scene must be an rfw.scene.Scene, got {type(scene).__name__}")
-        target = scene
+            raise RfwError("give vertices and indices, or scene=", element=element)
+    elif vertices is not None or indices is not None:
+        raise RfwError("give vertices and indices, or scene=, not both", element=element)
     if origins is None or directions is None:
-        raise ValueError("origins and directions are required")
-    o = _floats("origins", origins, 3)
-    d = _floats("directions", directions, 3)
-    if len(o) != len(d):
-        raise ValueError(f"origins has {len(o)} rows, directions {len(d)}")
-    zero = ~d.any(axis=1)
-    if zero.any():
-        raise ValueError(f"directions has zero-length rows (first: {int(np.argmax(zero))})")
-    n = len(o)
-    lo, hi = _interval("tmin", tmin, n), _interval("tmax", tmax, n)
-    if (hi < lo).any():
-        raise ValueError(f"tmax is below tmin (first in ray {int(np.argmax(hi < lo))})")
-    if method not in ("auto", "ray_query", "ray_pipeline"):
-        raise ValueError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not {method!r}")
-
-    caster = _caster()
-    dev = device if device is not None else _device(caster)
-    hits = caster.raycast(dev, target, {"origin": o, "direction": d, "tmin": lo, "tmax": hi},
-                          method=method, batch=batch)
-    out = {"t": hits["t"].copy(), "primitive": hits["primitive"].copy(),
-           "barycentrics": np.stack([hits["u"], hits["v"]], axis=1)}
-    if scene is not None:
-        out["instance"] = hits["instance"].copy()
-    return out
-
+        raise RfwError("origins and directions are required", element=element)
+    try:
+        # the cheap checks before the build
+        o = _floats("origins", origins, 3)
+        d = _floats("directions", directions, 3)
+        if len(o) != len(d):
+            raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
+        _intervals(tmin, tmax, len(o), ("tmin", "tmax"))
+        if scene is None:
+            rs = RayScene(vertices, indices, device=device, method=method, batch=batch)
+        else:
+            rs = RayScene.from_scene(scene, device=device, method=method, batch=batch)
+    except RfwError as e:
+        raise RfwError(e.message, element=element) from None
+    with rs:
+        return rs._cast(o, d, tmin, tmax, element, ("tmin", "tmax"))

@@ -1,7 +1,7 @@
 """The ``vk`` backend (registered in the ``rfw.backends`` entry-point group): raw Vulkan's
 device, fitted plans, executor and host copies behind :class:`rfw.backend.Backend`, so that
 :func:`rfw.render.render` drives it as it drives wgpu. Also the Vulkan half of
-``rfw.raycast`` (``VkBackend.raycast``).
+``rfw.RayScene`` and ``rfw.raycast`` (``VkBackend.ray_scene``).
 
 ``render_vk(cfg, ...)`` is ``rfw.render.render(cfg, backend="vk", ...)``.
 """
@@ -106,25 +106,15 @@ class VkBackend(BackendBase):
     def destroy_device(self, device: VkDevice) -> None:
         device.destroy()
 
-    def raycast(self, device: VkDevice, scene: Scene, rays: dict[str, np.ndarray], *,
-                method: str = "auto", batch: int | None = None) -> np.ndarray:
-        """Closest hits of ``rays`` (``origin``, ``direction``: (R, 3) float32; ``tmin``,
-        ``tmax``: (R,) float32) against every instance of ``scene``: a structured array
-        with ``t``, ``primitive``, ``instance``, ``u``, ``v`` per ray."""
-        from .accel import SceneAccel
-        from .raycast import DEFAULT_BATCH, HIT_DTYPE, RAY_DTYPE, raycaster
+    def ray_scene(self, device: VkDevice, scene: Scene, *, method: str = "auto",
+                  batch: int | None = None) -> Any:
+        """A :class:`vkext.raycast.RayScene` of every instance of ``scene``: acceleration
+        structures built once, then ``cast(origins, directions, tmin, tmax, hits=...)``
+        (float32 (R, 3) arrays; numbers or (R,) float32 arrays) as often as wanted, reusing
+        them and the ray buffers; ``destroy()`` frees it."""
+        from .raycast import DEFAULT_BATCH, RayScene
 
-        n = len(rays["origin"])
-        packed = np.empty(n, RAY_DTYPE)
-        for key in ("origin", "direction", "tmin", "tmax"):
-            packed[key] = rays[key]
-        caster = raycaster(device, method)  # a method the device lacks fails here
-        if n == 0 or all(len(m.indices) == 0 for m in scene.meshes) or not scene.instances:
-            hits = np.zeros(n, HIT_DTYPE)  # nothing to hit: no GPU work
-            hits["t"], hits["primitive"], hits["instance"] = np.inf, -1, -1
-            return hits
-        with SceneAccel(device, scene, label="raycast") as accel:
-            return caster.trace(accel, packed, batch=batch or DEFAULT_BATCH)
+        return RayScene(device, scene, method=method, batch=batch or DEFAULT_BATCH)
 
 
 def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,

@@ -1,12 +1,21 @@
 """Closest-hit ray casting against a :class:`SceneAccel`, by ray query or ray-tracing pipeline.
 
 Two ways to the same answer, so either can be checked against the other and against a CPU
-reference (``rfw.raycast`` is the numpy front end):
+reference (``rfw.RayScene`` and ``rfw.raycast`` are the numpy front end):
 
 - ``"ray_query"``: a compute shader with ``GL_EXT_ray_query`` (``raycast.comp.glsl``);
 - ``"ray_pipeline"``: raygen + miss + closest hit through a shader binding table and
   ``vkCmdTraceRaysKHR``; it needs no ray-query support (NVIDIA drivers may offer pipelines
   only).
+
+A :class:`RayScene` keeps what casting needs from call to call: the scene's acceleration
+structures (built once), the device's pipeline (:func:`raycaster`) and the ray and hit
+buffers (:class:`RayBuffers`, grown when a batch is larger, never shrunk). Rays and hits are
+*streams* (origins, directions, optional per-ray tmin and tmax; t, primitive, instance,
+barycentrics), so the host fills and reads each with one contiguous copy of the caller's
+arrays. The shaders check every ray as they read it (finite origin and direction, a
+direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
+naming the argument and the first bad row.
 
 Rays go through in batches of at most ``batch`` rays: per batch one submit copies the rays
 from a staging buffer to device-local memory, traces, and copies the hits back, so memory
@@ -28,15 +37,17 @@ from typing import Any
 
 import numpy as np
 
+from rfw.errors import RfwError
 from rfw.graph import Buffer as BufferSlot
 from rfw.graph import CompiledGraph, Graph, GraphBuilder
+from rfw.scene.model import Scene
 
 from .accel import SceneAccel
 from .accel.plan import PlanRecorder, compiled
+from .buffers import Buffer, staging_buffer
 from .commands import TimestampPool, copy_to_host, one_time
 from .consts import ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
-from .memory import Buffer, staging_buffer
 from .rt import BindingSet, ComputePipeline, HitGroup, RayTracingPipeline
 from .sbt import ShaderBindingTable
 
@@ -44,12 +55,19 @@ SHADERS = Path(__file__).resolve().parent / "shaders" / "raycast"
 METHODS = ("ray_query", "ray_pipeline")
 DEFAULT_BATCH = 1 << 20
 
-# the std430 twins of raycast.glsl's Ray and Hit
+# raycast.glsl's streams: 4-byte words per ray, in this order
+RAY_STREAMS = (("origin", 3), ("direction", 3), ("tmin", 1), ("tmax", 1))
+HIT_STREAMS = (("t", 1), ("primitive", 1), ("instance", 1), ("barycentrics", 2))
+RAY_WORDS, HIT_WORDS = 8, 5
+# what the shaders write as the primitive of a ray they refuse (t is NaN), by argument
+INVALID = {-2: ("origins", "non-finite values"), -3: ("directions", "non-finite values"),
+           -4: ("directions", "zero-length rows")}
+
+# rays and hits as records, for callers of Raycaster.trace
 RAY_DTYPE = np.dtype([("origin", "<f4", 3), ("tmin", "<f4"), ("direction", "<f4", 3),
                       ("tmax", "<f4")])
 HIT_DTYPE = np.dtype([("t", "<f4"), ("primitive", "<i4"), ("instance", "<i4"), ("u", "<f4"),
                       ("v", "<f4")])
-assert RAY_DTYPE.itemsize == 32 and HIT_DTYPE.itemsize == 20
 
 # the pass type that traces: its shader stages read the rays and write the hits
 _PASS_TYPE = {"ray_query": "compute", "ray_pipeline": "ray_tracing"}
@@ -87,8 +105,104 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
     return method
 
 
+def check_rays(origins: np.ndarray, directions: np.ndarray) -> None:
+    """On the host what the shaders check per ray (for casts that trace nothing)."""
+    for name, arr in (("origins", origins), ("directions", directions)):
+        bad = ~np.isfinite(arr).all(axis=1)
+        if bad.any():
+            raise RfwError(f"{name} has non-finite values (first in row {int(np.argmax(bad))})")
+    zero = ~directions.any(axis=1)
+    if zero.any():
+        raise RfwError(f"directions has zero-length rows (first: {int(np.argmax(zero))})")
+
+
+def _check_traced(t: np.ndarray, primitive: np.ndarray) -> None:
+    # a refused ray is the only NaN t, and min() propagates NaN: one pass over t
+    if len(t) and np.isnan(t.min()):
+        first = int(np.argmax(np.isnan(t)))
+        name, what = INVALID.get(int(primitive[first]), ("rays", "a ray the GPU refused"))
+        where = "first: " if what == "zero-length rows" else "first in row "
+        raise RfwError(f"{name} has {what} ({where}{first})")
+
+
+class RayBuffers:
+    """The rays and hits of one batch: device-local buffers ``<label>.rays`` and
+    ``<label>.hits``, their staging twins and the descriptor set binding them with a TLAS.
+
+    :meth:`reserve` grows them for a larger batch (``allocations`` counts the times buffers
+    were made) and never shrinks them."""
+
+    def __init__(self, caster: Raycaster, tlas: Any, *, label: str = "raycast"):
+        self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
+        self.capacity = self.allocations = 0
+        self._made: list[Any] = []
+        self.rays = self.hits = self.rays_up = self.hits_down = self.bindings = None
+
+    def reserve(self, rays: int) -> None:
+        if rays <= self.capacity:
+            return
+        self._free()
+        dev, label = self.device, self.label
+        try:
+            self.rays = self._keep(Buffer(dev, rays * RAY_WORDS * 4, ("storage", "transfer_dst"),
+                                          label=f"{label}.rays"))
+            self.rays.allocate()
+            self.hits = self._keep(Buffer(dev, rays * HIT_WORDS * 4, ("storage", "transfer_src"),
+                                          label=f"{label}.hits"))
+            self.hits.allocate()
+            self.rays_up = self._keep(staging_buffer(dev, self.rays.bytes,
+                                                     label=f"{label}:rays upload"))
+            self.hits_down = self._keep(staging_buffer(dev, self.hits.bytes, readback=True,
+                                                       label=f"{label}:hits readback"))
+            self.bindings = self._keep(BindingSet(self.caster.pipeline.layout,
+                                                  label=f"{label}:descriptors"))
+            self.bindings.write(tlas=self.tlas, rays=self.rays, hits=self.hits)
+        except BaseException:
+            self._free()
+            raise
+        self.capacity = rays
+        self.allocations += 1
+
+    def _keep(self, obj: Any) -> Any:
+        self._made.append(obj)
+        return obj
+
+    def write_rays(self, origins: np.ndarray, directions: np.ndarray, tmin: Any,
+                   tmax: Any) -> int:
+        """Rays into the upload buffer as raycast.glsl's streams; returns their bytes."""
+        k = len(origins)
+        words = self.rays_up.map().view(np.float32)
+        words[:3 * k] = origins.reshape(-1)
+        words[3 * k:6 * k] = directions.reshape(-1)
+        if np.ndim(tmin) == 0 and np.ndim(tmax) == 0:
+            return 6 * k * 4
+        words[6 * k:7 * k] = tmin
+        words[7 * k:8 * k] = tmax
+        return 8 * k * 4
+
+    def read_hits(self, k: int, out: dict[str, np.ndarray], start: int) -> None:
+        """The last batch's ``k`` hits into ``out``'s arrays (those it has) at ``start``."""
+        words = self.hits_down.map()[:k * HIT_WORDS * 4].view(np.float32)
+        at = 0
+        for name, width in HIT_STREAMS:
+            if name in out:
+                dst = out[name][start:start + k]
+                dst.reshape(-1)[:] = words[at:at + width * k].view(dst.dtype)
+            at += width * k
+
+    def _free(self) -> None:
+        for obj in reversed(self._made):
+            obj.destroy()
+        self._made.clear()
+        self.rays = self.hits = self.rays_up = self.hits_down = self.bindings = None
+        self.capacity = 0
+
+    def destroy(self) -> None:
+        self._free()
+
+
 class Raycaster:
-    """The pipeline of one method on a device; :meth:`trace` casts rays against a scene's
+    """The pipeline of one method on a device; :meth:`cast` casts rays against a scene's
     acceleration structures. Registered with the device, so it dies with it at the latest."""
 
     def __init__(self, device: VkDevice, method: str = "auto", *, label: str = "raycast"):
@@ -125,94 +239,110 @@ class Raycaster:
                 self.pipeline, hit=[0] * records, label=f"{self.label}:sbt{records}")
         return sbt
 
-    def trace(self, accel: SceneAccel, rays: np.ndarray, *,
-              batch: int = DEFAULT_BATCH) -> np.ndarray:
-        """Closest hits of ``rays`` (a :data:`RAY_DTYPE` array) as a :data:`HIT_DTYPE` array.
+    def cast(self, accel: SceneAccel, buffers: RayBuffers, origins: np.ndarray,
+             directions: np.ndarray, tmin: Any = 0.0, tmax: Any = np.inf, *,
+             batch: int = DEFAULT_BATCH, hits: tuple[str, ...] = ("t", "primitive",
+                                                                   "instance", "barycentrics"),
+             ) -> dict[str, np.ndarray]:
+        """Closest hits of rays given as float32 C-contiguous (R, 3) ``origins`` and
+        ``directions`` with ``tmin``/``tmax`` numbers or (R,) float32 arrays, through
+        ``buffers`` (grown to the batch if needed). Returns the arrays named in ``hits``:
+        ``t`` (inf on a miss), ``primitive`` and ``instance`` (-1), ``barycentrics`` (R, 2).
 
+        A ray the shaders refuse (non-finite origin or direction, zero direction) raises
+        :class:`RfwError` naming the argument and the first such row, after the cast.
         ``last`` then holds the ray and batch counts and, with timestamps, the GPU time of
-        the traces alone (``gpu_ms``) and ``mrays_per_s``; ``wall_ms`` is the host's time for
-        everything (copies and waits included)."""
-        rays = np.ascontiguousarray(rays)
-        if rays.dtype != RAY_DTYPE or rays.ndim != 1:
-            raise ValueError(f"rays must be a 1-D array of RAY_DTYPE, got {rays.dtype} "
-                             f"{rays.shape}")
+        the traces alone (``gpu_ms``) and ``mrays_per_s``; ``wall_ms`` is the host's time
+        for everything (copies and waits included)."""
         if batch < 1:
             raise ValueError(f"batch must be positive, got {batch}")
-        n = len(rays)
-        out = np.empty(n, HIT_DTYPE)
+        n = len(origins)
+        want = dict(dict.fromkeys(hits), t=None, primitive=None)  # the check reads both
+        out = {name: np.empty((n, width) if width > 1 else n,
+                              np.float32 if name in ("t", "barycentrics") else np.int32)
+               for name, width in HIT_STREAMS if name in want}
         self.last = {"method": self.method, "rays": n, "batches": 0}
         if n == 0:
-            return out
-        dev = self.device
+            return {k: out[k] for k in hits}
         per = min(batch, n)
         wall = time.perf_counter()
-        made: list[Any] = []
-        try:
-            ray_buf = Buffer(dev, per * RAY_DTYPE.itemsize, ("storage", "transfer_dst"),
-                             label=f"{self.label}.rays")
-            made.append(ray_buf)
-            ray_buf.allocate()
-            hit_buf = Buffer(dev, per * HIT_DTYPE.itemsize, ("storage", "transfer_src"),
-                             label=f"{self.label}.hits")
-            made.append(hit_buf)
-            hit_buf.allocate()
-            ray_up = staging_buffer(dev, ray_buf.bytes, label=f"{self.label}:rays upload")
-            made.append(ray_up)
-            hit_down = staging_buffer(dev, hit_buf.bytes, readback=True,
-                                      label=f"{self.label}:hits readback")
-            made.append(hit_down)
-            bindings = BindingSet(self.pipeline.layout, label=f"{self.label}:descriptors")
-            made.append(bindings)
-            bindings.write(tlas=accel.tlas, rays=ray_buf, hits=hit_buf)
-            sbt = self._table(accel.hit_records) if self.method == "ray_pipeline" else None
-            gpu_ns = 0
-            for start in range(0, n, per):
-                k = min(per, n - start)
-                ray_up.write(rays[start:start + k])
-                with one_time(dev, label=f"{self.label}: {k} rays") as cmd:
-                    self._record_batch(cmd, PlanRecorder(self.plan), k, bindings, sbt,
-                                       ray_up, ray_buf, hit_buf, hit_down)
-                out[start:start + k] = hit_down.read(HIT_DTYPE, k)
-                if self.timer is not None:
-                    t0, t1 = self.timer.results()
-                    gpu_ns += t1 - t0
-                self.last["batches"] += 1
-        finally:
-            for obj in reversed(made):
-                obj.destroy()
+        buffers.reserve(per)
+        sbt = self._table(accel.hit_records) if self.method == "ray_pipeline" else None
+        per_ray = not (np.ndim(tmin) == 0 and np.ndim(tmax) == 0)
+        if per_ray:  # one of them an array: both are streams
+            tmin, tmax = (np.broadcast_to(np.asarray(x, np.float32), (n,)) for x in (tmin, tmax))
+        gpu_ns = 0
+        for start in range(0, n, per):
+            k = min(per, n - start)
+            part = slice(start, start + k)
+            lo, hi = (tmin[part], tmax[part]) if per_ray else (tmin, tmax)
+            size = buffers.write_rays(origins[part], directions[part], lo, hi)
+            with one_time(self.device, label=f"{self.label}: {k} rays") as cmd:
+                self._record_batch(cmd, PlanRecorder(self.plan), k, size, buffers, sbt,
+                                   per_ray, lo, hi)
+            buffers.read_hits(k, out, start)
+            if self.timer is not None:
+                t0, t1 = self.timer.results()
+                gpu_ns += t1 - t0
+            self.last["batches"] += 1
         self.last["wall_ms"] = (time.perf_counter() - wall) * 1e3
         if self.timer is not None:
             self.last["gpu_ms"] = gpu_ns / 1e6
             self.last["mrays_per_s"] = n / max(gpu_ns, 1) * 1e3
+        _check_traced(out["t"], out["primitive"])
+        return {k: out[k] for k in hits}
+
+    def trace(self, accel: SceneAccel, rays: np.ndarray, *,
+              batch: int = DEFAULT_BATCH) -> np.ndarray:
+        """:meth:`cast` of ``rays`` given as a :data:`RAY_DTYPE` array, hits as a
+        :data:`HIT_DTYPE` array, through buffers made for this call."""
+        rays = np.ascontiguousarray(rays)
+        if rays.dtype != RAY_DTYPE or rays.ndim != 1:
+            raise ValueError(f"rays must be a 1-D array of RAY_DTYPE, got {rays.dtype} "
+                             f"{rays.shape}")
+        buffers = RayBuffers(self, accel.tlas, label=self.label)
+        try:
+            got = self.cast(accel, buffers, np.ascontiguousarray(rays["origin"]),
+                            np.ascontiguousarray(rays["direction"]),
+                            np.ascontiguousarray(rays["tmin"]),
+                            np.ascontiguousarray(rays["tmax"]), batch=batch)
+        finally:
+            buffers.destroy()
+        out = np.empty(len(rays), HIT_DTYPE)
+        for key in ("t", "primitive", "instance"):
+            out[key] = got[key]
+        out["u"], out["v"] = got["barycentrics"][:, 0], got["barycentrics"][:, 1]
         return out
 
-    def _record_batch(self, cmd: Any, plan: PlanRecorder, k: int, bindings: BindingSet,
-                      sbt: ShaderBindingTable | None, ray_up: Buffer, ray_buf: Buffer,
-                      hit_buf: Buffer, hit_down: Buffer) -> None:
+    def _record_batch(self, cmd: Any, plan: PlanRecorder, k: int, size: int,
+                      buffers: RayBuffers, sbt: ShaderBindingTable | None, per_ray: bool,
+                      tmin: Any, tmax: Any) -> None:
         # the work of each pass of batch_graph, behind the barriers its plan puts before it
         plan.enter(cmd, "rays")
         copy = ffi.new("VkBufferCopy*")
-        copy.size = k * RAY_DTYPE.itemsize
-        lib.vkCmdCopyBuffer(cmd, ray_up.handle, ray_buf.handle, 1, copy)
+        copy.size = size
+        lib.vkCmdCopyBuffer(cmd, buffers.rays_up.handle, buffers.rays.handle, 1, copy)
         plan.enter(cmd, "trace")
         if self.timer is not None:
             self.timer.reset(cmd)
             self.timer.write(cmd, "ALL_COMMANDS", 0)
-        self._record(cmd, bindings, sbt, k)
+        self._record(cmd, buffers.bindings, sbt, k, per_ray,
+                     0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
         if self.timer is not None:
             self.timer.write(cmd, "ALL_COMMANDS", 1)
         plan.enter(cmd, "hits")
-        copy_to_host(cmd, hit_buf, hit_down, k * HIT_DTYPE.itemsize)
+        copy_to_host(cmd, buffers.hits, buffers.hits_down, k * HIT_WORDS * 4)
 
     def _record(self, cmd: Any, bindings: BindingSet, sbt: ShaderBindingTable | None,
-                count: int) -> None:
+                count: int, per_ray: bool, tmin: float, tmax: float) -> None:
         pipe = self.pipeline
         vk.vkCmdBindPipeline(cmd, pipe.bind_point, pipe.handle)
         bindings.bind(cmd, pipe.bind_point)
         layout = pipe.layout
-        if layout.push_size:
-            data = ffi.new("uint32_t[1]", [count])
-            lib.vkCmdPushConstants(cmd, layout.handle, layout.push_stages, 0, 4, data)
+        push = np.array([count, int(per_ray), 0, 0], np.uint32)
+        push[2:].view(np.float32)[:] = (tmin, tmax)
+        data = ffi.from_buffer("uint32_t[]", push)
+        lib.vkCmdPushConstants(cmd, layout.handle, layout.push_stages, 0, push.nbytes, data)
         if sbt is None:
             pipe.dispatch(cmd, count)
         else:
@@ -240,3 +370,64 @@ def raycaster(device: VkDevice, method: str = "auto") -> Raycaster:
     if rc is None or rc.pipeline is None:
         rc = cache[method] = Raycaster(device, method)
     return rc
+
+
+class RayScene:
+    """A scene ready for many casts: its acceleration structures (``builds`` counts them:
+    one), the device's :class:`Raycaster` and :class:`RayBuffers` kept between casts.
+
+    A scene without triangles or instances builds nothing and every ray misses. Registered
+    with the device, so it dies with it at the latest; :meth:`destroy` frees it sooner."""
+
+    def __init__(self, device: VkDevice, scene: Scene, *, method: str = "auto",
+                 batch: int = DEFAULT_BATCH, label: str = "raycast"):
+        if batch < 1:
+            raise ValueError(f"batch must be positive, got {batch}")
+        self.device, self.batch, self.label = device, int(batch), label
+        self.caster = raycaster(device, method)  # a method the device lacks fails here
+        self.method = self.caster.method
+        self.accel: SceneAccel | None = None
+        self.buffers: RayBuffers | None = None
+        self.builds = 0
+        self.closed = False
+        empty = all(len(m.indices) == 0 for m in scene.meshes) or not scene.instances
+        if not empty:
+            self.accel = SceneAccel(device, scene, label=label)
+            self.builds += 1
+            self.buffers = RayBuffers(self.caster, self.accel.tlas, label=label)
+        device.register(self)
+
+    @property
+    def allocations(self) -> int:
+        """How many times ray and hit buffers were made (once, then once per growth)."""
+        return self.buffers.allocations if self.buffers is not None else 0
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, tmin: Any = 0.0,
+             tmax: Any = np.inf, *, hits: tuple[str, ...] = ("t", "primitive", "instance",
+                                                             "barycentrics"),
+             ) -> dict[str, np.ndarray]:
+        """:meth:`Raycaster.cast` against this scene (see there for the arguments)."""
+        if self.accel is None:  # nothing to hit: no GPU work, so the host checks the rays
+            check_rays(origins, directions)
+            n = len(origins)
+            miss = {"t": np.full(n, np.inf, np.float32), "primitive": np.full(n, -1, np.int32),
+                    "instance": np.full(n, -1, np.int32),
+                    "barycentrics": np.zeros((n, 2), np.float32)}
+            return {k: miss[k] for k in hits}
+        return self.caster.cast(self.accel, self.buffers, origins, directions, tmin, tmax,
+                                batch=self.batch, hits=hits)
+
+    @property
+    def last(self) -> dict[str, Any]:
+        """The last cast's counts and times (:attr:`Raycaster.last`)."""
+        return self.caster.last
+
+    def destroy(self) -> None:
+        self.closed = True
+        if self.buffers is not None:
+            self.buffers.destroy()
+            self.buffers = None
+        if self.accel is not None:
+            self.accel.destroy()
+            self.accel = None
+        self.device.unregister(self)

@@ -1,0 +1,278 @@
+"""rfw.RayScene: built once, cast many times, the same hits as rfw.raycast and Embree.
+
+Reuse is counted, not timed: the acceleration-structure builds (SceneAccel._build) and the
+buffers created (vkext.buffers.Buffer) while casting; a second scene is the negative control
+(it builds again). Bad rays are refused in one line naming the argument and the first bad
+row, the non-finite and zero ones by the shaders as they read them (a bad ray is never
+traced), with clean rays as the negative control.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import rfw
+from rfw.errors import RfwError
+from rfw.scene import default_scene
+from vkext import buffers as vk_buffers
+from vkext.accel import scene_accel
+
+from .embree_ref import embree_cast, flatten
+from .test_raycast import MESHES, METHODS, _check_against, _method, _rays_around
+
+
+@pytest.fixture(autouse=True)
+def _needs_ray_tracing(vk_device):
+    if "VK_KHR_acceleration_structure" not in vk_device.caps:
+        pytest.skip("no VK_KHR_acceleration_structure")
+
+
+@pytest.fixture
+def counts(monkeypatch):
+    """How many acceleration-structure builds and buffers were made (live counters)."""
+    made = {"builds": 0, "buffers": 0}
+    build, init = scene_accel.SceneAccel._build, vk_buffers.Buffer.__init__
+
+    def counted_build(self, *a, **k):
+        made["builds"] += 1
+        return build(self, *a, **k)
+
+    def counted_init(self, *a, **k):
+        made["buffers"] += 1
+        return init(self, *a, **k)
+
+    monkeypatch.setattr(scene_accel.SceneAccel, "_build", counted_build)
+    monkeypatch.setattr(vk_buffers.Buffer, "__init__", counted_init)
+    return made
+
+
+def _same(a: dict, b: dict) -> None:
+    assert set(a) == set(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_casts_equal_raycast_and_embree(vk_device, method):
+    """Three casts of one scene: each equals rfw.raycast's answer bit for bit and agrees
+    with Embree as tests/vkext/test_raycast.py requires."""
+    method = _method(vk_device, method)
+    mesh = MESHES["torus"]
+    v = mesh.vertices.astype(np.float32)
+    with rfw.RayScene(v, mesh.faces, device=vk_device, method=method) as scene:
+        for seed in (1, 2, 1):
+            o, d = _rays_around(v, 4000, seed=seed)
+            got = scene.cast(o, d)
+            _same(got, rfw.raycast(v, mesh.faces, o, d, device=vk_device, method=method))
+            ref = embree_cast(v, mesh.faces, o, d)
+            _check_against(ref, got, o, d, float(np.abs(v).max()))
+
+
+def test_from_scene_equals_raycast_of_the_scene(vk_device):
+    scene = default_scene()
+    v, f, owner = flatten(scene)
+    o, d = _rays_around(v, 6000, seed=21)
+    with rfw.RayScene.from_scene(scene, device=vk_device) as rs:
+        got = rs.cast(o, d)
+    _same(got, rfw.raycast(origins=o, directions=d, scene=scene, device=vk_device))
+    hit = got["primitive"] >= 0
+    assert hit.sum() > len(o) // 4
+    ref = embree_cast(v, f, o, d)
+    # Embree numbers the flattened triangles: (instance, primitive) of the same triangle
+    ref_owner = owner[np.maximum(ref["primitive"], 0)]
+    same = (got["instance"] == ref_owner[:, 0]) & (got["primitive"] == ref_owner[:, 1])
+    assert same[hit].mean() >= 0.99
+
+
+def test_intervals_as_numbers_and_as_arrays_agree(vk_device):
+    """t_min/t_max as numbers (push constants) and as per-ray arrays (streams) give the
+    same hits; a t_max short of the hit misses (the interval really reaches the GPU)."""
+    mesh = MESHES["icosphere"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 3000, seed=4)
+    n = len(o)
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
+        full = scene.cast(o, d)
+        hit = np.isfinite(full["t"])
+        assert hit.mean() > 0.25
+        _same(scene.cast(o, d, t_min=0.0, t_max=np.inf),
+              scene.cast(o, d, t_min=np.zeros(n), t_max=np.full(n, np.inf)))
+        _same(scene.cast(o, d, t_max=0.05), scene.cast(o, d, t_max=np.full(n, 0.05)))
+        short = scene.cast(o, d, t_max=np.where(hit, full["t"] * 0.99, np.inf))
+        assert not np.isfinite(short["t"][hit]).any()
+
+
+def test_one_build_for_many_casts(vk_device, counts):
+    mesh = MESHES["capsule"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 2000, seed=6)
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
+        assert counts["builds"] == 1
+        first = scene.cast(o, d)
+        after_first = counts["buffers"]
+        assert after_first > 0  # the ray and hit buffers are made by the first cast
+        for _ in range(4):
+            _same(scene.cast(o, d), first)
+            scene.cast(o[:500], d[:500])  # a smaller batch fits in them
+        assert counts == {"builds": 1, "buffers": after_first}
+        # a larger batch grows them once, and that size is kept
+        big_o, big_d = np.concatenate([o, o]), np.concatenate([d, d])
+        scene.cast(big_o, big_d)
+        grown = counts["buffers"]
+        assert grown > after_first
+        scene.cast(big_o, big_d)
+        scene.cast(o, d)
+        assert counts == {"builds": 1, "buffers": grown}
+    # negative control: another scene builds (and allocates) again
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as other:
+        other.cast(o, d)
+    assert counts["builds"] == 2 and counts["buffers"] > grown
+
+
+def test_batches_reuse_the_buffers(vk_device, counts):
+    """With batch=97 the buffers hold 97 rays and every batch goes through them."""
+    mesh = MESHES["icosphere"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 1000, seed=8)
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as whole:
+        ref = whole.cast(o, d)
+    before = counts["buffers"]
+    with rfw.RayScene(v, mesh.faces, device=vk_device, batch=97) as scene:
+        _same(scene.cast(o, d), ref)
+        assert scene.last["batches"] == 11
+        made = counts["buffers"] - before
+        _same(scene.cast(o, d), ref)
+        assert counts["buffers"] - before == made
+
+
+_TRI = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+_FACES = np.array([[0, 1, 2]])
+
+
+def _rays(n: int = 300) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(2)
+    o = np.c_[rng.uniform(0, 0.4, (n, 2)), np.ones(n)].astype(np.float32)
+    return o, np.tile(np.float32([0, 0, -1]), (n, 1))
+
+
+def _spoiled(what: str, row: int) -> tuple[np.ndarray, np.ndarray]:
+    o, d = _rays()
+    if what == "nan origin":
+        o[row, 1] = np.nan
+    elif what == "inf direction":
+        d[row, 2] = -np.inf
+    elif what == "zero direction":
+        d[row] = 0.0
+    return o, d
+
+
+@pytest.mark.parametrize(("what", "message"), [
+    ("nan origin", "origins has non-finite values (first in row 250)"),
+    ("inf direction", "directions has non-finite values (first in row 250)"),
+    ("zero direction", "directions has zero-length rows (first: 250)"),
+])
+@pytest.mark.parametrize("batch", [None, 97])
+def test_bad_rays_are_refused_by_the_gpu(vk_device, what, message, batch):
+    """The shaders check the rays (batch 97: row 250 is in the third batch), and the scene
+    goes on casting afterwards; clean rays are the negative control."""
+    with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=batch) as scene:
+        o, d = _spoiled(what, 250)
+        with pytest.raises(RfwError) as err:
+            scene.cast(o, d)
+        assert str(err.value) == f"RayScene.cast: {message}"
+        o, d = _rays()
+        assert np.isfinite(scene.cast(o, d)["t"]).all()
+        with pytest.raises(RfwError, match="row|first"):  # a bad first row too
+            scene.cast(*_spoiled(what, 0))
+
+
+def test_bad_rays_without_triangles_are_refused_too(vk_device):
+    """A scene with no triangles traces nothing: the host checks the rays instead."""
+    with rfw.RayScene(_TRI, np.zeros((0, 3), np.int32), device=vk_device) as scene:
+        o, d = _rays()
+        assert (scene.cast(o, d)["primitive"] == -1).all()
+        with pytest.raises(RfwError, match=r"^RayScene.cast: directions has zero-length rows "
+                                            r"\(first: 250\)$"):
+            scene.cast(*_spoiled("zero direction", 250))
+
+
+@pytest.mark.parametrize(("make", "args", "argument"), [
+    ("scene", {"vertices": _TRI[:, :2]}, "vertices must have shape"),
+    ("scene", {"vertices": np.zeros((0, 3), np.float32), "indices": np.zeros((0, 3), int)},
+     "vertices is empty"),
+    ("scene", {"vertices": np.float32([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]])},
+     "vertices has non-finite values"),
+    ("scene", {"indices": np.array([[0, 1, 3]])}, "indices must lie in"),
+    ("scene", {"method": "rasterise"}, "method is"),
+    ("scene", {"batch": 0}, "batch must be"),
+    ("cast", {"origins": _rays()[0][:, :2]}, "origins must have shape"),
+    ("cast", {"origins": _rays()[0].astype(str)}, "origins must be a real-valued"),
+    ("cast", {"directions": _rays()[1][:5]}, "origins has 300 rows, directions 5"),
+    ("cast", {"t_min": -1.0}, "t_min must be non-negative"),
+    ("cast", {"t_max": np.float32([1, 2])}, "t_max must be a number or have shape"),
+    ("cast", {"t_min": 2.0, "t_max": 1.0}, "t_max is below t_min"),
+    ("cast", {"t_max": np.nan}, "t_max must be non-negative and not NaN"),
+])
+def test_bad_input_is_one_line(vk_device, make, args, argument):
+    scene_args = {"vertices": _TRI, "indices": _FACES, "device": vk_device}
+    o, d = _rays()
+    cast_args = {"origins": o, "directions": d}
+    (scene_args if make == "scene" else cast_args).update(args)
+    with pytest.raises(RfwError) as err:
+        with rfw.RayScene(**scene_args) as scene:
+            scene.cast(**cast_args)
+    text = str(err.value)
+    assert argument in text and "\n" not in text
+    assert text.startswith("rfw.RayScene: " if make == "scene" else "RayScene.cast: ")
+
+
+def test_from_scene_takes_a_scene(vk_device):
+    with pytest.raises(RfwError, match="^RayScene.from_scene: scene must be an rfw.scene.Scene"):
+        rfw.RayScene.from_scene("courtyard", device=vk_device)
+
+
+def test_a_closed_scene_refuses(vk_device):
+    from vkext import VkDevice
+
+    o, d = _rays()
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+        assert not scene.closed
+        scene.cast(o, d)
+    assert scene.closed
+    scene.close()  # twice is fine
+    with pytest.raises(RfwError, match=r"^RayScene.cast: the ray scene is closed: make a new "
+                                        r"rfw.RayScene$"):
+        scene.cast(o, d)
+    # its device destroyed, a scene is closed as well (and nothing is left to free)
+    device = VkDevice(label="rfw-tests-ray-scene")
+    try:
+        scene = rfw.RayScene(_TRI, _FACES, device=device)
+        scene.cast(o, d)
+    finally:
+        device.destroy()
+    assert scene.closed
+    with pytest.raises(RfwError, match="closed"):
+        scene.cast(o, d)
+    scene.close()
+
+
+def test_closing_frees_what_it_built(vk_device):
+    """Leak check: live vkext objects return to the baseline after close."""
+    o, d = _rays()
+    before = vk_device.live_objects()
+    for _ in range(3):
+        with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+            scene.cast(o, d)
+            assert vk_device.live_objects() != before  # negative control: it holds objects
+    assert vk_device.live_objects() == before
+
+
+def test_import_rfw_does_not_load_vulkan_for_ray_scene():
+    code = ("import sys, rfw; c = rfw.RayScene; import rfw.raycasting; "
+            "assert rfw.RayScene is c and c.__name__ == 'RayScene'; "
+            "assert 'vulkan' not in sys.modules and 'vkext' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
