@@ -189,12 +189,40 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     return md, page
 
 
+def _clocks(records: list[dict[str, Any]]) -> str:
+    """SM and memory clocks after each run's frames (median and range over runs, per GPU),
+    the maximum the driver allows, or why there are none."""
+    by_gpu: dict[str, list[dict[str, Any]]] = {}
+    for r in records:
+        for g in r.get("gpu_clocks") or []:
+            by_gpu.setdefault(f"GPU {g.get('index')} {g.get('name')}", []).append(g)
+    if not by_gpu:
+        first = records[0] if records else {}
+        return first.get("gpu_clocks_note") or "not recorded"
+
+    def mhz(values: list[Any]) -> str:
+        v = sorted(x for x in values if isinstance(x, int))
+        if not v:
+            return "n/a"
+        mid = v[len(v) // 2]
+        return f"{mid} MHz" + (f" ({v[0]}-{v[-1]})" if v[0] != v[-1] else "")
+
+    parts = [f"{name}: SM {mhz([g.get('sm_mhz') for g in gs])} of max "
+             f"{mhz([g.get('max_sm_mhz') for g in gs])}, memory "
+             f"{mhz([g.get('mem_mhz') for g in gs])}, after each run's frames "
+             f"({len(gs)} runs)" for name, gs in sorted(by_gpu.items())]
+    return "; ".join(parts)
+
+
 def _environment(doc: Doc, records: list[dict[str, Any]], rfw: list[VariantSummary]) -> None:
     first = records[0] if records else {}
     devices = sorted({f"{r.get('device')} — {r.get('driver')} ({r.get('backend')})"
                       for v in rfw for r in v.records})
-    rows = [["rfw commit", f"`{first.get('rfw_commit', '?')}`"],
+    source = first.get("rfw_commit_source")
+    rows = [["rfw commit", f"`{first.get('rfw_commit', '?')}`"
+                           + (f" (from {source})" if source else "")],
             ["device — driver (backend)", "; ".join(devices) or "-"],
+            ["GPU clocks", _clocks(records)],
             ["CPU", f"{first.get('cpu', '?')} ({first.get('cpus', '?')} threads)"],
             ["host / python", f"{first.get('host', '?')} / {first.get('python', '?')} / "
                               f"{first.get('platform', '?')}"],

@@ -12,6 +12,8 @@ import json
 import os
 import platform
 import random
+import re
+import shutil
 import subprocess
 import sys
 import time
@@ -214,7 +216,38 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
 
 
 def environment() -> dict[str, Any]:
-    """The rfw commit (with a ``+dirty`` mark) and the host; the device comes per run."""
+    """The rfw commit, the host's CPU and the GPU clocks before any run; the device comes
+    per run.
+
+    The commit is ``RFW_COMMIT`` when set (a copy without git metadata, or with stale
+    metadata, as on a GPU machine the sources were carried to), else git's ``HEAD`` with a
+    ``+dirty`` mark; ``rfw_commit_source`` says which."""
+    commit, source = _commit()
+    clocks = gpu_clocks()
+    return {"rfw_commit": commit, "rfw_commit_source": source,
+            "host": platform.node(), "machine": platform.machine(),
+            "cpu": _cpu_name(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform(), "gpu_clocks_start": clocks,
+            **({} if clocks else {"gpu_clocks_note": NO_CLOCKS})}
+
+
+# one line of printable characters, as a hash or a describe string is (set by scripts)
+_COMMIT_RE = re.compile(r"[0-9A-Za-z][0-9A-Za-z._+/-]{0,99}")
+NO_CLOCKS = "not reported: no nvidia-smi on this machine (a CPU driver such as lavapipe " \
+            "has no GPU clocks)"
+
+
+def _commit() -> tuple[str, str]:
+    """``(commit, where it came from)``: ``RFW_COMMIT``, ``git`` or ``none``."""
+    given = os.environ.get("RFW_COMMIT")
+    if given is not None and given.strip():
+        text = given.strip()
+        if not _COMMIT_RE.fullmatch(text):
+            raise RfwError("expected a commit (one word of letters, digits and ._+/-, at "
+                           f"most 100), got {given[:40]!r}", file="RFW_COMMIT",
+                           element="environment")
+        return text, "RFW_COMMIT"
+
     def git(*args: str) -> str:
         try:
             return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
@@ -223,11 +256,43 @@ def environment() -> dict[str, Any]:
             return ""
 
     commit = git("rev-parse", "HEAD")
+    if not commit:
+        return "unknown", "none"
     dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
-    return {"rfw_commit": commit + ("+dirty" if commit and dirty else "") or "unknown",
-            "host": platform.node(), "machine": platform.machine(),
-            "cpu": _cpu_name(), "cpus": os.cpu_count(), "python": platform.python_version(),
-            "platform": platform.platform()}
+    return commit + ("+dirty" if dirty else ""), "git"
+
+
+CLOCK_FIELDS = ("index", "name", "clocks.sm", "clocks.mem", "clocks.max.sm", "clocks.max.mem")
+
+
+def gpu_clocks(*, smi: str = "nvidia-smi") -> list[dict[str, Any]] | None:
+    """The current and maximum SM and memory clocks (MHz) of every GPU nvidia-smi lists, or
+    None where there is no nvidia-smi (lavapipe, other vendors) or it answers nothing usable.
+    """
+    exe = shutil.which(smi)
+    if exe is None:
+        return None
+    try:
+        done = subprocess.run([exe, f"--query-gpu={','.join(CLOCK_FIELDS)}",
+                               "--format=csv,noheader,nounits"], capture_output=True,
+                              text=True, check=False, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return parse_clocks(done.stdout) if done.returncode == 0 else None
+
+
+def parse_clocks(text: str) -> list[dict[str, Any]] | None:
+    """nvidia-smi's ``csv,noheader,nounits`` answer to ``CLOCK_FIELDS`` as one dict per GPU
+    (MHz as int; ``[N/A]`` as None); None when a line does not have those fields."""
+    gpus = []
+    for line in text.strip().splitlines():
+        cells = [c.strip() for c in line.split(",")]
+        if len(cells) != len(CLOCK_FIELDS) or not cells[0].isdigit():
+            return None
+        mhz = [int(c) if c.isdigit() else None for c in cells[2:]]
+        gpus.append({"index": int(cells[0]), "name": cells[1], "sm_mhz": mhz[0],
+                     "mem_mhz": mhz[1], "max_sm_mhz": mhz[2], "max_mem_mhz": mhz[3]})
+    return gpus or None
 
 
 def _cpu_name() -> str:
@@ -309,9 +374,9 @@ def pass_stats(record: dict[str, Any]) -> None:
 def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True) -> Path:
     """Run every job of ``plan``; appends one JSON line per run to ``out_dir/results.jsonl``
     (written afresh) and returns its path."""
+    env = environment()  # a bad RFW_COMMIT fails here, before any folder or run
     out_dir.mkdir(parents=True, exist_ok=True)
     results = out_dir / "results.jsonl"
-    env = environment()
     meta = {"size": list(plan.size), "frames": plan.frames, "warmup": plan.warmup,
             "peer_frames": plan.peer_frames or plan.frames,
             "repeats": plan.repeat, "order": plan.order, "notes": plan.notes}

@@ -21,6 +21,7 @@ from typing import Any
 
 from ..config import parse_size
 from ..fileio import atomic_write
+from .runner import gpu_clocks
 
 # timings.json keys copied into the record as they are, where a run has them
 EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light")
@@ -93,6 +94,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
         total_s = time.perf_counter() - t0
     finally:
         clock.restore()
+    clocks = gpu_clocks()  # right after the frames: the clocks they ran at, or close
     timings = result.timings
     ex = result.executor
     samples = _samples(ex)
@@ -118,7 +120,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
         "timestamps": bool(timings.get("timestamps")) and bool(gpu_frame),
         "passes": passes,
         "frame": {"gpu_ms": gpu_frame, "cpu_ms": cpu_frame, "wall_ms": clock.last(frames)},
-        "process_s": total_s,
+        "process_s": total_s, "gpu_clocks": clocks,
     }
     for key in EXTRA_KEYS:
         if key in timings:
