@@ -197,18 +197,65 @@ class Scene:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World-space axis-aligned bounds of all drawable instances (degenerate
         transforms and empty meshes are left out, as renderers leave them out)."""
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        for inst in self.instances:
-            if self.instance_problem(inst):
-                continue
-            mesh = self.meshes[inst.mesh]
-            if len(mesh.positions) == 0:
-                continue
-            world = _corners(mesh, inst.transform)
-            lo = np.minimum(lo, world.min(axis=0))
-            hi = np.maximum(hi, world.max(axis=0))
-        return lo, hi
+        problems, world = self._instance_checks()
+        keep = [k for k, why in enumerate(problems) if why is None and world[k] is not None]
+        if not keep:
+            return np.full(3, np.inf), np.full(3, -np.inf)
+        corners = np.concatenate([world[k] for k in keep])
+        return corners.min(axis=0), corners.max(axis=0)
+
+    def _instance_checks(self) -> tuple[list[str | None], list[np.ndarray | None]]:
+        """``instance_problem`` of every instance and the world corners of its mesh's
+        bounds (None for an empty or unknown mesh), computed for all instances at once: a
+        scene may hold 100,000 of them. An instance any batched test doubts is checked
+        again alone, so the reasons are ``instance_problem``'s own."""
+        n = len(self.instances)
+        problems: list[str | None] = [None] * n
+        world: list[np.ndarray | None] = [None] * n
+        if not n:
+            return problems, world
+        shaped = [np.shape(i.transform) == (4, 4) for i in self.instances]
+        m = np.zeros((n, 4, 4))
+        m[:] = np.identity(4)
+        for k, i in enumerate(self.instances):
+            if shaped[k]:
+                m[k] = i.transform
+        with np.errstate(all="ignore"):
+            a = m[:, :3, :3]
+            scale = np.abs(a).max(axis=(1, 2))
+            ok = np.asarray(shaped) & np.isfinite(m).all(axis=(1, 2)) \
+                & np.isfinite(m.astype(np.float32)).all(axis=(1, 2)) \
+                & (m[:, 3] == [0.0, 0.0, 0.0, 1.0]).all(axis=1) & (scale > 0.0)
+            det = np.zeros(n)
+            det[ok] = np.linalg.det(a[ok] / scale[ok, None, None])
+            ok &= np.abs(det) >= 1e-12
+            normal = np.linalg.inv(a[ok])
+            ok[np.flatnonzero(ok)] = np.isfinite(normal.astype(np.float32)).all(axis=(1, 2))
+            corners, has = self._mesh_corners()
+            mesh = np.array([i.mesh for i in self.instances])
+            known = (mesh >= 0) & (mesh < len(self.meshes))
+            mesh = np.where(known, mesh, 0)
+            usable = known & has[mesh]
+            pts = (corners[mesh] @ m.transpose(0, 2, 1))[:, :, :3]  # as _corners does
+            far = np.abs(pts).max(axis=(1, 2))
+            ok &= ~usable | (far <= WORLD_LIMIT)
+        for k in np.flatnonzero(~ok):
+            problems[k] = self.instance_problem(self.instances[k])
+        for k in np.flatnonzero(usable):
+            world[k] = pts[k]
+        return problems, world
+
+    def _mesh_corners(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 8 homogeneous corners of each mesh's bounds, and which meshes have any."""
+        out = np.zeros((max(1, len(self.meshes)), 8, 4))
+        has = np.zeros(max(1, len(self.meshes)), bool)
+        for j, mesh in enumerate(self.meshes):
+            if len(mesh.positions):
+                lo, hi = mesh.bounds()
+                out[j] = [[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                          for z in (lo[2], hi[2])]
+                has[j] = True
+        return out, has
 
     def instance_problem(self, inst: Instance) -> str | None:
         """Why ``inst`` cannot be drawn, or None: its transform (``transform_problem``), or
@@ -243,8 +290,8 @@ class Scene:
             when the scene had instances and none is left.
         """
         keep = []
-        for k, inst in enumerate(self.instances):
-            why = self.instance_problem(inst)
+        for k, (inst, why) in enumerate(zip(self.instances, self._instance_checks()[0],
+                                            strict=True)):
             if why is None:
                 keep.append(inst)
             else:
