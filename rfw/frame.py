@@ -34,10 +34,12 @@ class Result:
 def load_scene_for(cfg: Config, scene: Any = None) -> Any:
     if scene is not None:
         return scene
-    from .scene import default_scene, load_scene
+    from .scene import default_scene, is_builtin, load_scene
 
     if cfg.scene == "default":
         return default_scene()
+    if is_builtin(cfg.scene) and not Path(cfg.scene).exists():  # stress, stress:COUNT
+        return load_scene(cfg.scene)
     if not Path(cfg.scene).exists():  # say which config (or --scene) asked for it
         raise RfwError(f"scene file not found: {cfg.scene}", file=cfg.source,
                        element="scene")

@@ -1,7 +1,9 @@
-"""Scenes: the data model, loaders for glTF and mesh files, and the built-in courtyard.
+"""Scenes: the data model, loaders for glTF and mesh files, and the built-in scenes.
 
 ``load_scene`` picks the loader from the file suffix; every loader returns a ``Scene`` and
 raises ``SceneError`` (naming the file and the element) for anything it cannot read.
+Built-in scenes are generated, and found by name (``builtin_scene``): ``default`` and
+``courtyard`` (the courtyard), ``stress`` (100,000 cubes) and ``stress:COUNT``.
 """
 
 from __future__ import annotations
@@ -12,8 +14,44 @@ from .courtyard import courtyard
 from .gltf import load_gltf
 from .meshfile import load_meshfile, mesh_suffixes
 from .model import Camera, Instance, Light, Material, Mesh, Scene, SceneError, Texture
+from .stress import MAX_INSTANCES, STRESS_INSTANCES, stress
 
 GLTF_SUFFIXES = frozenset({".gltf", ".glb"})
+
+
+BUILTIN_SCENES = ("default", "courtyard", "stress", "stress:COUNT")
+
+
+def is_builtin(name: str | Path) -> bool:
+    """Whether ``name`` names a built-in scene (``stress:x`` does, and is refused later by
+    ``builtin_scene`` with the reason)."""
+    text = str(name)
+    return text in ("default", "courtyard", "stress") or text.startswith("stress:")
+
+
+def builtin_scene(name: str) -> Scene:
+    """The built-in scene called ``name`` (see ``BUILTIN_SCENES``).
+
+    Raises
+    ------
+    SceneError
+        For an unknown name, or a ``stress:COUNT`` whose count is not an integer from 1 to
+        ``MAX_INSTANCES``.
+    """
+    if name in ("default", "courtyard"):
+        return courtyard(0)
+    if name == "stress":
+        return stress(STRESS_INSTANCES)
+    if name.startswith("stress:"):
+        text = name.split(":", 1)[1]
+        if not text.isdigit() or not 1 <= int(text) <= MAX_INSTANCES:
+            raise SceneError(f"the instance count must be an integer from 1 to "
+                             f"{MAX_INSTANCES:,}, not {text!r}", file=name,
+                             element="scene")
+        return stress(int(text))
+    raise SceneError(f"no built-in scene is called {name!r} (built-in: "
+                     f"{', '.join(BUILTIN_SCENES)})", file=name, element="scene",
+                     suggest=(name, BUILTIN_SCENES[:3]))
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -32,6 +70,8 @@ def load_scene(path: str | Path) -> Scene:
     SceneError
         For unknown suffixes and for anything the loader cannot read.
     """
+    if is_builtin(path) and not Path(path).exists():  # a file of that name comes first
+        return builtin_scene(str(path))
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in GLTF_SUFFIXES:
@@ -49,6 +89,7 @@ def default_scene() -> Scene:
 
 
 __all__ = [
-    "Camera", "Instance", "Light", "Material", "Mesh", "Scene", "SceneError", "Texture",
-    "courtyard", "default_scene", "load_gltf", "load_meshfile", "load_scene",
+    "BUILTIN_SCENES", "Camera", "Instance", "Light", "Material", "Mesh", "Scene", "SceneError",
+    "Texture", "builtin_scene", "courtyard", "default_scene", "is_builtin", "load_gltf",
+    "load_meshfile", "load_scene", "stress",
 ]
