@@ -375,6 +375,15 @@ def _check_portable(d: DescriptorInfo, path: Path, who: str) -> None:
         raise ShaderError(f"{who}{path}: binding '{d.name}' is {what}: WebGPU has none")
 
 
+def _identity(resource: Any) -> Any:
+    """What makes two bound resources the same: the objects (by id) and any numbers
+    (a buffer binding's offset and size)."""
+    if isinstance(resource, dict):
+        return tuple((k, v if isinstance(v, int) else id(v))
+                     for k, v in sorted(resource.items()))
+    return id(resource)
+
+
 def _stamps(paths: Any) -> tuple:
     """When and how large each file is: a changed include recompiles (hot reload)."""
     out = []
@@ -491,6 +500,7 @@ class PassContext(SlotContext):
     storage = view
 
     _step = -1  # the declared step (Pass.steps) the pass is in
+    _bundles = 0  # scene draws recorded by this pass so far in this frame
 
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps: wgpu orders a pass's work
@@ -542,11 +552,11 @@ class PassContext(SlotContext):
                            missing=True)
             for b in wanted:
                 self._check_format(prog, b, values[b.name])
-            entries = [{"binding": b.binding,
-                        "resource": self.executor.as_resource(values[b.name], b,
-                                                              self.pass_)} for b in wanted]
-            out.append(self.device.create_bind_group(layout=prog.layouts[g], entries=entries,
-                                                     label=f"{self.pass_.name}:g{g}"))
+            # a uniform's bytes are written here, every frame, into the same buffer
+            resources = [(b.binding, self.executor.as_resource(values[b.name], b, self.pass_))
+                         for b in wanted]
+            out.append(self.executor.bind_group(prog.layouts[g], resources,
+                                                label=f"{self.pass_.name}:g{g}"))
         return out
 
     def _check_format(self, prog: Program, b: Binding, value: Any) -> None:
@@ -635,9 +645,17 @@ class PassContext(SlotContext):
                            "front_face": "ccw"},
                 depth_stencil=ds, fragment=frag, label=f"{self.pass_.name}:scene")
         group0 = self.bind(prog, bindings, groups=(0,))[0]
-        rp = self.render_pass(color=color, depth=depth,
-                              depth_read_only=depth is not None and not depth_write)
-        n = self.scene.draw(rp, prog, pipe, camera=camera, group0=group0, alpha=alpha)
+        read_only = depth is not None and not depth_write
+        # the draws are recorded once into a bundle and replayed while nothing they name
+        # changes: per-frame data (camera, lights, settings) reaches them through buffers
+        key = (pipe, group0, self.scene, camera, tuple(alpha), targets, dfmt, read_only)
+        bundle, n = self.executor.bundle(
+            (self.pass_.name, self._bundles), key, lambda enc: self.scene.draw(
+                enc, prog, pipe, camera=camera, group0=group0, alpha=alpha),
+            color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
+        self._bundles += 1
+        rp = self.render_pass(color=color, depth=depth, depth_read_only=read_only)
+        rp.execute_bundles([bundle])
         rp.end()
         return n
 
@@ -705,6 +723,11 @@ class Executor(FrameExecutor):
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
         self._samplers: dict[tuple[str, str, str | None], Any] = {}
+        # bind groups by layout and bound objects: [group, what it holds, frame last used]
+        self._bind_groups: dict[tuple, list] = {}
+        # (pass, its n-th scene draw) -> (key, bundle, draws): replayed while the key holds
+        self._bundles: dict[tuple[str, int], tuple[tuple, Any, int]] = {}
+        self.bundles_recorded = 0
         self._allocate()
         self._timestamp_enabled = "timestamp-query" in device.features
         self._query_set = None
@@ -804,6 +827,40 @@ class Executor(FrameExecutor):
             return {"buffer": value}
         return value
 
+    def bind_group(self, layout: Any, resources: list[tuple[int, Any]], *,
+                   label: str = "") -> Any:
+        """The bind group of ``layout`` over ``resources`` [(binding, resource)], made once
+        while the same objects are bound (a uniform's buffer stays while its size fits)."""
+        key = (id(layout), *((k, _identity(r)) for k, r in resources))
+        hit = self._bind_groups.get(key)
+        if hit is None:
+            entries = [{"binding": k, "resource": r} for k, r in resources]
+            group = self.device.device.create_bind_group(layout=layout, entries=entries,
+                                                         label=label)
+            # holding what the key names keeps their ids from being reused
+            hit = self._bind_groups[key] = [group, (layout, resources), self.frame_index]
+        hit[2] = self.frame_index
+        return hit[0]
+
+    def bundle(self, slot: tuple[str, int], key: tuple, record: Any, *,
+               color_formats: tuple[str, ...], depth_format: str | None,
+               depth_read_only: bool) -> tuple[Any, int]:
+        """The render bundle of ``slot`` (a pass and its n-th scene draw) and its draw
+        count: ``record(encoder)`` fills a new one when ``key`` (pipeline, bind groups,
+        scene, formats) differs from the last one's, else the last one is replayed."""
+        hit = self._bundles.get(slot)
+        if hit is not None and hit[0] == key:
+            return hit[1], hit[2]
+        enc = self.device.device.create_render_bundle_encoder(
+            color_formats=list(color_formats), depth_stencil_format=depth_format,
+            depth_read_only=depth_read_only, stencil_read_only=depth_read_only,
+            label=f"{slot[0]}:scene")
+        draws = record(enc)
+        bundle = enc.finish(label=f"{slot[0]}:scene")
+        self._bundles[slot] = (key, bundle, draws)
+        self.bundles_recorded += 1
+        return bundle, draws
+
     # frames -------------------------------------------------------------------------------
     def timestamp_writes(self, pass_name: str) -> dict | None:
         if not self._timestamp_enabled:
@@ -872,6 +929,10 @@ class Executor(FrameExecutor):
     def end_frame(self) -> None:
         """Flush what is left and append the frame's timings of the passes recorded."""
         self.flush()
+        # bind groups unused last frame and this one name objects no pass binds any more
+        if len(self._bind_groups) > 64:
+            self._bind_groups = {k: v for k, v in self._bind_groups.items()
+                                 if v[2] >= self.frame_index - 1}
         for name in dict.fromkeys(self._recorded):
             self.timings[name].cpu_ms.append(self._cpu[name])
             if self._gpu is not None:
@@ -931,6 +992,8 @@ class Executor(FrameExecutor):
             b.destroy()
         self._buffers.clear()
         self._views.clear()
+        self._bundles.clear()
+        self._bind_groups.clear()
         for b in self._uniforms.values():
             b.destroy()
         self._uniforms.clear()
