@@ -35,6 +35,7 @@ PORTABLE = {
     "deferred": ["shadow.enabled=true"],
     "deferred_mixed": [],  # pins passes to both backends: each run is a mixed frame
     "deferred_ssao_shadows": [],
+    "flat": [],
     "forward": ["shadow.enabled=true"],
     "forward_prepass": [],
     "rt_shadows": ["shadows=shadow_map", "ao=ssao"],
