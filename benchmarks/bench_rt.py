@@ -11,7 +11,13 @@ Per scene (the embedded courtyard, and the fetched ``dragon``/``city`` where pre
    (``vkext.raycast``: closest hit; the GPU time of the trace alone, copies excluded), of
    Embree (embreex), Open3D ``RaycastingScene`` and Mitsuba 3 ``llvm_ad_rgb`` (closest hit
    for primary rays, occlusion queries for shadow and AO rays; host clock, all cores).
-3. **Shadows in the frame**: ``configs/rt_shadows.toml`` with the shadow map, ray-query and
+3. **Persistent ray scene**: ``rfw.RayScene.from_scene`` built once, then ``cast`` of the
+   primary rays: wall time per cast (upload, trace, readback and the host's checks: what a
+   caller waits for) and the trace alone (GPU timestamps), against the one-shot
+   ``rfw.raycast`` (which builds the scene every call) and Embree on one thread and on all
+   CPU cores (one process per core, each with its own BVH, hits into shared memory), all in
+   the same run; hit-or-miss agreement with Embree beside them.
+4. **Shadows in the frame**: ``configs/rt_shadows.toml`` with the shadow map, ray-query and
    ray-pipeline shadows (sun only, so the images are comparable): the GPU ms of the shadow
    pass and the share of pixels within 8/255 of the shadow-map image.
 
@@ -19,12 +25,19 @@ A device without ray queries (NVIDIA's drivers at the time of writing) skips the
 rows with a note. Medians over ``--repeats``. Markdown to stdout and ``--out``.
 
     .venv/bin/python benchmarks/bench_rt.py --size 640x360 --out out/bench_rt.md
+    .venv/bin/python benchmarks/bench_rt.py --size 1280x720 --sections cast --scenes ''
+
+``--sections`` picks among ``builds``, ``rays``, ``cast`` and ``frame`` (default: all).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import mmap
+import multiprocessing
+import os
 import statistics
 import sys
 import time
@@ -43,6 +56,7 @@ from rfw.scene.fetch import default_cache  # noqa: E402
 CONFIG = ROOT / "configs" / "rt_shadows.toml"
 METHODS = ("ray_query", "ray_pipeline")
 PEERS = ("embree", "open3d", "mitsuba")
+SECTIONS = ("builds", "rays", "cast", "frame")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -277,12 +291,171 @@ def frame_shadows(device, scene, size, frames, notes):
     return rows
 
 
+
+# ---------------------------------------------------------------------------------------------
+# the persistent ray scene against Embree on every core
+
+
+_EMBREE: dict = {}  # what forked workers inherit: the triangles, the rays, the shared hits
+
+
+def _embree_worker_init() -> None:
+    from embreex import mesh_construction, rtcore_scene
+
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, _EMBREE["v"], _EMBREE["f"])
+    scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))  # commits the BVH
+    _EMBREE["scene"] = scene
+
+
+def _embree_worker_cast(part: tuple[int, int]) -> None:
+    a, b = part
+    r = _EMBREE["scene"].run(_EMBREE["o"][a:b], _EMBREE["d"][a:b], output=1)
+    _EMBREE["t"][a:b] = np.where(r["primID"] >= 0, r["tfar"], np.inf)
+
+
+def embree_all_cores(v, f, o, d, repeats, workers=None):
+    """Seconds per cast of (o, d) by Embree on ``workers`` processes (default: every core),
+    median of ``repeats``, and the hit distances. The BVH builds (one per worker) are not
+    timed; each cast hands out 4 chunks per worker."""
+    workers = workers or os.cpu_count() or 1
+    n = len(o)
+    shared = mmap.mmap(-1, max(4 * n, 1))  # anonymous and shared: forked workers write it
+    _EMBREE.update(v=v, f=f, o=o, d=d, t=np.frombuffer(shared, np.float32, n))
+    cuts = np.linspace(0, n, 4 * workers + 1).astype(int)
+    parts = [(int(a), int(b)) for a, b in itertools.pairwise(cuts) if b > a]
+    ctx = multiprocessing.get_context("fork")
+    times = []
+    with ctx.Pool(workers, initializer=_embree_worker_init) as pool:
+        pool.map(_embree_worker_cast, parts)  # warm-up: every worker has built its BVH
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            pool.map(_embree_worker_cast, parts)
+            times.append(time.perf_counter() - t0)
+    t = _EMBREE["t"].copy()
+    _EMBREE.clear()
+    return statistics.median(times), workers, t
+
+
+def embree_one_thread(v, f, o, d, repeats):
+    from embreex import mesh_construction, rtcore_scene
+
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, v, f)
+    scene.run(o[:1], d[:1])
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        scene.run(o, d, output=1)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
+    """Per method: RayScene build, then casts (wall: what the caller waits for; GPU: the
+    trace alone), and the one-shot rfw.raycast's wall; hit-or-miss agreement with Embree's
+    ``ref_t``."""
+    import rfw
+    from rfw.errors import RfwError
+
+    rows = []
+    for method in METHODS:
+        t0 = time.perf_counter()
+        try:
+            rs = rfw.RayScene.from_scene(scene, device=device, method=method)
+        except RfwError as e:  # the device lacks the method: say so
+            notes.add(f"RayScene {method}: skipped on {device.name} ({e})")
+            continue
+        build = time.perf_counter() - t0
+        with rs:
+            rs.cast(o, d)  # warm-up: the buffers grow to the batch once
+            walls, gpus = [], []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                hits = rs.cast(o, d)
+                walls.append(time.perf_counter() - t0)
+                gpus.append(rs.last.get("gpu_ms"))
+            batches = rs.last["batches"]
+        t0 = time.perf_counter()
+        rfw.raycast(origins=o, directions=d, scene=scene, device=device, method=method)
+        one_shot = time.perf_counter() - t0
+        gpu = statistics.median(gpus) / 1e3 if None not in gpus else None
+        agree = float((np.isfinite(hits["t"]) == np.isfinite(ref_t)).mean())
+        rows.append({"method": method, "rays": len(o), "build_s": build, "batches": batches,
+                     "wall_s": statistics.median(walls), "gpu_s": gpu,
+                     "one_shot_s": one_shot, "agreement": agree})
+    return rows
+
+
+def cast_lines(rows, embree, n):
+    """The report's table: rays/s and the ratio to Embree on all cores."""
+    all_s, workers, one_s = embree["all_cores_s"], embree["workers"], embree["one_thread_s"]
+    lines = [f"Persistent ray scene, {n:,} primary rays (ratio: Embree on all {workers} cores "
+             "/ this, >1 is faster than Embree):", "",
+             "| caster | ms | Mrays/s | x Embree (all cores) | hit-or-miss = Embree |",
+             "| --- | ---: | ---: | ---: | ---: |"]
+
+    def row(name, sec, agree="-"):
+        lines.append(f"| {name} | {sec * 1e3:.2f} | {n / sec / 1e6:.1f} | {all_s / sec:.2f} | "
+                     f"{agree} |")
+
+    for r in rows:
+        row(f"RayScene.cast {r['method']} (wall: upload + trace + readback)", r["wall_s"],
+            f"{r['agreement']:.5f}")
+        if r["gpu_s"]:
+            row(f"RayScene.cast {r['method']} (trace only, GPU timestamps)", r["gpu_s"])
+        row(f"rfw.raycast {r['method']} (one shot: builds every call)", r["one_shot_s"])
+    row(f"Embree, {workers} processes (embreex)", all_s)
+    row("Embree, 1 thread (embreex)", one_s)
+    builds = ", ".join(f"{r['method']} {r['build_s'] * 1e3:.0f} ms" for r in rows)
+    lines += ["", f"RayScene builds (once per scene, not in the casts): {builds}.", ""]
+    return lines
+
 # ---------------------------------------------------------------------------------------------
 # the report
 
 
 def fmt(x, spec=".2f"):
     return "-" if x is None else format(x, spec)
+
+
+def section_lines(builds, gpu, peers, batches, casts, embree, frame, n):
+    """The tables of one scene, for the sections that ran."""
+    lines = []
+    if builds or peers:
+        lines += ["| BVH build | BLAS ms | compact ms | TLAS ms | BLAS bytes built | "
+                  "compacted | TLAS bytes |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+        for b in builds:
+            lines.append(f"| GPU {b['prefer']} ({b['timer']}) | {fmt(b['blas'])} | "
+                         f"{fmt(b['compact'])} | {fmt(b['tlas'])} | {b['blas_bytes_built']:,}"
+                         f" | {b['blas_bytes']:,} | {b['tlas_bytes']:,} |")
+        for peer, (build, _) in peers.items():
+            lines.append(f"| {peer} (host) | {build * 1e3:.2f} | - | - | - | - | - |")
+        lines.append("")
+    if gpu or peers:
+        kinds = list(batches)
+        lines += ["| Mrays/s | " + " | ".join(f"{k} ({len(batches[k][0]):,})"
+                                             for k in kinds) + " |",
+                  "| --- |" + " ---: |" * len(kinds)]
+        for m in METHODS:
+            if any((m, k) in gpu for k in kinds):
+                lines.append(f"| GPU {m} | " + " | ".join(
+                    fmt(gpu[(m, k)][0] / gpu[(m, k)][1] / 1e6) if (m, k) in gpu else "-"
+                    for k in kinds) + " |")
+        for peer, (_, times) in peers.items():
+            lines.append(f"| {peer} | " + " | ".join(
+                fmt(len(batches[k][0]) / times[k] / 1e6) for k in kinds) + " |")
+        lines.append("")
+    if casts or embree:
+        lines += cast_lines(casts, embree, n)
+    if frame:
+        lines += ["| shadows (sun) | shadow pass ms | accel ms | frame ms | "
+                  "pixels within 8/255 of the shadow map |", "| --- | ---: | ---: | ---: | ---: |"]
+        for row in frame:
+            lines.append(f"| {row['shadows']} | {fmt(row['shadow_pass_ms'], '.3f')} | "
+                         f"{fmt(row['accel_ms'], '.3f')} | {fmt(row['frame_ms'], '.3f')} | "
+                         f"{row['within_8']:.4f} |")
+    return lines
 
 
 def main(argv=None) -> int:
@@ -294,8 +467,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--peers", default=",".join(PEERS), help="CPU peers to run ('' for none)")
+    ap.add_argument("--sections", default=",".join(SECTIONS),
+                    help=f"what to measure, of {','.join(SECTIONS)}")
     ap.add_argument("--out", type=Path, help="also write the report here (and .json beside it)")
     args = ap.parse_args(argv)
+    sections = {x for x in args.sections.split(",") if x}
+    if sections - set(SECTIONS):
+        ap.error(f"--sections: unknown {', '.join(sorted(sections - set(SECTIONS)))}")
     size = tuple(int(s) for s in args.size.lower().split("x"))
     dirs = args.scene_dir or [ROOT / ".scenes", default_cache()]
     scenes = find_scenes([s for s in args.scenes.split(",") if s], dirs)
@@ -321,46 +499,32 @@ def main(argv=None) -> int:
             t = np.where(r["primID"] >= 0, r["tfar"], np.inf).astype(np.float32)
             batches = {"primary": (o, d, 1e30),
                        **secondary_rays(scene, v, f, o, d, t, r["primID"])}
-            builds = gpu_builds(device, scene, args.repeats)
-            gpu = gpu_rays(device, scene, batches, args.repeats, notes)
+            builds = gpu_builds(device, scene, args.repeats) if "builds" in sections else []
+            gpu = gpu_rays(device, scene, batches, args.repeats, notes) \
+                if "rays" in sections else {}
             peers = {}
-            for peer in [p for p in args.peers.split(",") if p]:
+            for peer in [p for p in args.peers.split(",") if p and "rays" in sections]:
                 try:
                     peers[peer] = globals()[f"{peer}_peer"](v, f, batches)
                 except Exception as e:  # not installed, or failing here: say so
                     notes.add(f"{peer}: {type(e).__name__}: {str(e).splitlines()[0][:120]}")
-            frame = frame_shadows(device, scene, size, args.frames, notes)
+            casts, embree = [], {}
+            if "cast" in sections:
+                casts = ray_scene_casts(device, scene, o, d, t, args.repeats, notes)
+                all_s, workers, all_t = embree_all_cores(v, f, o, d, args.repeats)
+                if not np.array_equal(all_t, t):  # the chunks must give the one-call answer
+                    notes.add(f"{name}: Embree on {workers} processes differs from one call")
+                embree = {"all_cores_s": all_s, "workers": workers,
+                          "one_thread_s": embree_one_thread(v, f, o, d, args.repeats)}
+            frame = frame_shadows(device, scene, size, args.frames, notes) \
+                if "frame" in sections else []
             record["scenes"][name] = {"triangles": len(f), "builds": builds,
                                       "rays": {f"{m}/{k}": v_ for (m, k), v_ in gpu.items()},
-                                      "peers": peers, "frame": frame}
+                                      "peers": peers, "frame": frame, "ray_scene": casts,
+                                      "embree_primary": embree}
 
-            lines += [f"## {name}: {len(f):,} triangles, {len(scene.instances)} instances", "",
-                      "| BVH build | BLAS ms | compact ms | TLAS ms | BLAS bytes built | "
-                      "compacted | TLAS bytes |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
-            for b in builds:
-                lines.append(f"| GPU {b['prefer']} ({b['timer']}) | {fmt(b['blas'])} | "
-                             f"{fmt(b['compact'])} | {fmt(b['tlas'])} | {b['blas_bytes_built']:,}"
-                             f" | {b['blas_bytes']:,} | {b['tlas_bytes']:,} |")
-            for peer, (build, _) in peers.items():
-                lines.append(f"| {peer} (host) | {build * 1e3:.2f} | - | - | - | - | - |")
-            kinds = list(batches)
-            lines += ["", "| Mrays/s | " + " | ".join(f"{k} ({len(batches[k][0]):,})"
-                                                     for k in kinds) + " |",
-                      "| --- |" + " ---: |" * len(kinds)]
-            for m in METHODS:
-                if any((m, k) in gpu for k in kinds):
-                    lines.append(f"| GPU {m} | " + " | ".join(
-                        fmt(gpu[(m, k)][0] / gpu[(m, k)][1] / 1e6) if (m, k) in gpu else "-"
-                        for k in kinds) + " |")
-            for peer, (_, times) in peers.items():
-                lines.append(f"| {peer} | " + " | ".join(
-                    fmt(len(batches[k][0]) / times[k] / 1e6) for k in kinds) + " |")
-            lines += ["", "| shadows (sun) | shadow pass ms | accel ms | frame ms | "
-                      "pixels within 8/255 of the shadow map |", "| --- | ---: | ---: | ---: | ---: |"]
-            for row in frame:
-                lines.append(f"| {row['shadows']} | {fmt(row['shadow_pass_ms'], '.3f')} | "
-                             f"{fmt(row['accel_ms'], '.3f')} | {fmt(row['frame_ms'], '.3f')} | "
-                             f"{row['within_8']:.4f} |")
+            lines += [f"## {name}: {len(f):,} triangles, {len(scene.instances)} instances", ""]
+            lines += section_lines(builds, gpu, peers, batches, casts, embree, frame, len(o))
             lines.append("")
     finally:
         device.destroy()

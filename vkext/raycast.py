@@ -13,7 +13,7 @@ structures (built once), the device's pipeline (:func:`raycaster`) and the ray a
 buffers (:class:`RayBuffers`, grown when a batch is larger, never shrunk). Rays and hits are
 *streams* (origins, directions, optional per-ray tmin and tmax; t, primitive, instance,
 barycentrics), so the host fills and reads each with one contiguous copy of the caller's
-arrays. The shaders check every ray as they read it (finite origin and direction, a
+arrays (split among threads when large: :func:`parallel_copy`). The shaders check every ray as they read it (finite origin and direction, a
 direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
 naming the argument and the first bad row.
 
@@ -31,7 +31,10 @@ its trace after the last batch's hits were copied out.
 
 from __future__ import annotations
 
+import itertools
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +72,12 @@ RAY_DTYPE = np.dtype([("origin", "<f4", 3), ("tmin", "<f4"), ("direction", "<f4"
 HIT_DTYPE = np.dtype([("t", "<f4"), ("primitive", "<i4"), ("instance", "<i4"), ("u", "<f4"),
                       ("v", "<f4")])
 
+# host copies of a cast are split among threads (numpy copies release the GIL): one core
+# cannot fill a wide memory bus, and first touches of fresh output pages fault in parallel
+COPY_THREADS = min(8, os.cpu_count() or 1)
+COPY_SPLIT = 1 << 20  # bytes: smaller copies stay on the calling thread
+_copy_pool: ThreadPoolExecutor | None = None
+
 # the pass type that traces: its shader stages read the rays and write the hits
 _PASS_TYPE = {"ray_query": "compute", "ray_pipeline": "ray_tracing"}
 
@@ -103,6 +112,26 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
         raise ValueError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not {method!r}")
     device.require(need[method])
     return method
+
+
+def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """``dst[:] = src`` for every (dst, src) pair of equal-size 1-D arrays, the large ones in
+    :data:`COPY_THREADS` parts on a thread pool."""
+    global _copy_pool
+    parts = []
+    for dst, src in jobs:
+        pieces = min(COPY_THREADS, dst.nbytes // COPY_SPLIT)
+        if pieces < 2:
+            dst[:] = src
+            continue
+        cuts = np.linspace(0, len(dst), pieces + 1).astype(int)
+        parts += [(dst[a:b], src[a:b]) for a, b in itertools.pairwise(cuts)]
+    if not parts:
+        return
+    if _copy_pool is None:
+        _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
+    for done in [_copy_pool.submit(np.copyto, d, s_) for d, s_ in parts]:
+        done.result()
 
 
 def check_rays(origins: np.ndarray, directions: np.ndarray) -> None:
@@ -172,23 +201,22 @@ class RayBuffers:
         """Rays into the upload buffer as raycast.glsl's streams; returns their bytes."""
         k = len(origins)
         words = self.rays_up.map().view(np.float32)
-        words[:3 * k] = origins.reshape(-1)
-        words[3 * k:6 * k] = directions.reshape(-1)
-        if np.ndim(tmin) == 0 and np.ndim(tmax) == 0:
-            return 6 * k * 4
-        words[6 * k:7 * k] = tmin
-        words[7 * k:8 * k] = tmax
-        return 8 * k * 4
+        jobs = [(words[:3 * k], origins.reshape(-1)), (words[3 * k:6 * k], directions.reshape(-1))]
+        if np.ndim(tmin) or np.ndim(tmax):
+            jobs += [(words[6 * k:7 * k], tmin), (words[7 * k:8 * k], tmax)]
+        parallel_copy(jobs)
+        return (8 if len(jobs) > 2 else 6) * k * 4
 
     def read_hits(self, k: int, out: dict[str, np.ndarray], start: int) -> None:
         """The last batch's ``k`` hits into ``out``'s arrays (those it has) at ``start``."""
         words = self.hits_down.map()[:k * HIT_WORDS * 4].view(np.float32)
-        at = 0
+        at, jobs = 0, []
         for name, width in HIT_STREAMS:
             if name in out:
-                dst = out[name][start:start + k]
-                dst.reshape(-1)[:] = words[at:at + width * k].view(dst.dtype)
+                dst = out[name][start:start + k].reshape(-1)
+                jobs.append((dst, words[at:at + width * k].view(dst.dtype)))
             at += width * k
+        parallel_copy(jobs)
 
     def _free(self) -> None:
         for obj in reversed(self._made):
