@@ -17,9 +17,12 @@ arrays (split among threads when large: :func:`parallel_copy`). The shaders chec
 direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
 naming the argument and the first bad row.
 
-Rays go through in batches of at most ``batch`` rays: per batch one submit copies the rays
-from a staging buffer to device-local memory, traces, and copies the hits back, so memory
-stays bounded (about 100 bytes a ray of the batch, staging included) for any ray count.
+Rays go through in batches of at most ``batch`` rays (a large cast in at least
+:data:`OVERLAP_PARTS`): per batch one submit copies the rays from a staging buffer to
+device-local memory, traces, and copies the hits back. Two batches are in flight, each with
+staging buffers of its own, so the host fills one batch's rays and reads another's hits
+while the GPU works; memory stays bounded (about 160 bytes a ray of the batch, staging
+included) for any ray count.
 Timestamps around each trace (the copies excluded) give ``last["gpu_ms"]`` and Mrays/s.
 
 A batch is a tiny frame graph (:func:`batch_graph`: copy the rays in, trace, copy the hits
@@ -34,6 +37,7 @@ from __future__ import annotations
 import itertools
 import os
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -48,7 +52,15 @@ from rfw.scene.model import Scene
 from .accel import SceneAccel
 from .accel.plan import PlanRecorder, compiled
 from .buffers import Buffer, staging_buffer
-from .commands import TimestampPool, copy_to_host, one_time
+from .commands import (
+    FENCE_TIMEOUT_NS,
+    CommandPool,
+    TimestampPool,
+    begin_label,
+    copy_to_host,
+    end_label,
+    submit,
+)
 from .consts import ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
 from .rt import BindingSet, ComputePipeline, HitGroup, RayTracingPipeline
@@ -57,6 +69,9 @@ from .sbt import ShaderBindingTable
 SHADERS = Path(__file__).resolve().parent / "shaders" / "raycast"
 METHODS = ("ray_query", "ray_pipeline")
 DEFAULT_BATCH = 1 << 20
+# a large cast goes in OVERLAP_PARTS submits (of at least OVERLAP_MIN rays), SLOTS of them in
+# flight: the host copies one part's rays in and another's hits out while the GPU works
+OVERLAP_PARTS, OVERLAP_MIN, SLOTS = 4, 1 << 16, 2
 
 # raycast.glsl's streams: 4-byte words per ray, in this order
 RAY_STREAMS = (("origin", 3), ("direction", 3), ("tmin", 1), ("tmax", 1))
@@ -156,7 +171,8 @@ def _check_traced(t: np.ndarray, primitive: np.ndarray) -> None:
 
 class RayBuffers:
     """The rays and hits of one batch: device-local buffers ``<label>.rays`` and
-    ``<label>.hits``, their staging twins and the descriptor set binding them with a TLAS.
+    ``<label>.hits``, :data:`SLOTS` pairs of staging buffers (one per batch in flight) and
+    the descriptor set binding the device buffers with a TLAS.
 
     :meth:`reserve` grows them for a larger batch (``allocations`` counts the times buffers
     were made) and never shrinks them."""
@@ -165,7 +181,9 @@ class RayBuffers:
         self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
         self.capacity = self.allocations = 0
         self._made: list[Any] = []
-        self.rays = self.hits = self.rays_up = self.hits_down = self.bindings = None
+        self.rays = self.hits = self.bindings = None
+        self.up: list[Buffer] = []
+        self.down: list[Buffer] = []
 
     def reserve(self, rays: int) -> None:
         if rays <= self.capacity:
@@ -179,10 +197,11 @@ class RayBuffers:
             self.hits = self._keep(Buffer(dev, rays * HIT_WORDS * 4, ("storage", "transfer_src"),
                                           label=f"{label}.hits"))
             self.hits.allocate()
-            self.rays_up = self._keep(staging_buffer(dev, self.rays.bytes,
-                                                     label=f"{label}:rays upload"))
-            self.hits_down = self._keep(staging_buffer(dev, self.hits.bytes, readback=True,
-                                                       label=f"{label}:hits readback"))
+            for slot in range(SLOTS):
+                self.up.append(self._keep(staging_buffer(
+                    dev, self.rays.bytes, label=f"{label}:rays upload {slot}")))
+                self.down.append(self._keep(staging_buffer(
+                    dev, self.hits.bytes, readback=True, label=f"{label}:hits readback {slot}")))
             self.bindings = self._keep(BindingSet(self.caster.pipeline.layout,
                                                   label=f"{label}:descriptors"))
             self.bindings.write(tlas=self.tlas, rays=self.rays, hits=self.hits)
@@ -196,20 +215,21 @@ class RayBuffers:
         self._made.append(obj)
         return obj
 
-    def write_rays(self, origins: np.ndarray, directions: np.ndarray, tmin: Any,
+    def write_rays(self, slot: int, origins: np.ndarray, directions: np.ndarray, tmin: Any,
                    tmax: Any) -> int:
-        """Rays into the upload buffer as raycast.glsl's streams; returns their bytes."""
+        """Rays into upload buffer ``slot`` as raycast.glsl's streams; returns their bytes."""
         k = len(origins)
-        words = self.rays_up.map().view(np.float32)
+        words = self.up[slot].map().view(np.float32)
         jobs = [(words[:3 * k], origins.reshape(-1)), (words[3 * k:6 * k], directions.reshape(-1))]
         if np.ndim(tmin) or np.ndim(tmax):
             jobs += [(words[6 * k:7 * k], tmin), (words[7 * k:8 * k], tmax)]
         parallel_copy(jobs)
         return (8 if len(jobs) > 2 else 6) * k * 4
 
-    def read_hits(self, k: int, out: dict[str, np.ndarray], start: int) -> None:
-        """The last batch's ``k`` hits into ``out``'s arrays (those it has) at ``start``."""
-        words = self.hits_down.map()[:k * HIT_WORDS * 4].view(np.float32)
+    def read_hits(self, slot: int, k: int, out: dict[str, np.ndarray], start: int) -> None:
+        """The ``k`` hits in readback buffer ``slot`` into ``out``'s arrays (those it has)
+        at ``start``."""
+        words = self.down[slot].map()[:k * HIT_WORDS * 4].view(np.float32)
         at, jobs = 0, []
         for name, width in HIT_STREAMS:
             if name in out:
@@ -222,7 +242,8 @@ class RayBuffers:
         for obj in reversed(self._made):
             obj.destroy()
         self._made.clear()
-        self.rays = self.hits = self.rays_up = self.hits_down = self.bindings = None
+        self.rays = self.hits = self.bindings = None
+        self.up, self.down = [], []
         self.capacity = 0
 
     def destroy(self) -> None:
@@ -239,10 +260,13 @@ class Raycaster:
         self.method = pick_method(device, method)
         self.pipeline: ComputePipeline | RayTracingPipeline | None = None
         self._tables: dict[int, ShaderBindingTable] = {}  # by hit-record count
-        self.timer = None
+        self.timer = self.commands = None
+        self._gpu_ns = 0  # the trace time of the cast under way
         self.last: dict[str, Any] = {}
         self.plan: CompiledGraph = compiled(batch_graph(self.method))
         try:
+            self.commands = CommandPool(device, label=f"{label}:commands")
+            self.cmds = self.commands.allocate(SLOTS)
             if self.method == "ray_query":
                 self.pipeline = ComputePipeline(device, SHADERS / "raycast.comp.glsl",
                                                 label=f"{label}:ray_query")
@@ -252,7 +276,7 @@ class Raycaster:
                     [HitGroup(closest=SHADERS / "raycast.rchit.glsl")],
                     label=f"{label}:ray_pipeline")
             if "timestamp" in device.caps:
-                self.timer = TimestampPool(device, 2, label=f"{label}:timestamps")
+                self.timer = TimestampPool(device, 2 * SLOTS, label=f"{label}:timestamps")
         except BaseException:
             self.destroy()
             raise
@@ -292,31 +316,35 @@ class Raycaster:
         self.last = {"method": self.method, "rays": n, "batches": 0}
         if n == 0:
             return {k: out[k] for k in hits}
-        per = min(batch, n)
+        per = min(batch, n, max(OVERLAP_MIN, -(-n // OVERLAP_PARTS)))
         wall = time.perf_counter()
         buffers.reserve(per)
         sbt = self._table(accel.hit_records) if self.method == "ray_pipeline" else None
         per_ray = not (np.ndim(tmin) == 0 and np.ndim(tmax) == 0)
         if per_ray:  # one of them an array: both are streams
             tmin, tmax = (np.broadcast_to(np.asarray(x, np.float32), (n,)) for x in (tmin, tmax))
-        gpu_ns = 0
-        for start in range(0, n, per):
-            k = min(per, n - start)
-            part = slice(start, start + k)
-            lo, hi = (tmin[part], tmax[part]) if per_ray else (tmin, tmax)
-            size = buffers.write_rays(origins[part], directions[part], lo, hi)
-            with one_time(self.device, label=f"{self.label}: {k} rays") as cmd:
-                self._record_batch(cmd, PlanRecorder(self.plan), k, size, buffers, sbt,
-                                   per_ray, lo, hi)
-            buffers.read_hits(k, out, start)
-            if self.timer is not None:
-                t0, t1 = self.timer.results()
-                gpu_ns += t1 - t0
-            self.last["batches"] += 1
+        self._gpu_ns = 0
+        flight: deque[tuple[int, int, int, Any]] = deque()  # (slot, start, rays, fence)
+        try:
+            for j, start in enumerate(range(0, n, per)):
+                slot = j % SLOTS
+                if len(flight) == SLOTS:  # the slot's last batch must be done and read
+                    self._finish(flight.popleft(), buffers, out)
+                k = min(per, n - start)
+                part = slice(start, start + k)
+                lo, hi = (tmin[part], tmax[part]) if per_ray else (tmin, tmax)
+                size = buffers.write_rays(slot, origins[part], directions[part], lo, hi)
+                fence = self._submit(slot, k, size, buffers, sbt, per_ray, lo, hi)
+                flight.append((slot, start, k, fence))
+            while flight:
+                self._finish(flight.popleft(), buffers, out)
+        finally:
+            for *_, fence in flight:  # after an error: nothing may still run on the buffers
+                self._wait(fence)
         self.last["wall_ms"] = (time.perf_counter() - wall) * 1e3
         if self.timer is not None:
-            self.last["gpu_ms"] = gpu_ns / 1e6
-            self.last["mrays_per_s"] = n / max(gpu_ns, 1) * 1e3
+            self.last["gpu_ms"] = self._gpu_ns / 1e6
+            self.last["mrays_per_s"] = n / max(self._gpu_ns, 1) * 1e3
         _check_traced(out["t"], out["primitive"])
         return {k: out[k] for k in hits}
 
@@ -342,24 +370,56 @@ class Raycaster:
         out["u"], out["v"] = got["barycentrics"][:, 0], got["barycentrics"][:, 1]
         return out
 
-    def _record_batch(self, cmd: Any, plan: PlanRecorder, k: int, size: int,
+    def _submit(self, slot: int, k: int, size: int, buffers: RayBuffers,
+                sbt: ShaderBindingTable | None, per_ray: bool, tmin: Any, tmax: Any) -> Any:
+        """Record slot ``slot``'s command buffer for a batch of ``k`` rays, submit it and
+        return its fence (the caller waits in :meth:`_finish`)."""
+        cmd = self.cmds[slot]
+        vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
+            flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
+        begin_label(self.device, cmd, f"{self.label}: {k} rays")
+        self._record_batch(cmd, PlanRecorder(self.plan), slot, k, size, buffers, sbt, per_ray,
+                           tmin, tmax)
+        end_label(self.device, cmd)
+        vk.vkEndCommandBuffer(cmd)
+        return submit(self.device, [cmd], wait=False)
+
+    def _wait(self, fence: Any) -> None:
+        dev = self.device.device
+        try:
+            vk.vkWaitForFences(dev, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
+        finally:
+            vk.vkDestroyFence(dev, fence, None)
+
+    def _finish(self, batch: tuple[int, int, int, Any], buffers: RayBuffers,
+                out: dict[str, np.ndarray]) -> None:
+        """Wait for a submitted batch, then read its hits and its trace time."""
+        slot, start, k, fence = batch
+        self._wait(fence)
+        buffers.read_hits(slot, k, out, start)
+        if self.timer is not None:
+            t0, t1 = self.timer.results(2 * slot, 2)
+            self._gpu_ns += t1 - t0
+        self.last["batches"] += 1
+
+    def _record_batch(self, cmd: Any, plan: PlanRecorder, slot: int, k: int, size: int,
                       buffers: RayBuffers, sbt: ShaderBindingTable | None, per_ray: bool,
                       tmin: Any, tmax: Any) -> None:
         # the work of each pass of batch_graph, behind the barriers its plan puts before it
         plan.enter(cmd, "rays")
         copy = ffi.new("VkBufferCopy*")
         copy.size = size
-        lib.vkCmdCopyBuffer(cmd, buffers.rays_up.handle, buffers.rays.handle, 1, copy)
+        lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
         plan.enter(cmd, "trace")
         if self.timer is not None:
-            self.timer.reset(cmd)
-            self.timer.write(cmd, "ALL_COMMANDS", 0)
+            vk.vkCmdResetQueryPool(cmd, self.timer.handle, 2 * slot, 2)
+            self.timer.write(cmd, "ALL_COMMANDS", 2 * slot)
         self._record(cmd, buffers.bindings, sbt, k, per_ray,
                      0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
         if self.timer is not None:
-            self.timer.write(cmd, "ALL_COMMANDS", 1)
+            self.timer.write(cmd, "ALL_COMMANDS", 2 * slot + 1)
         plan.enter(cmd, "hits")
-        copy_to_host(cmd, buffers.hits, buffers.hits_down, k * HIT_WORDS * 4)
+        copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
 
     def _record(self, cmd: Any, bindings: BindingSet, sbt: ShaderBindingTable | None,
                 count: int, per_ray: bool, tmin: float, tmax: float) -> None:
@@ -386,6 +446,9 @@ class Raycaster:
         if self.pipeline is not None:
             self.pipeline.destroy()
             self.pipeline = None
+        if self.commands is not None:
+            self.commands.destroy()
+            self.commands = None
         self.device.unregister(self)
 
 
