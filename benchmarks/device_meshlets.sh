@@ -2,8 +2,10 @@
 # benchmarks/bench_meshlets.py on a GPU machine without network (issue 5's NVIDIA run).
 #
 # Run from the repository root, with PYTHONPATH holding rfw's dependencies (numpy, vulkan,
-# meshoptimizer, pygltflib, trimesh, pillow), glslangValidator on PATH and a Vulkan driver.
-# Scenes come from .scenes/ (git ignores it), written beforehand on a machine with network:
+# meshoptimizer, pygltflib, trimesh, pillow), glslangValidator on PATH and a Vulkan driver;
+# where they are not importable and .whl is there, benchmarks/device_env.sh is sourced first
+# (carry .gl .whl .deb .scenes). Scenes come from .scenes/ (git ignores it), written beforehand
+# on a machine with network by benchmarks/device_prepare.sh, or by hand:
 #
 #   rfw scenes fetch dragon city
 #   .venv/bin/python benchmarks/bench_meshlets.py --export-scenes .scenes   # about 8 MiB
@@ -47,6 +49,12 @@ export RFW_CACHE_MESHLETS=${RFW_CACHE_MESHLETS:-/tmp/rfw-cache/meshlets}
 export RFW_CACHE_SPIRV=${RFW_CACHE_SPIRV:-/tmp/rfw-cache/spirv}
 export PYTHONUNBUFFERED=1
 mkdir -p "$OUT"
+
+if [[ -d .whl ]] && ! "$PYTHON" -c "import rfw, vulkan, meshoptimizer" 2>/dev/null; then
+    set +eu  # device_env.sh is written for a plain shell
+    . "$(dirname "$0")/device_env.sh" >"$OUT/env.log" 2>&1
+    set -eu
+fi
 
 missing=0
 for f in dragon.npz city.npz; do

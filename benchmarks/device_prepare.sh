@@ -6,8 +6,10 @@
 #   .whl  py3.12 manylinux wheels of rfw's pins that the GPU image lacks, and the meshoptimizer
 #         sdist (device_env.sh builds it there)
 #   .deb  Debian 12's glslang-tools, spirv-tools and vulkan-validationlayers (unpacked into /tmp/gl)
+#   .scenes  the dragon and city scenes as compact .npz (about 8 MiB), fetched here and exported
+#         by bench_meshlets.py --export-scenes: the GPU machine cannot fetch them
 #
-#   bash benchmarks/device_prepare.sh        # then carry .gl .whl .deb in the device call
+#   bash benchmarks/device_prepare.sh        # then carry .gl .whl .deb (.scenes) in the device call
 #
 # The image already holds numpy, pillow, matplotlib, tqdm, pytest, pytest-xdist, hypothesis,
 # setuptools, wheel, packaging, wrapt, typing-inspect and mypy-extensions, so they are not
@@ -60,6 +62,13 @@ if [[ -n $dupes ]]; then
     echo "device_prepare.sh: more than one version in .whl of: $dupes" >&2
     exit 1
 fi
-total=$(du -scm .gl .whl .deb | tail -1 | cut -f1)
-echo "device_prepare.sh: .gl .whl .deb hold ${total} MiB (a device call carries 64 MiB at most)"
+
+# the benchmarks' fetched scenes (bench_meshlets.py, bench_rt.py read .scenes/<name>.npz)
+if [[ ! -f .scenes/dragon.npz || ! -f .scenes/city.npz ]]; then
+    "$py" -m rfw.cli scenes fetch dragon city
+    "$py" benchmarks/bench_meshlets.py --export-scenes .scenes
+fi
+total=$(du -scm .gl .whl .deb .scenes | tail -1 | cut -f1)
+echo "device_prepare.sh: .gl .whl .deb .scenes hold ${total} MiB (a device call carries 64 MiB" \
+     "at most, the working tree included)"
 [[ $total -lt 60 ]] || { echo "device_prepare.sh: too large to carry" >&2; exit 1; }
