@@ -561,9 +561,11 @@ def environment() -> dict[str, Any]:
     if commit and not os.environ.get("RFW_COMMIT") and git("status", "--porcelain",
                                                            "--untracked-files=no"):
         commit += "-dirty"
+    from rfw.bench.runner import _cpu_name, gpu_clocks
+
     return {"commit": commit or "unknown", "source_sha": source_digest(),
             "python": platform.python_version(), "host": platform.node(),
-            "cpus": os.cpu_count()}
+            "cpu": _cpu_name(), "cpus": os.cpu_count(), "gpu_clocks_start": gpu_clocks()}
 
 
 def probe_device(device: Any = None) -> dict[str, Any]:
@@ -680,6 +682,13 @@ def report(records: list[dict[str, Any]], unavailable: dict[str, str] | None = N
                      f"{m['warmup']} warm-up, {max(r['repeat'] for r in ok) + 1} repeat(s), "
                      f"{'one process' if m['inprocess'] else 'a process per measurement'}; "
                      f"{elapsed:.0f} s in all.")
+        if m.get("cpu"):  # records before issue 13 have neither
+            clocks = m.get("gpu_clocks_start")
+            lines.append("")
+            lines.append(f"CPU {m['cpu']} ({m.get('cpus')} threads); GPU clocks at the start: "
+                         + ("; ".join(f"SM {g['sm_mhz']} of max {g['max_sm_mhz']} MHz, memory "
+                                      f"{g['mem_mhz']} MHz" for g in clocks) if clocks
+                            else "not reported (no nvidia-smi)") + ".")
     lines += notes or []
     lines += ["", "GPU ms: median over all frames of all repeats (interquartile range). "
               "G-buffer: every pass but " + ", ".join(SHADING_PASSES) + ". "

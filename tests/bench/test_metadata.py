@@ -140,3 +140,21 @@ def test_the_cli_refuses_a_bad_rfw_commit_before_any_run(tmp_path):
         "rfw: error: RFW_COMMIT: environment: expected a commit (one word of letters, digits "
         "and ._+/-, at most 100), got 'two words'"]
     assert not (tmp_path / "b").exists()
+
+
+def test_bench_meshlets_records_the_same(tmp_path, monkeypatch):
+    """benchmarks/bench_meshlets.py's records: RFW_COMMIT, the CPU and the clocks too."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import bench_meshlets
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    smi = fake_smi(tmp_path / "bin", SMI_LINE)
+    monkeypatch.setenv("PATH", f"{smi}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("RFW_COMMIT", "feed42")
+    env = bench_meshlets.environment()
+    assert env["commit"] == "feed42" and env["cpu"] == environment()["cpu"]
+    assert env["gpu_clocks_start"] == parse_clocks(SMI_LINE)
+    monkeypatch.delenv("RFW_COMMIT")
+    short = bench_meshlets.environment()["commit"].removesuffix("-dirty")
+    assert len(short) >= 7 and head().startswith(short)
