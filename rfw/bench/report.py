@@ -15,7 +15,7 @@ from typing import Any
 
 from ..errors import check_identifier
 from ..fileio import inside
-from .images import compare, load_png, save_png
+from .images import compare, load_png, psnr, save_png
 from .runner import load_results
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
 
@@ -180,7 +180,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     _pass_tables(doc, rfw)
     _images(doc, out_dir, rfw, reference)
     _counters(doc, rfw)
-    _peers(doc, rfw, peers)
+    _peers(doc, out_dir, rfw, peers)
     _failures(doc, variants)
     _method(doc, records)
     md, page = out_dir / "report.md", out_dir / "report.html"
@@ -448,7 +448,8 @@ def _num(x: Any) -> str:
     return "-" if x is None else f"{x:,}" if isinstance(x, int) else str(x)
 
 
-def _peers(doc: Doc, rfw: list[VariantSummary], peers: list[VariantSummary]) -> None:
+def _peers(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
+           peers: list[VariantSummary]) -> None:
     if not peers:
         return
     doc.h(2, "Peers")
@@ -496,6 +497,7 @@ def _peers(doc: Doc, rfw: list[VariantSummary], peers: list[VariantSummary]) -> 
         if imgs:
             doc.table([p.label.removeprefix("peer:") for p in imgs],
                       [[Img(p.image, p.label) for p in imgs]])
+            _peer_psnr(doc, out_dir, done, imgs)
     if cast:
         doc.h(3, "Ray casting (primary rays, closest hit)")
         own = next((p for p in cast if p.label == "peer:rfw_raycast" and p.ok), None)
@@ -525,6 +527,23 @@ def _peers(doc: Doc, rfw: list[VariantSummary], peers: list[VariantSummary]) -> 
         if imgs:
             doc.table([p.label.removeprefix("peer:") + " (hit distance)" for p in imgs],
                       [[Img(p.image, p.label) for p in imgs]])
+
+
+def _peer_psnr(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
+               imgs: list[VariantSummary]) -> None:
+    """How close each raster peer's image is to rfw's ``flat`` one, the shading they share."""
+    flat = next((v for v in rfw if v.get("config") == "flat" and v.image), None)
+    if flat is None:
+        return
+    ref = load_png(inside(out_dir, flat.image))
+    cells = []
+    for p in imgs:
+        img = load_png(inside(out_dir, p.image))
+        cells.append("size differs" if img.shape != ref.shape else f"{psnr(ref, img):.1f} dB")
+    doc.p(f"The raster peers shade as rfw's `flat` technique does (one sun, Lambert per "
+          f"vertex, base colours, no tonemap curve): PSNR of each peer's image against "
+          f"{flat.label}'s.")
+    doc.table([p.label.removeprefix("peer:") for p in imgs], [cells])
 
 
 def _kind(p: VariantSummary) -> str:

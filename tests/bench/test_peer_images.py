@@ -99,3 +99,28 @@ def test_another_sun_falls_below_the_bound(peer, flat, tmp_path):
     # negative control: the same peer lit from 5 degrees away is another picture
     image = peer_image(peer, tmp_path, "--sun", turned_sun())
     assert psnr(image, flat) < PSNR_DB, f"{peer}: {psnr(image, flat):.2f} dB"
+
+
+def test_bench_report_states_each_peers_psnr_against_flat(tmp_path):
+    peer = next((p for p in RASTER if importlib.util.find_spec(MODULES[p])), None)
+    if peer is None:
+        pytest.skip("no raster peer is installed (pip install -e '.[peers]')")
+
+    def report(config: str) -> str:
+        out = tmp_path / config
+        done = subprocess.run([sys.executable, "-m", "rfw.cli", "bench", config, "--size",
+                               "96x54", "--frames", "1", "--warmup", "0", "--repeat", "1",
+                               "--peers", peer, "--no-progress", "--out", str(out)],
+                              cwd=ROOT, capture_output=True, text=True, check=False)
+        assert done.returncode == 0, done.stdout + done.stderr
+        return (out / "report.md").read_text()
+
+    text = report("flat")
+    if f"| {peer} | -" in text:  # the peer's row without a wall time: it could not run
+        pytest.skip(f"{peer} cannot run here")
+    line = "PSNR of each peer's image against flat@wgpu's"
+    assert line in text
+    table = text[text.index(line):].splitlines()[2:5]
+    assert table[0] == f"| {peer} |" and table[2].endswith(" dB |"), table
+    # negative control: without a flat variant there is nothing to compare with
+    assert "PSNR of each peer" not in report("forward")
