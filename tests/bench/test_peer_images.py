@@ -4,7 +4,8 @@
 peer at 192x108 on the courtyard, and ``rfw run configs/flat.toml`` renders rfw's image; the
 two must agree within ``PSNR_DB``. Measured on lavapipe (Mesa 25.0.7, llvmpipe), wgpu backend:
 moderngl 50.6 dB, pyvista/VTK 50.5 dB, pygfx 50.2 dB; every pixel within 1 level but one or
-two, where a depth tie resolves differently (109 levels). At 320x180 no pixel is over 1 level
+two, where coincident surfaces tie in depth and each renderer resolves the tie its own way
+(109 levels; the peers disagree among themselves on such pixels too). At 320x180 no pixel is over 1 level
 (80.3, 67.9 and 61.9 dB). pygfx stores colour through an sRGB texture, which costs it up to a
 level near white. Negative control: the sun turned 5 degrees about the vertical axis drops
 every peer to 35.5 dB.
