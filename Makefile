@@ -35,7 +35,7 @@ BENCH_ARGS ?=
 PEERS_STAMP := $(VENV)/.peers
 
 bench: system venv $(PEERS_STAMP)
-	$(BIN)/rfw bench deferred deferred@vk forward deferred_ssao_shadows meshlet@vk \
+	$(BIN)/rfw bench deferred deferred@vk forward deferred_ssao_shadows meshlet@vk flat flat@vk \
 	  --vary ao=on,off --size $(BENCH_SIZE) --frames $(BENCH_FRAMES) --warmup 3 \
 	  --repeat $(BENCH_REPEAT) --peers all --peer-frames 10 --out $(BENCH_OUT) $(BENCH_ARGS)
 	$(BIN)/python benchmarks/bench_graph.py --out $(BENCH_OUT)/bench_graph.jsonl
