@@ -31,6 +31,8 @@ from .base import FrameExecutor, SlotContext
 from .gpu_scene import VERTEX_BUFFERS, scene_layout_entries
 from .scene_data import SCENE_GROUPS
 
+# seconds between looks at a pass's shader sources while frames replay its program
+RECHECK_S = 0.25
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
                    "bgra8unorm-storage", "texture-adapter-specific-format-features")
@@ -169,6 +171,7 @@ class Program:
     pipeline_layout: Any
     workgroup: tuple[int, int, int] = (1, 1, 1)
     pipelines: dict[Any, Any] = field(default_factory=dict)
+    key: tuple = ()  # its key in ShaderCache.programs
 
     @property
     def name(self) -> str:
@@ -187,6 +190,8 @@ class ShaderCache:
         # (files, defines) -> their SPIR-V and the stamps of every source they read: a
         # dispatch looks its program up without hashing sources or asking glslang
         self.compiled: dict[tuple, tuple[list[Spirv], tuple]] = {}
+        # a pass's (class, name, shader, kind, defines, formats) -> (program, when checked)
+        self.memo: dict[tuple, tuple[Program, float]] = {}
 
     def program(self, paths: list[Path], defines: dict[str, object], kind: str,
                 formats: dict[str, str], *, owner: str = "") -> Program:
@@ -198,7 +203,21 @@ class ShaderCache:
         key = (kind, *(s.key for s in spirvs), tuple(sorted(formats.items())))
         if key not in self.programs:
             self.programs[key] = self._glsl(paths, spirvs, kind, formats, owner)
+            self.programs[key].key = key
         return self.programs[key]
+
+    def recent(self, key: tuple, make: Any) -> Program:
+        """``make()``'s program, made again only when ``RECHECK_S`` has passed since it
+        last was (a pass's sources are looked at that often, for hot reload) or the cache
+        was cleared (``rfw view``'s R): a frame records without touching the files."""
+        hit = self.memo.get(key)
+        now = time.monotonic()
+        if hit is not None and now - hit[1] < RECHECK_S and \
+                self.programs.get(hit[0].key) is hit[0]:
+            return hit[0]
+        prog = make()
+        self.memo[key] = (prog, now)
+        return prog
 
     def _spirv(self, paths: list[Path], defines: dict[str, object], owner: str) -> list[Spirv]:
         memo = (tuple(paths), tuple(sorted((k, str(v)) for k, v in defines.items())))
@@ -362,6 +381,7 @@ class ShaderCache:
         prog = Program((path,), stages, bindings, layouts,
                        dev.create_pipeline_layout(bind_group_layouts=layouts,
                                                   label=path.name), wg)
+        prog.key = key
         self.programs[key] = prog
         return prog
 
@@ -535,9 +555,17 @@ class PassContext(SlotContext):
         name = shader or self.pass_.shader
         if not name:
             raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
-        paths = program_files(self.pass_.folder(), name, owner=self.pass_.name)
-        return self.executor.shaders.program(paths, defines or {}, kind, formats or {},
-                                             owner=self.pass_.name)
+        defines, formats = defines or {}, formats or {}
+
+        def make() -> Program:
+            paths = program_files(self.pass_.folder(), name, owner=self.pass_.name)
+            return self.executor.shaders.program(paths, defines, kind, formats,
+                                                 owner=self.pass_.name)
+
+        # keys are unique, so sorting never compares the values
+        key = (type(self.pass_), self.pass_.name, name, kind, tuple(sorted(defines.items())),
+               tuple(sorted(formats.items())))
+        return self.executor.shaders.recent(key, make)
 
     def bind(self, prog: Program, values: dict[str, Any], *, groups: tuple[int, ...] = (0,),
              cache_key: Any = None) -> list[Any]:

@@ -125,3 +125,50 @@ def test_a_uniform_setting_reaches_the_replayed_draws(device, counted):
     finally:
         frame.destroy()
         fresh.destroy()
+
+
+def test_replayed_frames_touch_no_shader_file(device, monkeypatch):
+    # a pass's program is looked up from memory between looks at its sources (RECHECK_S)
+    from pathlib import Path
+
+    from rfw.backends import wgpu_backend
+
+    frame = _frame(device, "deferred_ssao_shadows")
+    try:
+        frame.run(1)
+        stats = []
+        real = Path.stat
+
+        def counting_stat(self, *a, **kw):
+            stats.append(self)
+            return real(self, *a, **kw)
+
+        monkeypatch.setattr(Path, "stat", counting_stat)
+        monkeypatch.setattr(wgpu_backend, "RECHECK_S", 1e9)  # however slow the frames are
+        frame.run(2)
+        assert stats == []
+        monkeypatch.setattr(wgpu_backend, "RECHECK_S", 0.0)  # negative control: look always
+        frame.run(1)
+        assert any(p.suffix == ".glsl" for p in stats)
+    finally:
+        frame.destroy()
+
+
+def test_a_cleared_program_cache_is_not_bypassed(device):
+    # rfw view's R clears ShaderCache.programs: the next lookup makes the program again
+    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.shaders import program_files
+
+    cache = ShaderCache(device)
+    paths = program_files(ROOT / "passes" / "tonemap", "tonemap.comp.glsl")
+    made = []
+
+    def make():
+        made.append(1)
+        return cache.program(paths, {}, "compute", {})
+
+    first = cache.recent(("k",), make)
+    assert cache.recent(("k",), make) is first and len(made) == 1
+    cache.programs.clear()
+    again = cache.recent(("k",), make)
+    assert len(made) == 2 and again is not first
