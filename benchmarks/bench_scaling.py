@@ -4,10 +4,16 @@ textures, beside a depth-only floor drawing the same geometry (issue 13, item 2)
 One graph (written to ``OUT/scaling.toml``) holds every pass measured, so all see the same
 frame, scene and camera: ``shadow`` (``shadow_map``, its own 2048² target whatever the
 resolution), ``floor`` (``depth_prepass``: one pipeline, a vertex shader, no fragment shader, no
-textures, depth only), ``gbuffer`` and ``forward`` (its shadow lookups on). The floor is the
-simplest raster pass through rfw's own backend, not a raw-Vulkan draw outside the frame graph:
-it pays the same per-draw and per-instance costs as the other passes, so ``gbuffer / floor``
-is what the G-buffer's attachments, fragment shading and texturing add to drawing the geometry.
+textures, depth only), ``gbuffer`` and ``forward`` (its shadow lookups on). ``floor`` pays
+rfw's per-draw and per-instance costs, so ``gbuffer / floor`` is what the G-buffer's
+attachments, fragment shading and texturing add to drawing the geometry.
+
+Below that, two raw-Vulkan floors outside the frame graph (``raw_floor.py``, on a Vulkan
+device of their own after the rfw frames): the same geometry, camera and size, depth only,
+with a command buffer recorded once: ``raw_draws`` (a ``vkCmdDrawIndexed`` per instance, no
+descriptor sets) and ``raw_instanced`` (one instanced draw). ``floor / raw_instanced`` is what
+rfw's way of drawing costs the GPU over the least any renderer could do; the record checks
+that both depths cover the same pixels as rfw's floor (``raw_depth_check``).
 
 The scene is ``k`` copies of one UV sphere (``4 n²`` triangles) on a square grid, framed whole by
 the default camera: more copies make each one smaller on screen, so the covered pixels stay
@@ -54,6 +60,8 @@ from rfw.scene.model import Instance, Material, Mesh, Scene, Texture  # noqa: E4
 
 PASSES = ("shadow", "floor", "gbuffer", "forward")
 RASTER = ("shadow", "gbuffer", "forward")  # measured against the floor
+RAW = ("raw_draws", "raw_instanced")  # raw_floor.py: the floor outside the frame graph
+SERIES = PASSES + RAW
 GRAPH = """# written by benchmarks/bench_scaling.py: every raster pass of one frame, and the floor
 name = "scaling"
 scene = "default"
@@ -200,10 +208,43 @@ def measure(point: dict[str, Any], config: Path, *, backend: str, frames: int,
         passes[name] = {"gpu_ms": gpu, "cpu_ms": cpu,
                         "gpu_ms_median": statistics.median(gpu) if gpu else None,
                         "cpu_ms_median": statistics.median(cpu) if cpu else None}
+    try:
+        raw, check = measure_raw(scene, cfg, result, frames=frames, warmup=warmup)
+    except Exception as e:  # the rfw passes stand; the report names why the floor is missing
+        raw, check = {}, {"error": f"{type(e).__name__}: {e}".splitlines()[0]}
+    passes.update(raw)
     return {"device": result.timings.get("device"), "driver": result.timings.get("driver"),
             "triangles": scene.triangle_count, "frames": frames, "warmup": warmup,
-            "passes": passes, "gpu_clocks": clocks, "build_s": build_s, "render_s": render_s,
-            "wall_s": time.perf_counter() - t0}
+            "passes": passes, "raw_depth_check": check, "gpu_clocks": clocks,
+            "build_s": build_s, "render_s": render_s, "wall_s": time.perf_counter() - t0}
+
+
+def measure_raw(scene: Scene, cfg: Any, result: Any, *, frames: int,
+                warmup: int) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The raw-Vulkan floor (raw_floor.py) of the same geometry, camera and size, and how
+    its depth compares with rfw's floor pass's (the same surface, so the same pixels)."""
+    import raw_floor
+
+    from rfw.frame import camera_for
+
+    w, h = cfg.size
+    cam = camera_for(cfg, scene)
+    view_proj = cam.projection(w / h) @ cam.view()
+    transforms = np.stack([i.transform for i in scene.instances])
+    depth: dict[str, np.ndarray] = {}
+    times = raw_floor.measure(scene.meshes[0], transforms, view_proj, (w, h), frames=frames,
+                              warmup=warmup, depth_out=depth)
+    ours = np.asarray(result.images["floor.depth"], dtype=np.float32).reshape(h, w, -1)[..., 0]
+    check = {"coverage_floor": float((ours < 1).mean())}
+    for mode, d in depth.items():
+        both = (ours < 1) & (d < 1)
+        check[f"coverage_{mode}"] = float((d < 1).mean())
+        check[f"max_depth_diff_{mode}"] = float(np.abs(ours - d)[both].max()) if both.any() \
+            else None
+    out = {f"raw_{mode}": {"gpu_ms": t, "cpu_ms": [],
+                           "gpu_ms_median": statistics.median(t) if t else None,
+                           "cpu_ms_median": None} for mode, t in times.items()}
+    return out, check
 
 
 def cost(point: dict[str, Any]) -> float:
@@ -271,7 +312,8 @@ def sweep(plan: list[dict[str, Any]], config: Path, *, backend: str, frames: int
         if "error" in rec:
             print(f"[{k}/{len(plan)}] {label}: FAILED {rec['error']}", flush=True)
         else:
-            ms = ", ".join(f"{p} {_ms(rec['passes'][p]['gpu_ms_median'])}" for p in PASSES)
+            ms = ", ".join(f"{p} {_ms(rec['passes'].get(p, {}).get('gpu_ms_median'))}"
+                           for p in SERIES)
             print(f"[{k}/{len(plan)}] {label}: {ms} ({rec['wall_s']:.1f} s)", flush=True)
         records.append(rec)
     return records
@@ -296,6 +338,10 @@ def _clocks(records: list[dict[str, Any]]) -> str:
         return NO_CLOCKS
     return (f"SM {min(sm)}-{max(sm)} MHz after the points' frames (max "
             f"{', '.join(map(str, sorted(top))) or '?'} MHz; nvidia-smi, every GPU it lists)")
+
+
+def _ratio(a: float | None, b: float | None) -> str:
+    return f"{a / b:.2f}x" if a and b else "-"
 
 
 def _ms(v: float | None) -> str:
@@ -345,19 +391,20 @@ def report(records: list[dict[str, Any]], meta: dict[str, Any], charts: list[str
             continue
         lines += ["", f"## {AXIS_TITLES[axis]}", "",
                   "| " + " | ".join([axis if axis != "n" else "triangles", "triangles total",
-                                      *(f"{p} ms" for p in PASSES),
-                                      *(f"{p} x floor" for p in RASTER), "frames"]) + " |",
-                  "|" + "---|" * (3 + len(PASSES) + len(RASTER))]
+                                      *(f"{p} ms" for p in SERIES),
+                                      *(f"{p} x floor" for p in RASTER),
+                                      "floor x raw_instanced", "frames"]) + " |",
+                  "|" + "---|" * (4 + len(SERIES) + len(RASTER))]
         for r in rows:
             if "passes" not in r:
                 lines.append(f"| {_axis_value(axis, r)} | | "
                              f"{r.get('error') or 'skipped: ' + r.get('skipped', '?')} |")
                 continue
-            med = {p: r["passes"][p]["gpu_ms_median"] for p in PASSES}
-            ratio = [f"{med[p] / med['floor']:.2f}x" if med[p] and med["floor"] else "-"
-                     for p in RASTER]
+            med = {p: r["passes"].get(p, {}).get("gpu_ms_median") for p in SERIES}
+            ratio = [_ratio(med[p], med["floor"]) for p in RASTER]
             lines.append("| " + " | ".join([_axis_value(axis, r), f"{r['triangles']:,}",
-                                             *(_ms(med[p]) for p in PASSES), *ratio,
+                                             *(_ms(med[p]) for p in SERIES), *ratio,
+                                             _ratio(med["floor"], med["raw_instanced"]),
                                              str(r["frames"])]) + " |")
     if charts:
         lines += ["", "## Charts", ""] + [f"![{c}]({c})" for c in charts]
@@ -382,12 +429,15 @@ def charts(records: list[dict[str, Any]], out: Path) -> tuple[list[str], list[st
         fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=110)
         xs = [_x(r[axis]) if axis != "n" else float(r["triangles"]) / r["instances"]
               for r in rows]
-        for p in PASSES:
-            ys = [r["passes"][p]["gpu_ms_median"] for r in rows]
+        for p in SERIES:
+            ys = [r["passes"].get(p, {}).get("gpu_ms_median") for r in rows]
+            if all(y is None for y in ys):
+                continue
             if axis == "textures":
                 ax.bar([f"{p}\n{'on' if r['textures'] else 'off'}" for r in rows], ys)
             else:
-                ax.plot(xs, ys, marker="o", label=p, linestyle="--" if p == "floor" else "-")
+                ax.plot(xs, ys, marker="o", label=p,
+                        linestyle=":" if p in RAW else "--" if p == "floor" else "-")
         if axis != "textures":
             ax.set_xscale("log")
             ax.set_yscale("log")

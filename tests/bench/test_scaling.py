@@ -90,9 +90,15 @@ def test_a_tiny_sweep_end_to_end(tmp_path):
     assert [p["textures"] for p in data["points"]] == [True, False]
     for p in data["points"]:
         assert p["triangles"] == p["instances"] * 4 * p["n"] ** 2
-        for name in bs.PASSES:  # lavapipe has timestamps: every pass timed every frame
+        for name in bs.SERIES:  # lavapipe has timestamps: every pass timed every frame
             gpu = p["passes"][name]["gpu_ms"]
             assert len(gpu) == 2 and all(v > 0 for v in gpu), (name, gpu)
+        # the raw floors drew the surface rfw's floor pass drew: same pixels, same depth
+        check = p["raw_depth_check"]
+        assert check["coverage_floor"] > 0.01
+        for mode in ("instanced", "draws"):
+            assert check[f"coverage_{mode}"] == check["coverage_floor"]
+            assert check[f"max_depth_diff_{mode}"] <= 1e-6
     text = (tmp_path / "scaling.md").read_text()
     assert "## textures" in text and "| on | 25,600 |" in text and "| off | 25,600 |" in text
     assert (tmp_path / "scaling_textures.png").stat().st_size > 1000
@@ -118,3 +124,25 @@ def test_a_failing_point_is_an_error_record(tmp_path):
     rec = bs.run_worker(spec, 300)
     assert "error" not in rec, rec.get("error")
     assert rec["passes"]["gbuffer"]["gpu_ms_median"] is not None
+
+
+def test_raw_floor_depth_moves_with_the_camera():
+    """Negative control of the depth check above: a camera nudged by 1 % of the grid's size
+    changes the raw floor's pixels."""
+    import raw_floor
+
+    scene = bs.grid_scene(4, 4, False)
+    cam = scene.default_camera()
+    vp = cam.projection(64 / 36) @ cam.view()
+    nudge = np.eye(4, dtype=np.float32)
+    nudge[0, 3] = 0.05
+    transforms = np.stack([i.transform for i in scene.instances])
+    a: dict = {}
+    b: dict = {}
+    raw_floor.measure(scene.meshes[0], transforms, vp, (64, 36), frames=1, warmup=0,
+                      modes=("instanced",), depth_out=a)
+    raw_floor.measure(scene.meshes[0], transforms, vp @ nudge, (64, 36), frames=1, warmup=0,
+                      modes=("instanced",), depth_out=b)
+    covered = a["instanced"] < 1
+    assert covered.mean() > 0.01
+    assert not np.array_equal(covered, b["instanced"] < 1)
