@@ -20,7 +20,6 @@ from rfw.spirv import DescriptorInfo, check_bindings
 
 from .commands import image_layout, record_barriers
 from .consts import const, ffi, lib, vk
-from .fitting import shader_paths
 from .memory import Buffer, Image, ImageView
 from .programs import Program
 from .scene import BufferRange, Sampler, new, update_descriptors
@@ -63,6 +62,7 @@ class VkPassContext(SlotContext):
         self.device = executor.device
         self.frame = executor.frame_index
         self._rendering: VkRenderPass | None = None
+        self._bound: list[Any] = []  # cached sets bound by this record (bundles keep them)
 
     _step = -1  # the declared step (Pass.steps) the pass is in
 
@@ -136,7 +136,7 @@ class VkPassContext(SlotContext):
         mesh program is its mesh shader plus, in ``stages``, an optional task and fragment
         shader."""
         if kind in ("compute", "render") and not stages:
-            paths = shader_paths(self.pass_, shader)
+            paths = self.executor.shader_paths(self.pass_, shader)
         else:
             paths = [p for n in (shader or self.pass_.shader, *stages)
                      for p in self._stage_paths(n)]
@@ -158,24 +158,41 @@ class VkPassContext(SlotContext):
              sets: Sequence[int] | None = None) -> None:
         """Bind ``sets`` (default: every set of ``prog``), matching binding names to
         ``values``; the scene's own sets are bound as they are."""
-        ex = self.executor
         for s in prog.sets() if sets is None else sets:
-            wanted = sorted((d for d in prog.descriptors.values() if d.set == s),
-                            key=lambda d: d.binding)
-            if not wanted:
-                continue
-            check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
-                           missing=True)
-            handle = self._scene_set(prog, s, values, wanted)
-            if handle is None:
-                entries = [(d.binding, d.kind, max(1, d.count)) for d in wanted]
-                arr = ex.descriptors.allocate(prog.set_layouts[s], entries)
-                update_descriptors(ex.device, [
-                    (arr[0], d.binding, d.kind, self._payload(prog, d, values[d.name]))
-                    for d in wanted])
-                handle = arr
-            lib.vkCmdBindDescriptorSets(self.cmd, point, prog.pipeline_layout.handle, s, 1,
-                                        handle, 0, ffi.NULL)
+            handle = self._set(prog, s, values)
+            if handle is not None:
+                lib.vkCmdBindDescriptorSets(self.cmd, point, prog.pipeline_layout.handle, s,
+                                            1, handle, 0, ffi.NULL)
+
+    _set_calls = 0  # own sets bound so far in this record: one SetCache call site each
+
+    def _set(self, prog: Program, s: int, values: dict[str, Any]) -> Any:
+        """``VkDescriptorSet[1]`` binding set ``s`` of ``prog`` to ``values`` (None: the set
+        declares nothing): the scene's where it is one of them, else one written once and
+        kept (``vkext.bundles.SetCache``), or without that cache one for this frame."""
+        ex = self.executor
+        wanted = sorted((d for d in prog.descriptors.values() if d.set == s),
+                        key=lambda d: d.binding)
+        if not wanted:
+            return None
+        check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
+                       missing=True)
+        handle = self._scene_set(prog, s, values, wanted)
+        if handle is not None:
+            return handle
+        if ex.sets is not None:
+            slot = (self.pass_.name, self._set_calls)
+            self._set_calls += 1
+            entry = ex.sets.get(slot, prog.set_layouts[s], wanted, values,
+                                lambda d, v: self._payload(prog, d, v), _owners)
+            self._bound.append(entry)
+            return entry.handle
+        entries = [(d.binding, d.kind, max(1, d.count)) for d in wanted]
+        arr = ex.descriptors.allocate(prog.set_layouts[s], entries)
+        update_descriptors(ex.device, [
+            (arr[0], d.binding, d.kind, self._payload(prog, d, values[d.name]))
+            for d in wanted])
+        return arr
 
     def _scene_set(self, prog: Program, s: int, values: dict[str, Any],
                    wanted: list[DescriptorInfo]) -> Any:
@@ -276,7 +293,7 @@ class VkPassContext(SlotContext):
         stages beside it; bindings as for ``dispatch`` (scene camera and lights by name)."""
         raygen = shader or self.pass_.shader
         names = [raygen, *(n for n in (miss, closest_hit, any_hit) if n)]
-        paths = [shader_paths(self.pass_, n)[0] for n in names]
+        paths = [self.executor.shader_paths(self.pass_, n)[0] for n in names]
         prog = self.executor.programs.get(self.pass_, paths, defines or {}, "ray_tracing")
         self._check_extra(prog, bindings)
         values = {**self.executor.scene_bindings(), **bindings}
@@ -290,12 +307,15 @@ class VkPassContext(SlotContext):
     def _push(self, prog: Program, data: bytes | None) -> None:
         if data is None:
             return
-        if len(data) > prog.push_size:
-            raise ShaderError(f"pass '{self.pass_.name}': {len(data)} bytes of push constants, "
-                              f"{prog.name} declares {prog.push_size}")
+        self._check_push(prog, data)
         buf = ffi.new("char[]", bytes(data))
         lib.vkCmdPushConstants(self.cmd, prog.pipeline_layout.handle, prog.stage_flags, 0,
                                len(data), buf)
+
+    def _check_push(self, prog: Program, data: bytes) -> None:
+        if len(data) > prog.push_size:
+            raise ShaderError(f"pass '{self.pass_.name}': {len(data)} bytes of push constants, "
+                              f"{prog.name} declares {prog.push_size}")
 
     def draw_scene(self, *, color: Sequence[tuple[str, Any]] = (),
                    depth: tuple[str, Any] | None = None, shader: str | None = None,
@@ -304,18 +324,69 @@ class VkPassContext(SlotContext):
                    blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
                    push_constants: bytes | None = None, **bindings: Any) -> int:
         """Draw the scene's instances into ``color`` targets (and ``depth``) with dynamic
-        rendering; set 0 takes ``bindings``, sets 1-3 are the scene's. Returns the draws."""
+        rendering; set 0 takes ``bindings``, sets 1-3 are the scene's. Returns the draws.
+
+        The draws are recorded once into a bundle (``vkext.bundles``) and replayed while
+        nothing they bake in changes; uniform values are rewritten each frame."""
         if self.scene is None:
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
         prog = self.program("render", shader=shader, defines=defines)
         self._check_extra(prog, {**bindings, "camera": 0, "lights": 0})
-        with self.render_pass(color=color, depth=depth, depth_read_only=not depth_write) as rp:
-            rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend)
-            rp.bind(**bindings)
-            if push_constants is not None:
-                rp.push(push_constants)
-            return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
-                                   alpha=alpha)
+        if self.executor.bundles is None:  # recorded inline, every frame
+            with self.render_pass(color=color, depth=depth,
+                                  depth_read_only=not depth_write) as rp:
+                rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend)
+                rp.bind(**bindings)
+                if push_constants is not None:
+                    rp.push(push_constants)
+                return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
+                                       alpha=alpha)
+        colors, targets, dimage = self._targets(color, depth)
+        first = (targets or [dimage])[0]
+        pipe = self.executor.programs.graphics_pipeline(
+            prog, **_target_formats(targets, dimage), samples=first.samples,
+            depth_write=depth_write, depth_compare=depth_compare, cull=cull, blend=blend)
+        if push_constants is not None:
+            self._check_push(prog, push_constants)
+        # the pass's own sets first: cached, with this frame's uniform values written
+        self._bound = []
+        own = [(s, h) for s in prog.sets() if s not in prog.scene_sets
+               for h in [self._set(prog, s, bindings)] if h is not None]
+        sets, self._bound = self._bound, []
+        key = (pipe.handle, (first.width, first.height), camera, tuple(alpha),
+               None if push_constants is None else bytes(push_constants),
+               tuple((s, h[0]) for s, h in own), tuple(id(e) for e in sets), self.scene)
+        slot = (self.pass_.name, self._draw_calls)
+        self._draw_calls += 1
+        bundle = self.executor.bundles.find(slot, key)
+        if bundle is None:
+            formats = _target_formats(targets, dimage)
+            layout = prog.pipeline_layout.handle
+
+            def fill(cmd: Any) -> int:
+                _viewport(cmd, first.width, first.height)
+                point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+                vk.vkCmdBindPipeline(cmd, point, pipe.handle)
+                for s, handle in own:
+                    lib.vkCmdBindDescriptorSets(cmd, point, layout, s, 1, handle, 0, ffi.NULL)
+                if push_constants is not None:
+                    buf = ffi.new("char[]", bytes(push_constants))
+                    lib.vkCmdPushConstants(cmd, layout, prog.stage_flags, 0,
+                                           len(push_constants), buf)
+                return self.scene.draw(cmd, layout, camera=camera, alpha=alpha)
+
+            bundle = self.executor.bundles.record(
+                slot, key, colors=formats["colors"], depth=formats["depth"] or 0,
+                stencil=formats["depth"] if formats["stencil"] else 0,
+                samples=first.samples, fill=fill)
+            bundle.sets = sets
+        self._begin_rendering(colors, depth, depth_write, (first.width, first.height),
+                              secondary=True)
+        lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+        lib.vkCmdEndRendering(self.cmd)
+        return bundle.draws
+
+    _draw_calls = 0  # draw_scene calls so far in this record: one bundle call site each
 
     def render_pass(self, *, color: Sequence[tuple[str, Any]] = (),
                     depth: tuple[str, Any] | None = None,
@@ -323,20 +394,26 @@ class VkPassContext(SlotContext):
         """Begin dynamic rendering into ``color`` targets ([(slot, clear color or None to
         load)]) and ``depth`` ((slot, clear depth or None)); record into the returned
         :class:`VkRenderPass` and ``end()`` it (or use it as a ``with`` block)."""
+        colors, targets, dimage = self._targets(color, depth)
+        first = (targets or [dimage])[0]
+        self._begin_rendering(colors, depth, not depth_read_only, (first.width, first.height))
+        self._rendering = VkRenderPass(self, targets, dimage, not depth_read_only)
+        return self._rendering
+
+    def _targets(self, color: Sequence[tuple[str, Any]], depth: tuple[str, Any] | None
+                 ) -> tuple[list[tuple[str, Any]], list[Image], Image | None]:
+        """The color targets as (resource, clear), their images and the depth image."""
         ex = self.executor
         colors = [(self.resource(slot), clear) for slot, clear in color]
         targets = [ex.image(r) for r, _ in colors]
         dimage = ex.image(self.resource(depth[0])) if depth is not None else None
-        first = (targets or [dimage])[0]
-        if first is None:
+        if not targets and dimage is None:
             raise ShaderError(f"pass '{self.pass_.name}': render_pass needs a color or depth "
                               "target")
         if self._rendering is not None and self._rendering.open:
             raise ShaderError(f"pass '{self.pass_.name}': render_pass while another is open "
                               "(end() it first)")
-        self._begin_rendering(colors, depth, not depth_read_only, (first.width, first.height))
-        self._rendering = VkRenderPass(self, targets, dimage, not depth_read_only)
-        return self._rendering
+        return colors, targets, dimage
 
     def finish(self) -> None:
         """After ``record``: a render pass left open is ended, and named as an error."""
@@ -353,7 +430,25 @@ class VkPassContext(SlotContext):
         return self.executor.sampler(filter=filter, address=address, compare=compare)
 
     def _begin_rendering(self, colors: list[tuple[str, Any]], depth: tuple[str, Any] | None,
-                         depth_write: bool, extent: tuple[int, int]) -> None:
+                         depth_write: bool, extent: tuple[int, int], *,
+                         secondary: bool = False) -> None:
+        """``vkCmdBeginRendering``; ``secondary``: its contents are a bundle's. The info is
+        built once per pass, targets (their images: history ones swap) and clears."""
+        ex = self.executor
+        dname = None if depth is None else self.resource(depth[0])
+        key = (self.pass_.name, tuple((n, _frozen(c), id(ex.images.get(n))) for n, c in colors),
+               None if depth is None else (dname, _frozen(depth[1]), id(ex.images.get(dname))),
+               depth_write, extent, secondary)
+        made = ex.rendering_infos.get(key)
+        if made is None:
+            made = ex.rendering_infos[key] = self._rendering_info(colors, depth, depth_write,
+                                                                  extent, secondary)
+        lib.vkCmdBeginRendering(self.cmd, made[0])
+
+    def _rendering_info(self, colors: list[tuple[str, Any]], depth: tuple[str, Any] | None,
+                        depth_write: bool, extent: tuple[int, int], secondary: bool
+                        ) -> tuple[Any, list[Any]]:
+        """A ``VkRenderingInfo`` and the structs it points to (kept alive with it)."""
         ex = self.executor
         atts = new("VkRenderingAttachmentInfo", len(colors))
         for i, (name, clear) in enumerate(colors):
@@ -379,6 +474,8 @@ class VkPassContext(SlotContext):
                         a.clearValue.color.float32[k] = float(values[k])
         info = new("VkRenderingInfo", layerCount=1, colorAttachmentCount=len(colors),
                    pColorAttachments=atts)
+        if secondary:
+            info.flags = const("VK_RENDERING_CONTENTS_SECONDARY_COMMAND_BUFFERS_BIT")
         info.renderArea.extent.width, info.renderArea.extent.height = extent
         keep = [atts]
         if depth is not None:
@@ -400,7 +497,7 @@ class VkPassContext(SlotContext):
             if format_info(ex.plan.resource(name).format).stencil:
                 info.pStencilAttachment = d
             keep.append(d)
-        vk.vkCmdBeginRendering(self.cmd, info)
+        return info, keep
 
     def _attachment_layout(self, name: str) -> str:
         state = self.executor.state_in(self.pass_.name, name)
@@ -408,6 +505,32 @@ class VkPassContext(SlotContext):
             raise ShaderError(f"pass '{self.pass_.name}': '{name}' is not a resource of this "
                               "pass in the plan")
         return state.layout
+
+
+def _target_formats(targets: list[Image], depth: Image | None) -> dict[str, Any]:
+    """The formats a graphics pipeline (and a bundle continuing its rendering) is made for."""
+    return {"colors": [t.vk_format for t in targets],
+            "depth": depth.vk_format if depth is not None else None,
+            "stencil": bool(depth is not None and depth.info.stencil)}
+
+
+def _frozen(clear: Any) -> Any:
+    """A clear value as a key: None, a number or a tuple of numbers."""
+    return tuple(clear) if isinstance(clear, list | tuple) else clear
+
+
+def _owners(value: Any) -> list[Any]:
+    """The objects that keep a bound value's handles alive (``SetCache`` keys on them): an
+    image binding's view, a sampler, a buffer, an acceleration structure and its TLAS; a
+    ``BufferRange`` has none (its handle and range are the key)."""
+    if isinstance(value, list | tuple):
+        return [o for v in value for o in _owners(v)]
+    if isinstance(value, BufferRange):
+        return []
+    if isinstance(value, ImageBinding):
+        return [value.view]
+    tlas = getattr(value, "tlas", None)
+    return [value] if tlas is None else [value, tlas]
 
 
 def _viewport(cmd: Any, width: int, height: int) -> None:
@@ -450,11 +573,8 @@ class VkRenderPass:
         if prog.kind not in ("render", "mesh"):
             raise ShaderError(f"pass '{self.ctx.pass_.name}': {prog.name} is a {prog.kind} "
                               "program; a render pass draws render or mesh programs")
-        d = self.depth
         pipe = self.ctx.executor.programs.graphics_pipeline(
-            prog, colors=[t.vk_format for t in self.targets],
-            depth=d.vk_format if d is not None else None,
-            stencil=bool(d is not None and d.info.stencil), samples=self.samples,
+            prog, **_target_formats(self.targets, self.depth), samples=self.samples,
             depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend)
         vk.vkCmdBindPipeline(self.cmd, self.point, pipe.handle)
         self.prog = prog

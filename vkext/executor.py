@@ -17,9 +17,11 @@ module owns the resources and records the frames.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,6 +36,7 @@ from rfw.shaders import ShaderError
 from rfw.units import MiB
 
 from . import poison
+from .bundles import BundleCache, SetCache
 from .commands import (
     GLOBAL,
     CommandPool,
@@ -54,7 +57,7 @@ from .consts import ffi, lib, vk
 from .context import VkPassContext
 from .descriptors import FrameDescriptors, UniformRing
 from .device import VkDevice
-from .fitting import check_passes
+from .fitting import check_passes, shader_paths
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
 from .programs import Programs
 from .scene import Sampler, VkScene, make_sampler
@@ -118,11 +121,16 @@ class VkExecutor(FrameExecutor):
                           if r.history and r.name.endswith("@prev"))]
         self._views: dict[tuple[int, bool, int | None], ImageView] = {}
         self._samplers: dict[tuple[str, str, str | None], Sampler] = {}
+        self._paths: dict[tuple[str, str | None], list[Path]] = {}
+        # VkRenderingInfo per pass, targets and clears (vkext.context builds them)
+        self.rendering_infos: dict[tuple, tuple[Any, list[Any]]] = {}
         # acceleration structures by plan resource, published by the passes that build them
         self.accels: dict[str, Any] = {}
         self.transients = None
         self.allocator: BlockAllocator | None = None
         self.programs = self.descriptors = self.ring = None
+        self.bundles: BundleCache | None = None
+        self.sets: SetCache | None = None
         self.pool: CommandPool | None = None
         self.timestamps: TimestampPool | None = None
         self._pin_begin = False
@@ -142,6 +150,12 @@ class VkExecutor(FrameExecutor):
             self.descriptors = FrameDescriptors(device)
             self.ring = UniformRing(self.allocator,
                                     int(device.limits["minUniformBufferOffsetAlignment"]))
+            # descriptor sets written once and scene draws recorded once, then replayed
+            # (vkext.bundles); RFW_VK_BUNDLES=0 writes and records them every frame: the
+            # baseline a benchmark measures against in the same run
+            if os.environ.get("RFW_VK_BUNDLES", "1") != "0":
+                self.sets = SetCache(device, self.allocator)
+                self.bundles = BundleCache(device)
             for p in passes.values():
                 p.setup(self)
         except BaseException:
@@ -251,6 +265,16 @@ class VkExecutor(FrameExecutor):
                 address_v=address, address_w=address, compare=compare,
                 label=f"rfw:sampler:{filter}:{address}" + (f":{compare}" if compare else ""))
         return s
+
+    def shader_paths(self, pass_: Pass, shader: str | None = None) -> list[Path]:
+        """``vkext.fitting.shader_paths``, looked up once per pass and shader: a bare name
+        scans the pass folder for every stage, too slow for each frame (edits to the files
+        still recompile: ``Programs.get`` checks their times)."""
+        key = (pass_.name, shader)
+        paths = self._paths.get(key)
+        if paths is None:
+            paths = self._paths[key] = shader_paths(pass_, shader)
+        return paths
 
     def scene_bindings(self) -> dict[str, Any]:
         return self.scene.bindings() if self.scene is not None else {}
@@ -384,8 +408,8 @@ class VkExecutor(FrameExecutor):
         """Destroy every Vulkan object the executor made (safe to call twice)."""
         if self.device.alive:
             self.device.wait_idle()
-        for obj in (self.programs, self.descriptors, self.timestamps, self.pool,
-                    self.transients, self.allocator):
+        for obj in (self.bundles, self.sets, self.programs, self.descriptors, self.timestamps,
+                    self.pool, self.transients, self.allocator):
             if obj is not None:
                 obj.destroy()
         for smp in self._samplers.values():
@@ -395,5 +419,6 @@ class VkExecutor(FrameExecutor):
             v.destroy()
         self._views.clear()
         self.programs = self.descriptors = self.timestamps = self.pool = None
+        self.bundles = self.sets = None
         self.transients = self.allocator = None
         self.ring = None
