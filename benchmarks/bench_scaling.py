@@ -269,7 +269,8 @@ def run_worker(spec: dict[str, Any], timeout: float) -> dict[str, Any]:
     is that point's error and the sweep goes on."""
     t0 = time.perf_counter()
     try:
-        done = subprocess.run([sys.executable, __file__, "--worker", json.dumps(spec)],
+        done = subprocess.run([sys.executable, "-X", "faulthandler", __file__, "--worker",
+                               json.dumps(spec)],
                               capture_output=True, text=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:
         return {"error": f"timed out after {timeout:g} s", "wall_s": timeout}
@@ -278,6 +279,9 @@ def run_worker(spec: dict[str, Any], timeout: float) -> dict[str, Any]:
             return {**json.loads(line[len("RFW_POINT "):]),
                     "process_s": time.perf_counter() - t0}
     tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
+    if "Current thread" in done.stderr:  # a crash: where it happened, innermost first
+        crashed = done.stderr.split("Current thread", 1)[1].split("\n\n", 1)[0]
+        tail = [x.strip() for x in crashed.splitlines() if x.strip().startswith("File")][:4]
     why = f"signal {-done.returncode}" if done.returncode < 0 else f"exit {done.returncode}"
     return {"error": f"{why}: " + " | ".join(tail), "wall_s": time.perf_counter() - t0}
 
