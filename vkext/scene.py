@@ -279,12 +279,30 @@ class _Upload:
             staging.destroy()
 
 
+@dataclass(frozen=True)
+class BufferPart:
+    """One mesh's part of a packed stream: where shaders find it by device address."""
+
+    buffer: Buffer
+    offset: int  # bytes
+    bytes: int
+
+    @property
+    def handle(self) -> Any:
+        return self.buffer.handle
+
+    @property
+    def address(self) -> int:
+        return self.buffer.address + self.offset
+
+
 @dataclass
 class _MeshBuffers:
     vertex: Any  # VkBuffer[4]
     offsets: Any  # VkDeviceSize[4]
     index: Any  # VkBuffer
     count: int
+    index_offset: int = 0  # bytes
 
 
 class VkScene:
@@ -318,28 +336,28 @@ class VkScene:
         align = max(16, int(dev.limits["minUniformBufferOffsetAlignment"]))
         up = _Upload()
         self.meshes: list[_MeshBuffers] = []
-        # per mesh (positions, normals, uvs, tangents, indices) as Buffers: shaders that read
-        # them through device addresses (buffer references) take their addresses
-        self.mesh_buffers: list[tuple[Buffer, ...]] = []
-        for m in scene.meshes:
-            arrays = [m.positions, m.normals, m.uvs, m.tangents]
-            bufs = []
-            for k, a in enumerate(arrays):
-                a = np.ascontiguousarray(a, np.float32)
-                b = self.allocator.create_buffer(max(16, a.nbytes), ("vertex", "transfer_dst"),
-                                                 label=f"{m.name}.{('pos', 'nor', 'uv', 'tan')[k]}")
-                if a.nbytes:
-                    up.buffer(b, a)
-                bufs.append(b)
-            idx = np.ascontiguousarray(m.indices, np.uint32)
-            ib = self.allocator.create_buffer(max(16, idx.nbytes), ("index", "transfer_dst"),
-                                              label=f"{m.name}.indices")
-            if idx.nbytes:
-                up.buffer(ib, idx)
-            self.mesh_buffers.append((*bufs, ib))
-            vb = ffi.new("VkBuffer[4]", [b.handle for b in bufs])
-            self.meshes.append(_MeshBuffers(vb, ffi.new("VkDeviceSize[4]"), ib.handle,
-                                            len(idx)))
+        # each stream of every mesh in one buffer (five allocations however many meshes: the
+        # city has 2,367), every mesh's part at a 16-byte aligned offset
+        per_mesh = [(m.positions, m.normals, m.uvs, m.tangents) for m in scene.meshes]
+        vertex = [self._pack(up, [np.ascontiguousarray(a[k], np.float32) for a in per_mesh],
+                             "vertex", f"scene:{name}")
+                  for k, name in enumerate(("pos", "nor", "uv", "tan"))]
+        index = self._pack(up, [np.ascontiguousarray(m.indices, np.uint32)
+                                for m in scene.meshes], "index", "scene:indices")
+        self.streams = {"pos": vertex[0][0], "nor": vertex[1][0], "uv": vertex[2][0],
+                        "tan": vertex[3][0], "indices": index[0]}
+        # per mesh (positions, normals, uvs, tangents, indices) as parts of those buffers:
+        # shaders that read them through device addresses (buffer references) take theirs
+        self.mesh_buffers: list[tuple[BufferPart, ...]] = [
+            tuple(BufferPart(b, offs[j], a.nbytes) for (b, offs), a in
+                  zip((*vertex, index), (m.positions, m.normals, m.uvs, m.tangents, m.indices),
+                      strict=True))
+            for j, m in enumerate(scene.meshes)]
+        for j, m in enumerate(scene.meshes):
+            vb = ffi.new("VkBuffer[4]", [b.handle for b, _ in vertex])
+            offsets = ffi.new("VkDeviceSize[4]", [offs[j] for _, offs in vertex])
+            self.meshes.append(_MeshBuffers(vb, offsets, index[0].handle, len(m.indices),
+                                            index[1][j]))
         self._mirrored_meshes(up)
 
         # static uniforms: materials then instances, each at an aligned offset
@@ -395,20 +413,36 @@ class VkScene:
         scene = self.scene
         self.mirrored = [is_mirrored(i.transform) for i in scene.instances]
         self.mirrored_meshes: dict[int, _MeshBuffers] = {}
-        for k in sorted({i.mesh for i, m in zip(scene.instances, self.mirrored, strict=True)
-                         if m}):
-            mesh, plain = scene.meshes[k], self.mesh_buffers[k]
-            indices, tangents = mirrored_arrays(mesh)
-            made = []
-            for a, usage, what in ((tangents, "vertex", "tan"), (indices, "index", "indices")):
-                b = self.allocator.create_buffer(max(16, a.nbytes), (usage, "transfer_dst"),
-                                                 label=f"{mesh.name}.{what}:mirrored")
-                if a.nbytes:
-                    up.buffer(b, a)
-                made.append(b)
-            vb = ffi.new("VkBuffer[4]", [b.handle for b in (*plain[:3], made[0])])
-            self.mirrored_meshes[k] = _MeshBuffers(vb, ffi.new("VkDeviceSize[4]"),
-                                                   made[1].handle, len(indices))
+        ks = sorted({i.mesh for i, m in zip(scene.instances, self.mirrored, strict=True) if m})
+        if not ks:
+            return
+        flipped = [mirrored_arrays(scene.meshes[k]) for k in ks]  # (indices, tangents)
+        tan, tan_offs = self._pack(up, [t for _, t in flipped], "vertex", "scene:tan:mirrored")
+        idx, idx_offs = self._pack(up, [i for i, _ in flipped], "index",
+                                   "scene:indices:mirrored")
+        self.streams.update({"tan:mirrored": tan, "indices:mirrored": idx})
+        for n, k in enumerate(ks):
+            plain = self.meshes[k]
+            vb = ffi.new("VkBuffer[4]", [*plain.vertex[0:3], tan.handle])
+            offsets = ffi.new("VkDeviceSize[4]", [*plain.offsets[0:3], tan_offs[n]])
+            self.mirrored_meshes[k] = _MeshBuffers(vb, offsets, idx.handle,
+                                                   len(flipped[n][0]), idx_offs[n])
+
+    def _pack(self, up: _Upload, arrays: list[np.ndarray], usage: str,
+              label: str) -> tuple[Buffer, list[int]]:
+        """One buffer holding ``arrays`` back to back at 16-byte aligned offsets (a vertex
+        attribute's and an index's alignment, and the staging copy's), and the offsets."""
+        offsets, end = [], 0
+        for a in arrays:
+            offsets.append(end)
+            end = align_up(end + a.nbytes, 16)
+        buf = self.allocator.create_buffer(max(16, end), (usage, "transfer_dst"), label=label)
+        if end:
+            blob = np.zeros(end, np.uint8)
+            for o, a in zip(offsets, arrays, strict=True):
+                blob[o:o + a.nbytes] = np.ascontiguousarray(a).reshape(-1).view(np.uint8)
+            up.buffer(buf, blob)
+        return buf, offsets
 
     def _texture(self, up: _Upload, pixels: np.ndarray, srgb: bool, label: str) -> ImageView:
         levels = mip_chain(np.ascontiguousarray(pixels, np.uint8))
@@ -525,7 +559,7 @@ class VkScene:
                                         ffi.NULL)
             if (inst.mesh, mirrored) != last_mesh:
                 lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
-                lib.vkCmdBindIndexBuffer(cmd, buffers.index, 0, index_type)
+                lib.vkCmdBindIndexBuffer(cmd, buffers.index, buffers.index_offset, index_type)
                 last_mesh = (inst.mesh, mirrored)
             lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, 0)
             draws += 1
