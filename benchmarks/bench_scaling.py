@@ -192,6 +192,7 @@ def measure(point: dict[str, Any], config: Path, *, backend: str, frames: int,
 
     w, h = point["size"]
     t0 = time.perf_counter()
+    load_before = os.getloadavg()[0]
     scene = grid_scene(point["instances"], point["n"], point["textures"])
     build_s = time.perf_counter() - t0
     cfg = apply_overrides(load_config(config), [f"size={w}x{h}"])
@@ -216,7 +217,8 @@ def measure(point: dict[str, Any], config: Path, *, backend: str, frames: int,
     return {"device": result.timings.get("device"), "driver": result.timings.get("driver"),
             "triangles": scene.triangle_count, "frames": frames, "warmup": warmup,
             "passes": passes, "raw_depth_check": check, "gpu_clocks": clocks,
-            "build_s": build_s, "render_s": render_s, "wall_s": time.perf_counter() - t0}
+            "build_s": build_s, "render_s": render_s, "wall_s": time.perf_counter() - t0,
+            "loadavg": [load_before, os.getloadavg()[0]]}
 
 
 def measure_raw(scene: Scene, cfg: Any, result: Any, *, frames: int,
@@ -344,6 +346,11 @@ def _clocks(records: list[dict[str, Any]]) -> str:
             f"{', '.join(map(str, sorted(top))) or '?'} MHz; nvidia-smi, every GPU it lists)")
 
 
+def _load(records: list[dict[str, Any]]) -> str:
+    loads = [x for r in records for x in r.get("loadavg", [])]
+    return f"{min(loads):.2f}-{max(loads):.2f}" if loads else "?"
+
+
 def _ratio(a: float | None, b: float | None) -> str:
     return f"{a / b:.2f}x" if a and b else "-"
 
@@ -386,8 +393,14 @@ def report(records: list[dict[str, Any]], meta: dict[str, Any], charts: list[str
              "GPU ms: median over the timed frames (timestamps around each pass). floor: "
              "`depth_prepass` over the same geometry (one pipeline, no fragment shader, no "
              "textures), the cheapest raster pass through rfw's backend; x floor: the "
-             "pass's time over the floor's in the same frame. shadow draws into its own "
-             "2048² map whatever the resolution.", ""]
+             "pass's time over the floor's in the same frame. raw_draws, raw_instanced: the "
+             "same depth drawn by raw Vulkan outside the frame graph (`raw_floor.py`: a draw "
+             "per instance, or one instanced draw; no descriptor set), on the same pixels "
+             "(checked per point); floor x raw_instanced: what rfw's way of drawing costs "
+             "over the least. shadow draws into its own 2048² map whatever the resolution.",
+             "", f"Host load (1-minute average) over the points: {_load(records)} on "
+             f"{os.cpu_count()} CPUs (on a CPU driver other work shows in the GPU times).",
+             ""]
     lines += notes
     for axis in AXES:
         rows = axis_rows(records, axis)
