@@ -8,9 +8,9 @@
 #   OUT=<folder> bash benchmarks/device_scaling.sh --backend wgpu      # anything else goes on
 #
 # Results into $OUT: scaling.md, scaling.json, scaling_<axis>.png, scaling.log, device.txt.
-# BENCH_BUDGET_S (default 200, less the seconds the setup took) is passed as --budget: no point
-# starts that would likely end after it (the points run cheapest first, so the budget cuts the extremes, named in the
-# report). The full grid is 18 points.
+# BENCH_BUDGET_S (default 200, less the seconds the setup took) is passed as --budget: no
+# point starts that would likely end after it (the points run cheapest first, so the budget
+# cuts the extremes, named in the report). The full grid is 18 points.
 set -uo pipefail
 
 : "${OUT:?set OUT to the folder for the results}"
