@@ -139,3 +139,42 @@ def test_unknown_strategy_is_one_line(vk_device):
 
     with pytest.raises(RfwError, match="unknown allocation strategy 'best'"):
         BlockAllocator(vk_device, strategy="best")
+
+
+def _cubes(meshes: int, mirrored: bool = False):
+    import numpy as np
+
+    from rfw.scene import Instance, Scene
+    from rfw.scene.stress import _cube
+
+    scene = Scene("cubes", [_cube(f"cube{k}", 0) for k in range(meshes)])
+    for k in range(meshes):
+        t = np.identity(4, np.float32)
+        t[0, 3] = 2.0 * k
+        if mirrored and k == 0:
+            t[0, 0] = -1.0
+        scene.instances.append(Instance(k, t, f"cube {k}"))
+    return scene
+
+
+def _scene_buffers(device, scene) -> tuple[int, int]:
+    """Live buffers a VkScene of ``scene`` adds, and its allocator's allocations."""
+    from vkext.scene import VkScene
+
+    before = device.live_objects()["Buffer"]
+    vs = VkScene(device, scene)
+    try:
+        return device.live_objects()["Buffer"] - before, vs.allocator.stats()["allocations"]
+    finally:
+        vs.destroy()
+
+
+def test_scene_buffers_do_not_grow_with_meshes(vk_device):
+    # every mesh's streams share a few packed buffers: 6 meshes or 60, the same count
+    few, many = _scene_buffers(vk_device, _cubes(6)), _scene_buffers(vk_device, _cubes(60))
+    assert few == many
+    assert few[0] <= 8
+    # negative control: the count sees buffers the scene adds (a mirrored instance's
+    # flipped tangents and indices are two more)
+    mirrored = _scene_buffers(vk_device, _cubes(60, mirrored=True))
+    assert mirrored[0] == many[0] + 2
