@@ -5,6 +5,7 @@ The suite renders a few thousand instances at a tiny size through the CLI; the f
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -44,7 +45,7 @@ def test_grid_cubes_do_not_touch():
     # a turned cube reaches at most scale * sqrt(2) / 2 from its centre on the ground
     reach = np.linalg.norm(t[:, :3, 0], axis=1) * np.sqrt(2) / 2
     order = np.lexsort((xz[:, 0], xz[:, 1]))
-    pairs = list(zip(order[:-1], order[1:]))  # neighbours along each row
+    pairs = list(itertools.pairwise(order))  # neighbours along each row
 
     def smallest_gap(r):
         return min(np.linalg.norm(xz[i] - xz[j]) - r[i] - r[j] for i, j in pairs)

@@ -3,6 +3,8 @@ allocation stays bounded as allocations pile up (counted, never timed)."""
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -34,7 +36,7 @@ def placement_problems(allocs, granularity: int) -> list[str]:
         by_memory.setdefault(id(a.memory), []).append(a)
     for group in by_memory.values():
         group.sort(key=lambda a: a.offset)
-        for x, y in zip(group, group[1:]):
+        for x, y in itertools.pairwise(group):
             if y.offset < x.end:
                 problems.append(f"{x.label} [{x.offset}, {x.end}) overlaps {y.label} "
                                 f"[{y.offset}, {y.end})")
