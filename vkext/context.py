@@ -19,7 +19,7 @@ from rfw.shaders import ShaderError, program_files
 from rfw.spirv import DescriptorInfo, check_bindings
 
 from .commands import image_layout, record_barriers
-from .consts import const, ffi, lib, vk
+from .consts import const, ffi, lib
 from .memory import Buffer, Image, ImageView
 from .programs import Program
 from .scene import BufferRange, Sampler, new, update_descriptors
@@ -171,8 +171,7 @@ class VkPassContext(SlotContext):
         declares nothing): the scene's where it is one of them, else one written once and
         kept (``vkext.bundles.SetCache``), or without that cache one for this frame."""
         ex = self.executor
-        wanted = sorted((d for d in prog.descriptors.values() if d.set == s),
-                        key=lambda d: d.binding)
+        wanted = prog.set_descriptors(s)
         if not wanted:
             return None
         check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
@@ -274,13 +273,13 @@ class VkPassContext(SlotContext):
         values = {**self.executor.scene_bindings(), **bindings}
         pipe = self.executor.programs.compute_pipeline(prog)
         point = const("VK_PIPELINE_BIND_POINT_COMPUTE")
-        vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+        lib.vkCmdBindPipeline(self.cmd, point, pipe.handle)
         self.bind(prog, values, point)
         self._push(prog, push_constants)
         # no barrier here: dispatches of one step are unordered (rfw.passes), and a pass
         # whose dispatches depend on each other declares steps
         t = (*threads, 1, 1)[:3]
-        vk.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
+        lib.vkCmdDispatch(self.cmd, *(max(1, math.ceil(t[i] / prog.local_size[i]))
                                      for i in range(3)))
 
     def trace_rays(self, *, size: tuple[int, ...], shader: str | None = None,
@@ -299,7 +298,7 @@ class VkPassContext(SlotContext):
         values = {**self.executor.scene_bindings(), **bindings}
         pipe = self.executor.programs.ray_pipeline(prog, max_recursion=max_recursion)
         point = const("VK_PIPELINE_BIND_POINT_RAY_TRACING_KHR")
-        vk.vkCmdBindPipeline(self.cmd, point, pipe.handle)
+        lib.vkCmdBindPipeline(self.cmd, point, pipe.handle)
         self.bind(prog, values, point)
         self._push(prog, push_constants)
         pipe.sbt.trace(self.cmd, *(*size, 1, 1)[:3])
@@ -366,7 +365,7 @@ class VkPassContext(SlotContext):
             def fill(cmd: Any) -> int:
                 _viewport(cmd, first.width, first.height)
                 point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
-                vk.vkCmdBindPipeline(cmd, point, pipe.handle)
+                lib.vkCmdBindPipeline(cmd, point, pipe.handle)
                 for s, handle in own:
                     lib.vkCmdBindDescriptorSets(cmd, point, layout, s, 1, handle, 0, ffi.NULL)
                 if push_constants is not None:
@@ -576,7 +575,7 @@ class VkRenderPass:
         pipe = self.ctx.executor.programs.graphics_pipeline(
             prog, **_target_formats(self.targets, self.depth), samples=self.samples,
             depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend)
-        vk.vkCmdBindPipeline(self.cmd, self.point, pipe.handle)
+        lib.vkCmdBindPipeline(self.cmd, self.point, pipe.handle)
         self.prog = prog
 
     def _program(self) -> Program:
@@ -630,4 +629,4 @@ class VkRenderPass:
     def end(self) -> None:
         if self.open:
             self.open = False
-            vk.vkCmdEndRendering(self.cmd)
+            lib.vkCmdEndRendering(self.cmd)

@@ -109,6 +109,15 @@ class Program:
     def sets(self) -> list[int]:
         return sorted({d.set for d in self.descriptors.values()})
 
+    def set_descriptors(self, s: int) -> list[DescriptorInfo]:
+        """The descriptors of set ``s`` by binding (worked out once: binds ask each frame)."""
+        by_set = self.__dict__.setdefault("_by_set", {})
+        out = by_set.get(s)
+        if out is None:
+            out = by_set[s] = sorted((d for d in self.descriptors.values() if d.set == s),
+                                     key=lambda d: d.binding)
+        return out
+
 
 class Programs:
     """Programs keyed by their SPIR-V (content-addressed: source, includes and defines)."""
