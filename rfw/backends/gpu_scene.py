@@ -11,6 +11,7 @@ import numpy as np
 import wgpu
 
 from ..scene.model import Camera, Scene, is_mirrored
+from ..units import align_up
 from .scene_data import (
     SCENE_GROUPS,
     instance_bytes,
@@ -30,13 +31,21 @@ _ENTRIES: dict[str, tuple[str, dict[str, str]]] = {
 }
 
 
+INSTANCE_BYTES = 128  # mesh.glsl's InstanceBlock: model and normal matrices
+# the scene's bindings moved by a dynamic offset per draw: every instance in one buffer
+DYNAMIC = {(3, 0)}
+
+
 def scene_layout_entries(group: int) -> list[dict]:
-    """Bind group layout entries of a scene group, visible to every stage that may read it."""
+    """Bind group layout entries of a scene group, visible to every stage that may read it
+    (the instance block with a dynamic offset: one bind group serves every instance)."""
     stages = wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT | wgpu.ShaderStage.COMPUTE
     out = []
     for _, binding, kind in SCENE_GROUPS[group]:
         key, layout = _ENTRIES[kind]
-        out.append({"binding": binding, "visibility": stages, key: dict(layout)})
+        entry = dict(layout) | ({"has_dynamic_offset": True} if (group, binding) in DYNAMIC
+                                else {})
+        out.append({"binding": binding, "visibility": stages, key: entry})
     return out
 
 
@@ -50,7 +59,9 @@ class GpuScene:
         self._upload_meshes()
         self._upload_textures()
         self.material_data = [material_bytes(m) for m in scene.materials]
-        self.instance_data = [instance_bytes(i.transform) for i in scene.instances]
+        self.instance_stride = align_up(
+            INSTANCE_BYTES, device.limits["min-uniform-buffer-offset-alignment"])
+        self.instance_buffer = self._instances()
         self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
         self.sun_camera_buffer = self._uniform(b"\0" * 352, "scene.sun_camera")
         self.lights_buffer = self._uniform(self._lights_bytes(), "scene.lights")
@@ -78,6 +89,13 @@ class GpuScene:
         self.device.queue.write_buffer(buf, 0, data)
         self._buffers.append(buf)
         return buf
+
+    def _instances(self) -> Any:
+        # one buffer, one aligned block per instance: written once, bound once per draw list
+        rows = np.zeros((max(1, len(self.scene.instances)), self.instance_stride), np.uint8)
+        for k, inst in enumerate(self.scene.instances):
+            rows[k, :INSTANCE_BYTES] = np.frombuffer(instance_bytes(inst.transform), np.uint8)
+        return self._buffer(rows, wgpu.BufferUsage.UNIFORM, "scene.instances")
 
     def _upload_meshes(self) -> None:
         v = wgpu.BufferUsage.VERTEX
@@ -170,12 +188,16 @@ class GpuScene:
             self._bind_cache[key] = self.device.create_bind_group(layout=layout, entries=entries)
         return self._bind_cache[key]
 
-    def _instance_group(self, layout: Any, k: int) -> Any:
+    def _instance_group(self, layout: Any, k: int | None) -> Any:
+        """Instance ``k``'s block, or (``k`` None) the group of a dynamic-offset layout
+        that every instance shares."""
         key = ("instance", id(layout), k)
         if key not in self._bind_cache:
-            ubuf = self._uniform(self.instance_data[k], f"instance{k}")
+            offset = 0 if k is None else k * self.instance_stride
             self._bind_cache[key] = self.device.create_bind_group(
-                layout=layout, entries=[{"binding": 0, "resource": {"buffer": ubuf}}])
+                layout=layout, entries=[{"binding": 0, "resource": {
+                    "buffer": self.instance_buffer, "offset": offset, "size": INSTANCE_BYTES}}],
+                label="scene.instances" if k is None else f"instance{k}")
         return self._bind_cache[key]
 
     def _scene_group(self, layout: Any, camera: str) -> Any:
@@ -189,12 +211,17 @@ class GpuScene:
         return self._bind_cache[key]
 
     def draw(self, rp: Any, prog: Any, pipeline: Any, *, camera: str = "main",
-             group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
-        """Draw every instance whose material's alpha mode is in ``alpha``; returns draws."""
+             group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
+             dynamic: bool = True) -> int:
+        """Draw every instance whose material's alpha mode is in ``alpha`` (into a render
+        pass or a render bundle); returns draws. ``dynamic``: the program's group 3 is the
+        scene's layout (``scene_layout_entries``), whose instance block takes an offset;
+        else (a WGSL program's own layout) each instance gets a bind group of its own."""
         rp.set_pipeline(pipeline)
         if group0 is not None:
             rp.set_bind_group(0, group0)
         rp.set_bind_group(1, self._scene_group(prog.layouts[1], camera))
+        shared = self._instance_group(prog.layouts[3], None) if dynamic else None
         draws = 0
         for k, inst in enumerate(self.scene.instances):
             mesh = self.scene.meshes[inst.mesh]
@@ -205,7 +232,10 @@ class GpuScene:
             buffers, index, count = self.mirrored_meshes[inst.mesh] if self.mirrored[k] \
                 else self.meshes[inst.mesh]
             rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
-            rp.set_bind_group(3, self._instance_group(prog.layouts[3], k))
+            if shared is not None:
+                rp.set_bind_group(3, shared, [k * self.instance_stride])
+            else:
+                rp.set_bind_group(3, self._instance_group(prog.layouts[3], k))
             for slot, buf in enumerate(buffers):
                 rp.set_vertex_buffer(slot, buf)
             rp.set_index_buffer(index, "uint32")

@@ -679,7 +679,8 @@ class PassContext(SlotContext):
         key = (pipe, group0, self.scene, camera, tuple(alpha), targets, dfmt, read_only)
         bundle, n = self.executor.bundle(
             (self.pass_.name, self._bundles), key, lambda enc: self.scene.draw(
-                enc, prog, pipe, camera=camera, group0=group0, alpha=alpha),
+                enc, prog, pipe, camera=camera, group0=group0, alpha=alpha,
+                dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3)),
             color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
         self._bundles += 1
         rp = self.render_pass(color=color, depth=depth, depth_read_only=read_only)
