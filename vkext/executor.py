@@ -10,9 +10,11 @@ descriptors are written in the layout the plan puts the image in for the pass.
 
 The pass runtime, module by module: :mod:`vkext.fitting` compiles the graph for the device
 and finds each pass's shader files; :mod:`vkext.programs` is the one program and pipeline
-cache (compute, render, mesh, ray tracing); :mod:`vkext.descriptors` holds a frame's
-descriptor sets and uniforms; :mod:`vkext.context` is what a pass records through; this
-module owns the resources and records the frames.
+cache (compute, render, mesh, ray tracing); :mod:`vkext.bundles` keeps a pass's own
+descriptor sets and its scene draws (secondary command buffers) from frame to frame, so a frame
+records no Python per draw; :mod:`vkext.descriptors` holds a frame's descriptor sets and
+uniforms where those caches are off (``RFW_VK_BUNDLES=0``); :mod:`vkext.context` is what a pass
+records through; this module owns the resources and records the frames.
 """
 
 from __future__ import annotations
