@@ -647,6 +647,10 @@ class PassContext(SlotContext):
                             formats={k: v for k, v in formats.items() if v})
         check_bindings(self.pass_.name, prog.name, [*prog.bindings, "camera", "lights"],
                        bindings)
+        if len(prog.layouts) != 4:  # wgpu-native aborts on a bundle that leaves one unset
+            raise ShaderError(f"pass '{self.pass_.name}': {prog.name} declares groups 0-"
+                              f"{len(prog.layouts) - 1}: a scene draw binds groups 0 (the "
+                              "pass's) to 3 (the scene's), each declared")
         targets = tuple(self.format(slot) for slot, _ in color)
         dfmt = self.format(depth[0]) if depth is not None else None
         key = ("scene", targets, dfmt, depth_compare, depth_write, cull, str(blend))

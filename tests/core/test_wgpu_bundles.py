@@ -259,3 +259,18 @@ def test_a_wgsl_scene_pass_binds_each_instance(device, tmp_path, monkeypatch):
     assert np.abs(glsl - wgsl).max() < 1e-3
     # negative control: the cube half a unit aside is far outside that
     assert np.abs(world("world.wgsl", moved) - glsl).max() > 0.2
+
+
+def test_a_scene_pass_with_a_fifth_group_is_one_line(device, tmp_path, monkeypatch):
+    # a group the draw never sets would abort wgpu-native when the bundle is finished
+    from rfw.shaders import ShaderError
+    from rfw.testing import run_pass
+
+    monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
+    extra = "@group(4) @binding(0) var<uniform> extra: vec4f;\n"
+    (tmp_path / "world.wgsl").write_text(_WGSL_SCENE.replace(
+        "return vec4f(v.world, 1.0);", "return vec4f(v.world, extra.x);") + extra)
+    with pytest.raises(ShaderError, match=r"pass 'WorldPass': .*world\.wgsl declares "
+                                          r"groups 0-4: a scene draw binds groups 0"):
+        run_pass(_world_pass(tmp_path, "world.wgsl"), {}, scene=tiny_scene(), device=device,
+                 size=(32, 32))
