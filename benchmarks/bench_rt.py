@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import mmap
 import multiprocessing
 import os
 import statistics
@@ -296,16 +295,20 @@ def frame_shadows(device, scene, size, frames, notes):
 # the persistent ray scene against Embree on every core
 
 
-_EMBREE: dict = {}  # what forked workers inherit: the triangles, the rays, the shared hits
+_EMBREE: dict = {}  # in each worker process: its Embree scene, the rays, the shared hits
 
 
-def _embree_worker_init() -> None:
+def _embree_worker_init(v, f, o, d, hits_name) -> None:
+    from multiprocessing import shared_memory
+
     from embreex import mesh_construction, rtcore_scene
 
     scene = rtcore_scene.EmbreeScene()
-    mesh_construction.TriangleMesh(scene, _EMBREE["v"], _EMBREE["f"])
+    mesh_construction.TriangleMesh(scene, v, f)
     scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))  # commits the BVH
-    _EMBREE["scene"] = scene
+    shm = shared_memory.SharedMemory(name=hits_name)
+    _EMBREE.update(scene=scene, o=o, d=d, shm=shm,
+                   t=np.ndarray(len(o), np.float32, buffer=shm.buf))
 
 
 def _embree_worker_cast(part: tuple[int, int]) -> None:
@@ -316,24 +319,31 @@ def _embree_worker_cast(part: tuple[int, int]) -> None:
 
 def embree_all_cores(v, f, o, d, repeats, workers=None):
     """Seconds per cast of (o, d) by Embree on ``workers`` processes (default: every core),
-    median of ``repeats``, and the hit distances. The BVH builds (one per worker) are not
-    timed; each cast hands out 4 chunks per worker."""
+    median of ``repeats``, and the hit distances. Workers are spawned (this process has
+    Vulkan's and the copy pool's threads, which a fork would not carry) and each builds its
+    own BVH, untimed; each cast hands out 4 chunks per worker, the hits go to shared
+    memory."""
+    from multiprocessing import shared_memory
+
     workers = workers or os.cpu_count() or 1
     n = len(o)
-    shared = mmap.mmap(-1, max(4 * n, 1))  # anonymous and shared: forked workers write it
-    _EMBREE.update(v=v, f=f, o=o, d=d, t=np.frombuffer(shared, np.float32, n))
+    shm = shared_memory.SharedMemory(create=True, size=max(4 * n, 1))
     cuts = np.linspace(0, n, 4 * workers + 1).astype(int)
     parts = [(int(a), int(b)) for a, b in itertools.pairwise(cuts) if b > a]
-    ctx = multiprocessing.get_context("fork")
     times = []
-    with ctx.Pool(workers, initializer=_embree_worker_init) as pool:
-        pool.map(_embree_worker_cast, parts)  # warm-up: every worker has built its BVH
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            pool.map(_embree_worker_cast, parts)
-            times.append(time.perf_counter() - t0)
-    t = _EMBREE["t"].copy()
-    _EMBREE.clear()
+    try:
+        ctx = multiprocessing.get_context("spawn")
+        with ctx.Pool(workers, initializer=_embree_worker_init,
+                      initargs=(v, f, o, d, shm.name)) as pool:
+            pool.map(_embree_worker_cast, parts)  # warm-up: every worker has its BVH
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                pool.map(_embree_worker_cast, parts)
+                times.append(time.perf_counter() - t0)
+        t = np.ndarray(n, np.float32, buffer=shm.buf).copy()
+    finally:
+        shm.close()
+        shm.unlink()
     return statistics.median(times), workers, t
 
 
