@@ -13,9 +13,9 @@ structures (built once), the device's pipeline (:func:`raycaster`) and the ray a
 buffers (:class:`RayBuffers`, grown when a batch is larger, never shrunk). Rays and hits are
 *streams* (origins, directions, optional per-ray tmin and tmax; t, primitive, instance,
 barycentrics), so the host fills and reads each with one contiguous copy of the caller's
-arrays (split among threads when large: :func:`parallel_copy`). The shaders check every ray as they read it (finite origin and direction, a
-direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
-naming the argument and the first bad row.
+arrays (split among threads when large: :func:`parallel_copy`). The shaders check every ray
+as they read it (finite origin and direction, a direction that is not zero): such a ray is
+not traced, and :meth:`Raycaster.cast` raises naming the argument and the first bad row.
 
 Rays go through in batches of at most ``batch`` rays (a large cast in at least
 :data:`OVERLAP_PARTS`): per batch one submit copies the rays from a staging buffer to

@@ -230,7 +230,8 @@ def test_bad_input_is_one_line(vk_device, make, args, argument):
 
 
 def test_from_scene_takes_a_scene(vk_device):
-    with pytest.raises(RfwError, match=r"^RayScene\.from_scene: scene must be an rfw\.scene\.Scene"):
+    with pytest.raises(RfwError,
+                       match=r"^RayScene\.from_scene: scene must be an rfw\.scene\.Scene"):
         rfw.RayScene.from_scene("courtyard", device=vk_device)
 
 
