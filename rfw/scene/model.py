@@ -102,6 +102,22 @@ def transform_problem(transform: np.ndarray) -> str | None:
     return None
 
 
+def _stacked(transforms: list) -> tuple[np.ndarray, np.ndarray]:
+    """``transforms`` as one (n, 4, 4) float64 array (identity where one is not 4x4), and
+    which were 4x4."""
+    try:
+        m = np.asarray(transforms, np.float64)
+        if m.shape == (len(transforms), 4, 4):
+            return m, np.ones(len(transforms), bool)
+    except (ValueError, TypeError):  # ragged: some are not 4x4
+        pass
+    shaped = np.array([np.shape(t) == (4, 4) for t in transforms], bool)
+    m = np.tile(np.identity(4), (len(transforms), 1, 1))
+    for k in np.flatnonzero(shaped):
+        m[k] = transforms[k]
+    return m, shaped
+
+
 # world coordinates beyond this lose every digit a renderer needs (their squares, taken in
 # float32 for distances, overflow near 1.8e19)
 WORLD_LIMIT = 1e18
@@ -197,29 +213,24 @@ class Scene:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World-space axis-aligned bounds of all drawable instances (degenerate
         transforms and empty meshes are left out, as renderers leave them out)."""
-        problems, world = self._instance_checks()
-        keep = [k for k, why in enumerate(problems) if why is None and world[k] is not None]
-        if not keep:
+        problems, world, usable = self._instance_checks()
+        keep = usable & np.array([why is None for why in problems], bool)
+        if not keep.any():
             return np.full(3, np.inf), np.full(3, -np.inf)
-        corners = np.concatenate([world[k] for k in keep])
+        corners = world[keep].reshape(-1, 3)
         return corners.min(axis=0), corners.max(axis=0)
 
-    def _instance_checks(self) -> tuple[list[str | None], list[np.ndarray | None]]:
-        """``instance_problem`` of every instance and the world corners of its mesh's
-        bounds (None for an empty or unknown mesh), computed for all instances at once: a
-        scene may hold 100,000 of them. An instance any batched test doubts is checked
-        again alone, so the reasons are ``instance_problem``'s own."""
+    def _instance_checks(self) -> tuple[list[str | None], np.ndarray, np.ndarray]:
+        """``instance_problem`` of every instance, the (n, 8, 3) world corners of its
+        mesh's bounds, and where those mean something (the mesh is known and not empty),
+        computed for all instances at once: a scene may hold 100,000 of them. An instance
+        any batched test doubts is checked again alone, so the reasons are
+        ``instance_problem``'s own."""
         n = len(self.instances)
         problems: list[str | None] = [None] * n
-        world: list[np.ndarray | None] = [None] * n
         if not n:
-            return problems, world
-        shaped = [np.shape(i.transform) == (4, 4) for i in self.instances]
-        m = np.zeros((n, 4, 4))
-        m[:] = np.identity(4)
-        for k, i in enumerate(self.instances):
-            if shaped[k]:
-                m[k] = i.transform
+            return problems, np.zeros((0, 8, 3)), np.zeros(0, bool)
+        m, shaped = _stacked([i.transform for i in self.instances])
         with np.errstate(all="ignore"):
             a = m[:, :3, :3]
             scale = np.abs(a).max(axis=(1, 2))
@@ -232,7 +243,7 @@ class Scene:
             normal = np.linalg.inv(a[ok])
             ok[np.flatnonzero(ok)] = np.isfinite(normal.astype(np.float32)).all(axis=(1, 2))
             corners, has = self._mesh_corners()
-            mesh = np.array([i.mesh for i in self.instances])
+            mesh = np.fromiter((i.mesh for i in self.instances), np.int64, n)
             known = (mesh >= 0) & (mesh < len(self.meshes))
             mesh = np.where(known, mesh, 0)
             usable = known & has[mesh]
@@ -241,9 +252,7 @@ class Scene:
             ok &= ~usable | (far <= WORLD_LIMIT)
         for k in np.flatnonzero(~ok):
             problems[k] = self.instance_problem(self.instances[k])
-        for k in np.flatnonzero(usable):
-            world[k] = pts[k]
-        return problems, world
+        return problems, pts, usable
 
     def _mesh_corners(self) -> tuple[np.ndarray, np.ndarray]:
         """The 8 homogeneous corners of each mesh's bounds, and which meshes have any."""
