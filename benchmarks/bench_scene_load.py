@@ -268,6 +268,8 @@ def main(argv: list[str] | None = None) -> int:
                 n = args.before_repeats if strategy == "first-fit" else args.repeats
                 row = {"scene": name, "backend": backend, "allocator": strategy,
                        "repeats": n, **spawn(source, backend, strategy, n, args.timeout)}
+                # what the allocator says it was (an older commit's knows first fit only)
+                row["allocator"] = row.get("blocks", {}).get("strategy", strategy)
                 if "ms" in row:
                     row["summary"] = summarize(row)
                 rows.append(row)
