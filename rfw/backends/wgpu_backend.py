@@ -761,6 +761,8 @@ class Executor(FrameExecutor):
         # (pass, its n-th scene draw) -> (key, bundle, draws): replayed while the key holds
         self._bundles: dict[tuple[str, int], tuple[tuple, Any, int]] = {}
         self.bundles_recorded = 0
+        self._written: dict[tuple[str, str], bytes] = {}  # what each uniform buffer holds
+        self._packs: dict[tuple[str, str], tuple[tuple, bytes]] = {}  # Settings.pack() kept
         self._allocate()
         self._timestamp_enabled = "timestamp-query" in device.features
         self._query_set = None
@@ -841,24 +843,39 @@ class Executor(FrameExecutor):
         return s
 
     def uniform(self, owner: str, name: str, data: bytes) -> Any:
+        """The uniform buffer of ``owner``'s binding ``name`` holding ``data``: written
+        when the bytes differ from the ones it holds (a frame that changes no setting
+        writes nothing)."""
         key = (owner, name)
         buf = self._uniforms.get(key)
         if buf is None or buf.size < len(data):
             buf = self._uniforms[key] = self.device.device.create_buffer(
                 size=max(16, len(data)), usage=wgpu.BufferUsage.UNIFORM |
                 wgpu.BufferUsage.COPY_DST, label=f"{owner}.{name}")
-        self.device.device.queue.write_buffer(buf, 0, data)
+            self._written.pop(key, None)
+        if self._written.get(key) != data:
+            self.device.device.queue.write_buffer(buf, 0, data)
+            self._written[key] = bytes(data)
         return buf
 
     def as_resource(self, value: Any, b: Binding, owner: Pass) -> Any:
         if isinstance(value, Settings):
-            return {"buffer": self.uniform(owner.name, b.name, value.pack())}
+            data = self._pack((owner.name, b.name), value)
+            return {"buffer": self.uniform(owner.name, b.name, data)}
         if isinstance(value, np.ndarray | bytes):
             data = value.tobytes() if isinstance(value, np.ndarray) else value
             return {"buffer": self.uniform(owner.name, b.name, data)}
         if isinstance(value, wgpu.GPUBuffer):
             return {"buffer": value}
         return value
+
+    def _pack(self, key: tuple[str, str], settings: Settings) -> bytes:
+        # packing walks the type hints: the bytes are kept while the values read the same
+        snap = (type(settings), repr(vars(settings)))
+        hit = self._packs.get(key)
+        if hit is None or hit[0] != snap:
+            hit = self._packs[key] = (snap, settings.pack())
+        return hit[1]
 
     def bind_group(self, layout: Any, resources: list[tuple[int, Any]], *,
                    label: str = "") -> Any:
@@ -1030,6 +1047,8 @@ class Executor(FrameExecutor):
         for b in self._uniforms.values():
             b.destroy()
         self._uniforms.clear()
+        self._written.clear()
+        self._packs.clear()
         self._samplers.clear()
         if self._query_set is not None:
             self._query_set.destroy()

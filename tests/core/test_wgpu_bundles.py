@@ -274,3 +274,29 @@ def test_a_scene_pass_with_a_fifth_group_is_one_line(device, tmp_path, monkeypat
                                           r"groups 0-4: a scene draw binds groups 0"):
         run_pass(_world_pass(tmp_path, "world.wgsl"), {}, scene=tiny_scene(), device=device,
                  size=(32, 32))
+
+
+def test_an_unchanged_frame_writes_no_uniform(device, monkeypatch):
+    # settings are packed and written when their values change, not every frame
+    import wgpu
+
+    frame = _frame(device, "deferred_ssao_shadows")
+    try:
+        frame.run(1)
+        writes = []
+        queue_cls = wgpu.backends.wgpu_native.GPUQueue
+        real = queue_cls.write_buffer
+
+        def counting_write(self, buffer, *a, **kw):
+            writes.append(buffer.label)
+            return real(self, buffer, *a, **kw)
+
+        monkeypatch.setattr(queue_cls, "write_buffer", counting_write)
+        frame.run(2)
+        assert writes == []
+        # negative control: one changed value is one write, of that pass's buffer
+        frame.executors["wgpu"].passes["tonemap"].params.exposure = 2.0
+        frame.run(2)
+        assert writes == ["tonemap.u_params"]
+    finally:
+        frame.destroy()
