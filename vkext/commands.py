@@ -134,21 +134,11 @@ def barrier(cmd: Any, image_barriers: Iterable[ImageBarrier | tuple] = (),
             buffer_barriers: Iterable[BufferBarrier | tuple] = (),
             memory_barriers: Iterable[tuple[State, State]] = ()) -> None:
     """Record one ``vkCmdPipelineBarrier2``; tuples are (resource, src, dst, ...)."""
-    made = dependency(image_barriers, buffer_barriers, memory_barriers)
-    if made is not None:
-        vk.vkCmdPipelineBarrier2(cmd, made[0])
-
-
-def dependency(image_barriers: Iterable[ImageBarrier | tuple] = (),
-               buffer_barriers: Iterable[BufferBarrier | tuple] = (),
-               memory_barriers: Iterable[tuple[State, State]] = ()) -> tuple[Any, list] | None:
-    """``barrier``'s ``VkDependencyInfo`` and the arrays it points to (keep them with it), to
-    record again without building it again; None when there is nothing to wait for."""
     images = [b if isinstance(b, ImageBarrier) else ImageBarrier(*b) for b in image_barriers]
     buffers = [b if isinstance(b, BufferBarrier) else BufferBarrier(*b) for b in buffer_barriers]
     memory = list(memory_barriers)
     if not (images or buffers or memory):
-        return None
+        return
     dep = ffi.new("VkDependencyInfo*")
     dep.sType = const("VK_STRUCTURE_TYPE_DEPENDENCY_INFO")
     keep = []
@@ -174,7 +164,7 @@ def dependency(image_barriers: Iterable[ImageBarrier | tuple] = (),
             m.dstStageMask, m.dstAccessMask = stage_flags(d.stages), access_flags(d.access)
         dep.memoryBarrierCount, dep.pMemoryBarriers = len(memory), arr
         keep.append(arr)
-    return dep, keep
+    vk.vkCmdPipelineBarrier2(cmd, dep)
 
 
 # a plan resource synchronized by memory barriers: acceleration structures (their accesses
@@ -192,14 +182,6 @@ def record_barriers(cmd: Any, barriers: Iterable[Barrier],
     """Record a compiled plan's barriers (e.g. those of one pass) as one pipeline barrier.
     Returns how many were recorded. Every resource must be in ``resources``; one given as
     :data:`GLOBAL` (acceleration structures) gets a global memory barrier."""
-    images, buffers, memory = plan_barriers(barriers, resources)
-    barrier(cmd, images, buffers, memory)
-    return len(images) + len(buffers) + len(memory)
-
-
-def plan_barriers(barriers: Iterable[Barrier], resources: Mapping[str, Image | Buffer]
-                  ) -> tuple[list[ImageBarrier], list[BufferBarrier], list[tuple]]:
-    """A plan's barriers as ``barrier``'s image, buffer and memory barriers."""
     images, buffers, memory = [], [], []
     for b in barriers:
         res = resources.get(b.resource)
@@ -212,7 +194,8 @@ def plan_barriers(barriers: Iterable[Barrier], resources: Mapping[str, Image | B
             images.append(ImageBarrier(res, b.src, b.dst, mips=b.mips))
         else:
             buffers.append(BufferBarrier(res, b.src, b.dst, *(b.bytes or (0, None))))
-    return images, buffers, memory
+    barrier(cmd, images, buffers, memory)
+    return len(images) + len(buffers) + len(memory)
 
 
 # ---------------------------------------------------------------------------------------------

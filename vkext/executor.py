@@ -46,11 +46,9 @@ from .commands import (
     TimestampPool,
     as_state,
     barrier,
-    dependency,
     image_layout,
     label,
     one_time,
-    plan_barriers,
     read_buffer,
     read_image,
     record_barriers,
@@ -129,8 +127,6 @@ class VkExecutor(FrameExecutor):
         self._paths: dict[tuple[str, str | None], list[Path]] = {}
         # VkRenderingInfo per pass, targets and clears (vkext.context builds them)
         self.rendering_infos: dict[tuple, tuple[Any, list[Any]]] = {}
-        # each pass's barriers as a VkDependencyInfo, per pass and resources
-        self._dependencies: dict[tuple, tuple[Any, list] | None] = {}
         self._ts_stage = stage_flags(TIMESTAMP_STAGE)
         # acceleration structures by plan resource, published by the passes that build them
         self.accels: dict[str, Any] = {}
@@ -336,12 +332,10 @@ class VkExecutor(FrameExecutor):
         p = self.passes.get(name)
         try:
             with label(dev, cmd, name):
+                barriers = self._barriers[name]
                 if self.poison is not None:  # fill what starts its lifetime here first
-                    barriers = self.poison.fill(cmd, name, self._barriers[name],
-                                                self.resources)
-                    record_barriers(cmd, barriers, self.resources)
-                else:
-                    self._record_planned(cmd, name)
+                    barriers = self.poison.fill(cmd, name, barriers, self.resources)
+                record_barriers(cmd, barriers, self.resources)
                 if p is None:
                     return
                 if ts is not None:
@@ -362,20 +356,6 @@ class VkExecutor(FrameExecutor):
             self._recording = False
             self.pool.reset()  # drop the half-recorded commands
             raise
-
-    def _record_planned(self, cmd: Any, name: str) -> None:
-        """The plan's barriers before pass ``name``: built once per pass and resources
-        (history images swap each frame), then recorded again as they are."""
-        barriers = self._barriers[name]
-        if not barriers:
-            return
-        res = self.resources
-        key = (name, tuple(id(res.get(b.resource)) for b in barriers))
-        made = self._dependencies.get(key, False)
-        if made is False:
-            made = self._dependencies[key] = dependency(*plan_barriers(barriers, res))
-        if made is not None:
-            lib.vkCmdPipelineBarrier2(cmd, made[0])
 
     def _timestamp(self, cmd: Any, index: int) -> None:
         # TimestampPool.write without its checks: the executor numbers its own queries

@@ -144,12 +144,12 @@ def test_validation_sees_a_missing_planned_barrier(vk_device, monkeypatch):
     # map's bytes) the layer reports wrong layouts and hazards; the executor adds none itself
     import vkext.executor
 
-    real = vkext.executor.plan_barriers
+    real = vkext.executor.record_barriers
 
-    def without_tonemap(barriers, resources):
-        return real([b for b in barriers if b.pass_name != "tonemap"], resources)
+    def without_tonemap(cmd, barriers, resources):
+        return real(cmd, [b for b in barriers if b.pass_name != "tonemap"], resources)
 
-    monkeypatch.setattr(vkext.executor, "plan_barriers", without_tonemap)
+    monkeypatch.setattr(vkext.executor, "record_barriers", without_tonemap)
     try:
         render_vk(deferred("64x36"), scene=tiny_scene(), device=vk_device)
         texts = [m.text for m in vk_device.messages]

@@ -317,12 +317,13 @@ def test_validation_sees_a_missing_bridge_barrier(vk_device, device, monkeypatch
     # (the copies UNDEFINED -> TRANSFER_DST_OPTIMAL) the uploads find the wrong layout
     import vkext.executor
 
-    real = vkext.executor.plan_barriers
+    real = vkext.executor.record_barriers
 
-    def without_bridges(barriers, resources):
-        return real([b for b in barriers if not b.pass_name.startswith("bridge.")], resources)
+    def without_bridges(cmd, barriers, resources):
+        return real(cmd, [b for b in barriers if not b.pass_name.startswith("bridge.")],
+                    resources)
 
-    monkeypatch.setattr(vkext.executor, "plan_barriers", without_bridges)
+    monkeypatch.setattr(vkext.executor, "record_barriers", without_bridges)
     try:
         render(mixed("64x36", "shadow.resolution=256"), scene=tiny_scene(),
                devices=(vk_device, device))
