@@ -98,9 +98,11 @@ def resolve_scene(scene: str | None) -> str | None:
     directory); a missing file fails here, before any run."""
     if scene is None or scene == "default":
         return scene
-    from ..scene import is_builtin  # numpy and the loaders: only when a scene is named
+    from ..scene import is_builtin, stress_count  # numpy and the loaders: when one is named
 
     if is_builtin(scene) and not Path(scene).exists():  # stress, stress:COUNT
+        if scene != "courtyard":
+            stress_count(scene)  # a bad count fails here, before any run
         return scene
     p = Path(scene).expanduser()
     if not p.is_file():

@@ -40,15 +40,21 @@ def builtin_scene(name: str) -> Scene:
     """
     if name in ("default", "courtyard"):
         return courtyard(0)
+    return stress(stress_count(name))
+
+
+def stress_count(name: str) -> int:
+    """The instance count ``stress`` or ``stress:COUNT`` asks for, checked without building
+    the scene (so a bench refuses a bad count before any run)."""
     if name == "stress":
-        return stress(STRESS_INSTANCES)
+        return STRESS_INSTANCES
     if name.startswith("stress:"):
         text = name.split(":", 1)[1]
         if not text.isdigit() or not 1 <= int(text) <= MAX_INSTANCES:
             raise SceneError(f"the instance count must be an integer from 1 to "
                              f"{MAX_INSTANCES:,}, not {text!r}", file=name,
                              element="scene")
-        return stress(int(text))
+        return int(text)
     raise SceneError(f"no built-in scene is called {name!r} (built-in: "
                      f"{', '.join(BUILTIN_SCENES)})", file=name, element="scene",
                      suggest=(name, BUILTIN_SCENES[:3]))

@@ -852,6 +852,11 @@ def other_cases() -> list[Case]:
                area="scenes"),
         _other("bench-missing-config", ("bench", "nope.toml", *bench), "nope.toml",
                area="bench"),
+        # a built-in scene's bad count fails before any run (it once failed every run, exit 1)
+        _other("bench-stress-count", ("bench", FORWARD, *bench, "--scene", "stress:x"),
+               "stress:x", "instance count", area="bench"),
+        _other("run-stress-count", ("run", FORWARD, "--scene", "stress:0"), "stress:0",
+               "instance count", area="scene"),
         _other("bench-malformed-config", ("bench", "c.toml", *bench), "c.toml", "line 1",
                files={"c.toml": b"name = \n"}, area="bench"),
         _other("bench-frames-zero", ("bench", FORWARD, *bench, "--frames", "0"), "--frames",
