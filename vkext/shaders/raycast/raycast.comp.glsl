@@ -13,14 +13,11 @@ void main() {
     if (i >= pc.count) {
         return;
     }
-    vec3 origin = ray_vec3(0u, i);
-    vec3 direction = ray_vec3(3u, i);
-    int bad = invalid_ray(origin, direction);
-    if (bad != 0) {
-        store_invalid(i, bad);
+    vec3 origin, direction;
+    vec2 interval;
+    if (!load_ray(i, origin, direction, interval)) {
         return;
     }
-    vec2 interval = ray_interval(i);
     rayQueryEXT q;
     // opaque: a geometric query ignores alpha, so no candidate needs confirming
     rayQueryInitializeEXT(q, tlas, gl_RayFlagsOpaqueEXT, 0xFF, origin, interval.x, direction,

@@ -80,4 +80,18 @@ void store_hit(uint i, Hit h) {
 void store_invalid(uint i, int code) {
     store_hit(i, Hit(uintBitsToFloat(0x7fc00000u), code, -1, 0.0, 0.0));
 }
+
+// ray i's origin, direction and [t_min, t_max]; false (its hit marked invalid) when the
+// ray cannot be traced
+bool load_ray(uint i, out vec3 origin, out vec3 direction, out vec2 interval) {
+    origin = ray_vec3(0u, i);
+    direction = ray_vec3(3u, i);
+    int bad = invalid_ray(origin, direction);
+    if (bad != 0) {
+        store_invalid(i, bad);
+        return false;
+    }
+    interval = ray_interval(i);
+    return true;
+}
 #endif

@@ -12,14 +12,11 @@ layout(location = 0) rayPayloadEXT Hit payload;
 
 void main() {
     uint i = gl_LaunchIDEXT.x;  // the launch is exactly one batch wide
-    vec3 origin = ray_vec3(0u, i);
-    vec3 direction = ray_vec3(3u, i);
-    int bad = invalid_ray(origin, direction);
-    if (bad != 0) {
-        store_invalid(i, bad);
+    vec3 origin, direction;
+    vec2 interval;
+    if (!load_ray(i, origin, direction, interval)) {
         return;
     }
-    vec2 interval = ray_interval(i);
     // sbt record offset 0, stride 0: every geometry uses hit record (instance offset + 0)
     traceRayEXT(tlas, gl_RayFlagsOpaqueEXT, 0xFF, 0, 0, 0, origin, interval.x, direction,
                 interval.y, 0);
