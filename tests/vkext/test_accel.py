@@ -167,16 +167,13 @@ def _unordered_builds(events) -> list[tuple]:
             if not any(_orders_writes_before_reads(e) for e in events[a + 1:b])]
 
 
-def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch):
-    """In the recorded stream, a barrier from acceleration-structure writes to
-    acceleration-structure reads in the build stage lies between the last BLAS build and
-    the TLAS build; with several scratch batches, one also lies between batches. The
-    barriers come from the build plan, recorded by ``record_barriers`` as a frame's are."""
+def _record_builds(vk_device, monkeypatch) -> list:
+    """Events of the recorded stream, in order: ("barrier", src, dst) for each memory
+    barrier that goes through commands.barrier, ("build", type, count) for each build."""
     events = []
     real_barrier = commands_module.barrier
     real_build = vk_device.fn.vkCmdBuildAccelerationStructuresKHR
 
-    # the build plan's barriers go through record_barriers, as a frame's do
     def barrier(cmd, image_barriers=(), buffer_barriers=(), memory_barriers=()):
         events.extend(("barrier", s, d) for s, d in memory_barriers)
         return real_barrier(cmd, image_barriers, buffer_barriers, memory_barriers)
@@ -187,6 +184,16 @@ def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch)
 
     monkeypatch.setattr(commands_module, "barrier", barrier)
     monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
+    return events
+
+
+def test_tlas_build_waits_for_the_blas_builds(vk_device, courtyard, monkeypatch):
+    """In the recorded stream, a barrier from acceleration-structure writes to
+    acceleration-structure reads in the build stage lies between the last BLAS build and
+    the TLAS build; with several scratch batches, one also lies between batches. The
+    barriers come from the build plan, recorded by ``record_barriers`` as a frame's are."""
+    # the build plan's barriers go through record_barriers, as a frame's do
+    events = _record_builds(vk_device, monkeypatch)
     with SceneAccel(vk_device, courtyard, scratch_budget=1) as acc:  # one BLAS per batch
         assert acc.stats()["blas_batches"] == 36
         assert acc.build_plan.order == ("blas", "tlas", "readers")
@@ -207,20 +214,7 @@ def test_frames_build_the_tlas_behind_the_frame_plans_barriers(vk_device, monkey
     frame scratch (a write after write in the build stage, the scratch's alone)."""
     if "VK_KHR_ray_tracing_pipeline" not in vk_device.caps:
         pytest.skip("no VK_KHR_ray_tracing_pipeline")
-    events = []
-    real_barrier = commands_module.barrier
-    real_build = vk_device.fn.vkCmdBuildAccelerationStructuresKHR
-
-    def barrier(cmd, image_barriers=(), buffer_barriers=(), memory_barriers=()):
-        events.extend(("barrier", s, d) for s, d in memory_barriers)
-        return real_barrier(cmd, image_barriers, buffer_barriers, memory_barriers)
-
-    def build(cmd, count, infos, ranges):
-        events.append(("build", int(infos[0].type), count))
-        return real_build(cmd, count, infos, ranges)
-
-    monkeypatch.setattr(commands_module, "barrier", barrier)
-    monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
+    events = _record_builds(vk_device, monkeypatch)
     cfg = apply_overrides(load_config(RT_PRIMARY), ["size=32x18"])
     render(cfg, scene=_row_of_boxes(3), device=vk_device, backend="vk", frames=2)
 
