@@ -127,8 +127,6 @@ def _bridges(frame: Frame, passes: list[dict[str, Any]]) -> dict[str, Any]:
 def backend_for(cfg: Config) -> str:
     """The backend a run takes when none is asked for: the one every enabled pass is pinned
     to (in the config or by its class), else wgpu (pinned passes then mix in)."""
-    from .config import pass_class
-
     pins = {e.backend or pass_class(cfg, e).backend for e in cfg.passes if e.enabled}
     return pins.pop() if len(pins) == 1 and None not in pins else "wgpu"
 
