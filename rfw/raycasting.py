@@ -70,6 +70,15 @@ def _intervals(t_min: Any, t_max: Any, n: int, names: tuple[str, str],
     return lo, hi
 
 
+def _rays(origins: Any, directions: Any, t_min: Any, t_max: Any, names: tuple[str, str],
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | float]:
+    o = _floats("origins", origins, 3)
+    d = _floats("directions", directions, 3)
+    if len(o) != len(d):
+        raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
+    return (o, d, *_intervals(t_min, t_max, len(o), names))
+
+
 def _mesh_scene(vertices: Any, indices: Any) -> Scene:
     v = _floats("vertices", vertices, 3, finite=True)
     if len(v) == 0:
@@ -210,22 +219,20 @@ class RayScene:
             differ in number, non-finite origins or directions, zero directions, or a bad
             ``t_min``/``t_max``; the message names the argument.
         """
-        return self._cast(origins, directions, t_min, t_max, "RayScene.cast")
-
-    def _cast(self, origins: Any, directions: Any, t_min: Any, t_max: Any, element: str,
-              names: tuple[str, str] = ("t_min", "t_max")) -> dict[str, np.ndarray]:
+        element = "RayScene.cast"
         if self.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
         try:
-            o = _floats("origins", origins, 3)
-            d = _floats("directions", directions, 3)
-            if len(o) != len(d):
-                raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
-            lo, hi = _intervals(t_min, t_max, len(o), names)
-            keys = ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
-            return self._scene.cast(o, d, lo, hi, hits=keys)
+            rays = _rays(origins, directions, t_min, t_max, ("t_min", "t_max"))
+            return self._cast(*rays)
         except RfwError as e:
             raise e.about(element) from None
+
+    def _cast(self, o: np.ndarray, d: np.ndarray, lo: np.ndarray | float,
+              hi: np.ndarray | float) -> dict[str, np.ndarray]:
+        """Cast rays that :func:`_rays` has checked."""
+        keys = ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
+        return self._scene.cast(o, d, lo, hi, hits=keys)
 
     def close(self) -> None:
         """Free the acceleration structures and buffers now (safe to call twice); the
@@ -285,11 +292,7 @@ def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
         raise RfwError("origins and directions are required", element=element)
     try:
         # the cheap checks before the build
-        o = _floats("origins", origins, 3)
-        d = _floats("directions", directions, 3)
-        if len(o) != len(d):
-            raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
-        _intervals(tmin, tmax, len(o), ("tmin", "tmax"))
+        rays = _rays(origins, directions, tmin, tmax, ("tmin", "tmax"))
         if scene is None:
             rs = RayScene(vertices, indices, device=device, method=method, batch=batch)
         else:
@@ -297,4 +300,7 @@ def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
     except RfwError as e:
         raise RfwError(e.message, element=element) from None
     with rs:
-        return rs._cast(o, d, tmin, tmax, element, ("tmin", "tmax"))
+        try:
+            return rs._cast(*rays)
+        except RfwError as e:
+            raise e.about(element) from None
