@@ -9,10 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from rfw.config import apply_overrides, build, load_config
-from rfw.scene import default_scene
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
@@ -20,11 +18,6 @@ from vkext.scene import VkScene
 from ..conftest import tiny_scene
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 def _frames(vk_device, monkeypatch, config: str, sets: list[str], frames: int, *,

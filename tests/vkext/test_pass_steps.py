@@ -21,7 +21,6 @@ import pytest
 from passes.ssao.ssao import SSAOPass
 from rfw.config import apply_overrides, build, load_config
 from rfw.graph import Step, compile
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,11 +29,6 @@ SIZE = "96x54"
 
 # where barrier() may be called: the primitives, the executor's frame and poison fills
 ALLOWED = {"vkext/commands.py", "vkext/executor.py", "vkext/poison.py"}
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 def _config():
