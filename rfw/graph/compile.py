@@ -9,7 +9,6 @@ placement.py (6), barriers.py (7); plan.py holds what they pass along and return
 
 from __future__ import annotations
 
-import gc
 from collections import OrderedDict, defaultdict
 from collections.abc import Iterable
 from dataclasses import replace
@@ -18,7 +17,7 @@ from typing import Any
 from .barriers import plan_barriers, plan_step_barriers
 from .bridges import insert_bridges
 from .errors import GraphError
-from .graph import Graph
+from .graph import Graph, gc_paused
 from .placement import _memory_items, _raptor_reuse_bytes, assign_memory, lower_bound
 from .plan import (  # the result types are imported from here too
     IMPLIED_CAPS,
@@ -56,6 +55,8 @@ def _remember(cache: OrderedDict, key: tuple, value: Any) -> Any:
     return value
 
 
+# hashing a new graph for the cache makes many tuples too
+@gc_paused
 def compile(graph: Graph, size: tuple[int, int] | None = None,
             caps: Iterable[str] | None = None, *, strict: bool | None = None,
             cull_passes: bool = True, memory: MemoryOptions = MemoryOptions(),  # noqa: B008 (frozen)
@@ -67,16 +68,8 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     ``order_seed`` breaks ties in the pass order at random (seeded): another valid order,
     with the lifetimes, aliasing and barriers that follow from it (schedule fuzzing).
     """
-    # compile builds many small acyclic objects, and hashing a new graph for the cache makes
-    # many tuples: the cycle collector, sweeping the whole heap, would dominate its time
-    paused = gc.isenabled()
-    gc.disable()
-    try:
-        return _compile_cached(graph, size, caps, strict=strict, cull_passes=cull_passes,
-                               memory=memory, backend=backend, order_seed=order_seed)
-    finally:
-        if paused:
-            gc.enable()
+    return _compile_cached(graph, size, caps, strict=strict, cull_passes=cull_passes,
+                           memory=memory, backend=backend, order_seed=order_seed)
 
 
 def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[str] | None, *,

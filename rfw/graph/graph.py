@@ -5,7 +5,9 @@ TOML and Raptor JSON loaders produce the same ``Graph``; ``compile`` only ever s
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import functools
+import gc
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -13,6 +15,21 @@ from typing import Any
 from ..errors import IDENTIFIER, check_identifier
 from .errors import GraphError
 from .resources import PASS_TYPES, Binding, Slot, Step, Texture
+
+
+def gc_paused(fn: Callable) -> Callable:
+    """``fn`` with the cycle collector paused: loading and compiling build many small acyclic
+    objects, and a collection sweeping the whole heap would dominate their time."""
+    @functools.wraps(fn)
+    def paused(*args: Any, **kwargs: Any) -> Any:
+        was = gc.isenabled()
+        gc.disable()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            if was:
+                gc.enable()
+    return paused
 
 
 def _freeze(value: Any) -> Any:

@@ -6,8 +6,6 @@ Errors name the file, the pass and the slot (and the line where it can be found)
 
 from __future__ import annotations
 
-import functools
-import gc
 import json
 import math
 import re
@@ -20,25 +18,11 @@ import tomli_w
 
 from ..errors import check_identifier
 from .errors import GraphError, did_you_mean
-from .graph import Graph, GraphBuilder, PassBuilder, is_identifier
+from .graph import Graph, GraphBuilder, PassBuilder, gc_paused, is_identifier
 from .resources import BUFFER_USAGES, IMAGE_USAGES, LOAD_OPS, PASS_TYPES, SLOT_TYPES, SizeRule, Slot
 
 # the Raptor engine's samples run in a 1280x800 window: its relative sizes scale that
 RAPTOR_DEFAULT_SIZE = (1280, 800)
-
-
-def _gc_paused(fn: Callable) -> Callable:
-    # loading builds many small acyclic objects: the cycle collector took a third of the time
-    @functools.wraps(fn)
-    def paused(*args: Any, **kwargs: Any) -> Any:
-        was = gc.isenabled()
-        gc.disable()
-        try:
-            return fn(*args, **kwargs)
-        finally:
-            if was:
-                gc.enable()
-    return paused
 
 
 def load_graph(path: str | Path, *, strict: bool | None = None) -> Graph:
@@ -172,7 +156,7 @@ def load_toml(path: str | Path, *, strict: bool | None = None) -> Graph:
     return loads_toml(_read(path), source=str(path), strict=strict)
 
 
-@_gc_paused
+@gc_paused
 def loads_toml(text: str, *, source: str = "<toml>", strict: bool | None = None) -> Graph:
     try:
         # rtoml (compiled) parses a 10k-pass graph three times faster than tomllib
@@ -457,7 +441,7 @@ def load_raptor(path: str | Path, *, strict: bool | None = None) -> Graph:
     return loads_raptor(_read(path), source=str(path), strict=strict)
 
 
-@_gc_paused
+@gc_paused
 def loads_raptor(text: str, *, source: str = "<json>", strict: bool | None = None) -> Graph:
     """A Raptor frame graph. Lenient by default, as Raptor only warns about inputs that no
     pass produces; texture and buffer outputs without a description stay application-owned,
