@@ -123,7 +123,7 @@ def compile_glsl(path: str | Path, defines: dict[str, object] | None = None, *,
         return Spirv(path, stage, code, key, tuple(seen))
     with tempfile.TemporaryDirectory(prefix="rfw-glsl-") as tmp:
         out = Path(tmp) / "out.spv"
-        source = _with_include_extension(path, Path(tmp))
+        source = _with_include_extension(path, seen[path], Path(tmp))
         cmd = [exe, "-V", "--target-env", target, "-S", stage, "-o", str(out),
                *(f"-I{d}" for d in [path.parent, *dirs]),
                *(f"-D{k}={v}" for k, v in sorted((defines or {}).items())), str(source)]
@@ -151,8 +151,7 @@ def _cached(path: Path) -> bytes | None:
         warn(f"{path}: cannot read SPIR-V cache entry ({e.strerror or e}); recompiling")
         return None
     try:
-        check_module(code)
-        reflect(code)
+        reflect(code)  # checks the module whole (check_module) before reading it
     except ShaderCompileError as e:
         warn(f"{path}: corrupt SPIR-V cache entry ({e.message}); discarded and recompiled")
         path.unlink(missing_ok=True)
@@ -160,10 +159,10 @@ def _cached(path: Path) -> bytes | None:
     return code
 
 
-def _with_include_extension(path: Path, tmp: Path) -> Path:
+def _with_include_extension(path: Path, data: bytes, tmp: Path) -> Path:
     # glslang needs GL_GOOGLE_include_directive for #include; add it after #version so
-    # shader files stay plain, and keep line numbers with #line
-    data = path.read_bytes()
+    # shader files stay plain, and keep line numbers with #line (``data``: the bytes
+    # _sources read and hashed, so the compile sees what the cache key names)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
