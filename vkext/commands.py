@@ -375,6 +375,8 @@ TRANSFER_SRC = State("TRANSFER_SRC_OPTIMAL", frozenset({"COPY"}), frozenset({"TR
 HOST_READ = State(None, frozenset({"HOST"}), frozenset({"HOST_READ"}))
 COPY_WRITE = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_WRITE"}))
 COPY_READ = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
+# the default reader of uploaded bytes: every stage, any access
+ANY_ACCESS = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
 
 
 def copy_image_to_buffer(cmd: Any, image: Image, buffer: Buffer, *, mip: int = 0,
@@ -470,8 +472,7 @@ def record_upload(cmd: Any, staging: Buffer, *,
             r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, h, 1
         lib.vkCmdCopyBufferToImage(cmd, staging.handle, img.handle,
                                    image_layout(TRANSFER_DST.layout), len(regions), arr)
-    after = buffers_to or State(None, frozenset({"ALL_COMMANDS"}),
-                                frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
+    after = buffers_to or ANY_ACCESS
     # one memory barrier covers every buffer copied
     barrier(cmd, [ImageBarrier(img, TRANSFER_DST, images_to) for img, _ in images],
             memory_barriers=[(COPY_WRITE, after)] if buffers else ())
@@ -552,8 +553,7 @@ def upload_buffer(device: VkDevice, buffer: Buffer, array: Any,
     staging = staging_buffer(device, data.size, label=f"{buffer.label}:upload")
     try:
         staging.write(data)
-        after = dst if isinstance(dst, State) else \
-            State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
+        after = dst if isinstance(dst, State) else ANY_ACCESS
         with one_time(device, label=f"upload {buffer.label}") as cmd:
             vk.vkCmdCopyBuffer(cmd, staging.handle, buffer.handle, 1,
                                [vk.VkBufferCopy(srcOffset=0, dstOffset=offset, size=data.size)])
