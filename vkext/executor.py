@@ -304,6 +304,8 @@ class VkExecutor(FrameExecutor):
             for copy, name in self._history:
                 if copy in self.images and name in self.images:
                     self.images[copy], self.images[name] = self.images[name], self.images[copy]
+        # the resource map the frame's barriers use, made once per frame (after the swap)
+        self._frame_resources = self.resources
         self.descriptors.reset()
         self.ring.reset()
         self.pool.reset()
@@ -334,8 +336,8 @@ class VkExecutor(FrameExecutor):
             with label(dev, cmd, name):
                 barriers = self._barriers[name]
                 if self.poison is not None:  # fill what starts its lifetime here first
-                    barriers = self.poison.fill(cmd, name, barriers, self.resources)
-                record_barriers(cmd, barriers, self.resources)
+                    barriers = self.poison.fill(cmd, name, barriers, self._frame_resources)
+                record_barriers(cmd, barriers, self._frame_resources)
                 if p is None:
                     return
                 if ts is not None:
