@@ -168,9 +168,8 @@ class Frame:
                 out.append({"name": name, "gpu_ms": None, "cpu_ms": median(t.cpu_ms),
                             "backend": side, "bytes": t.bytes})
             else:
-                t = self.executors[side].timings[name]
-                out.append({"name": name, "gpu_ms": median(t.gpu_ms),
-                            "cpu_ms": median(t.cpu_ms), "backend": side})
+                entry = pass_timings([name], self.executors[side].timings)[0]
+                out.append({**entry, "backend": side})
         return out
 
     def destroy(self) -> None:
