@@ -84,11 +84,16 @@ def naming(element: str) -> Iterator[None]:
         raise
 
 
+def is_identifier(name: Any) -> bool:
+    """What ``check_identifier`` accepts, without making its message."""
+    return isinstance(name, str) and IDENTIFIER.fullmatch(name) is not None and ".." not in name
+
+
 def check_identifier(kind: str, name: Any, *, file: str | None = None,
                      element: str | None = None) -> str:
     """``name`` if it is an identifier (``[A-Za-z_][A-Za-z0-9_.-]*``), else an RfwError:
     names become file names, so ``../x``, ``/abs`` and control characters are refused."""
-    if not isinstance(name, str) or not IDENTIFIER.fullmatch(name) or ".." in name:
+    if not is_identifier(name):
         raise RfwError(f"{kind} name {name!r} is not an identifier (letters, digits, '_', "
                        f"'.', '-'; starting with a letter or '_')", file=file, element=element)
     return name

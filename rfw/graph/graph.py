@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
-from ..errors import IDENTIFIER, check_identifier
+from ..errors import check_identifier, is_identifier
 from .errors import GraphError
 from .resources import PASS_TYPES, Binding, Slot, Step, Texture
 
@@ -114,11 +114,6 @@ class Graph:
 
     def with_outputs(self, outputs: Iterable[str] | None) -> Graph:
         return replace(self, outputs=None if outputs is None else tuple(outputs))
-
-
-def is_identifier(name: Any) -> bool:
-    """What ``check_identifier`` accepts, without making its message."""
-    return name.__class__ is str and IDENTIFIER.fullmatch(name) is not None and ".." not in name
 
 
 class PassBuilder:
