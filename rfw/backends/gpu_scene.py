@@ -14,7 +14,7 @@ from ..scene.model import Camera, Scene, is_mirrored
 from ..units import align_up
 from .scene_data import (
     SCENE_GROUPS,
-    instance_bytes,
+    instance_blocks,
     lights_bytes,
     main_camera_bytes,
     material_bytes,
@@ -93,8 +93,9 @@ class GpuScene:
     def _instances(self) -> Any:
         # one buffer, one aligned block per instance: written once, bound once per draw list
         rows = np.zeros((max(1, len(self.scene.instances)), self.instance_stride), np.uint8)
-        for k, inst in enumerate(self.scene.instances):
-            rows[k, :INSTANCE_BYTES] = np.frombuffer(instance_bytes(inst.transform), np.uint8)
+        if self.scene.instances:
+            blocks = instance_blocks([i.transform for i in self.scene.instances])
+            rows[:len(blocks), :INSTANCE_BYTES] = blocks.view(np.uint8)
         return self._buffer(rows, wgpu.BufferUsage.UNIFORM, "scene.instances")
 
     def _upload_meshes(self) -> None:

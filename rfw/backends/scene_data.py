@@ -7,6 +7,7 @@ the GLSL twins declare the same offsets.
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 import numpy as np
 
@@ -74,10 +75,17 @@ def material_bytes(m: Material) -> bytes:
 def instance_bytes(model: np.ndarray) -> bytes:
     """The model matrix, then its inverse-transpose for normals (which keeps a mirrored
     instance's normals pointing out; ``Scene.drawable`` has dropped singular ones)."""
-    model = np.asarray(model, np.float64)
-    normal = np.linalg.inv(model).T
-    # WGSL and GLSL matrices are column-major
-    return model.T.astype(np.float32).tobytes() + normal.T.astype(np.float32).tobytes()
+    return instance_blocks([model]).tobytes()
+
+
+def instance_blocks(models: Any) -> np.ndarray:
+    """``instance_bytes`` of every model at once: one float32 row of 32 per instance (one
+    batched inverse instead of one per instance)."""
+    m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    # GLSL matrices are column-major: the model's columns, then those of inv(model).T,
+    # which are inv(model)'s rows
+    return np.concatenate([m.transpose(0, 2, 1).reshape(-1, 16),
+                           np.linalg.inv(m).reshape(-1, 16)], axis=1).astype(np.float32)
 
 
 def mirrored_arrays(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
