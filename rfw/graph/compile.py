@@ -68,13 +68,6 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     ``order_seed`` breaks ties in the pass order at random (seeded): another valid order,
     with the lifetimes, aliasing and barriers that follow from it (schedule fuzzing).
     """
-    return _compile_cached(graph, size, caps, strict=strict, cull_passes=cull_passes,
-                           memory=memory, backend=backend, order_seed=order_seed)
-
-
-def _compile_cached(graph: Graph, size: tuple[int, int] | None, caps: Iterable[str] | None, *,
-                    strict: bool | None, cull_passes: bool, memory: MemoryOptions,
-                    backend: str | None, order_seed: int | None) -> CompiledGraph:
     size_from = "graph" if size is None else "given"
     size = size or graph.size
     if size is None:
