@@ -31,12 +31,17 @@ _default_device: Any = None
 METHODS = ("auto", "ray_query", "ray_pipeline")
 
 
-def _floats(name: str, a: Any, width: int, *, finite: bool = False) -> np.ndarray:
+def _floats(name: str, a: Any, width: int, *, finite: bool = False,
+            convert: bool = True) -> np.ndarray:
+    """``a`` checked as a real (N, width) array; float32 C-contiguous with ``convert``, else
+    as it is (rays are converted as they are copied to the GPU: one pass, not two)."""
     arr = np.asarray(a)
     if arr.dtype.kind not in "fiu":  # floats, or integers that convert exactly enough
         raise RfwError(f"{name} must be a real-valued (float) array, got dtype {arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] != width:
         raise RfwError(f"{name} must have shape (N, {width}), got {arr.shape}")
+    if not convert:
+        return arr
     out = np.ascontiguousarray(arr, np.float32)
     if finite:
         bad = ~np.isfinite(out).all(axis=1)
@@ -72,8 +77,8 @@ def _intervals(t_min: Any, t_max: Any, n: int, names: tuple[str, str],
 
 def _rays(origins: Any, directions: Any, t_min: Any, t_max: Any, names: tuple[str, str],
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | float]:
-    o = _floats("origins", origins, 3)
-    d = _floats("directions", directions, 3)
+    o = _floats("origins", origins, 3, convert=False)
+    d = _floats("directions", directions, 3, convert=False)
     if len(o) != len(d):
         raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
     return (o, d, *_intervals(t_min, t_max, len(o), names))
@@ -193,16 +198,21 @@ class RayScene:
         return dict(self._scene.last) if not self.closed else {}
 
     def cast(self, origins: Any, directions: Any, *, t_min: Any = 0.0,
-             t_max: Any = np.inf) -> dict[str, np.ndarray]:
+             t_max: Any = np.inf, out: dict[str, np.ndarray] | None = None,
+             ) -> dict[str, np.ndarray]:
         """Closest hit of each ray ``origins[i] + t * directions[i]``, ``t_min <= t <= t_max``.
 
         Parameters
         ----------
         origins, directions
-            Float (R, 3) arrays (float32 C-contiguous ones are copied to the GPU as they
-            are). Directions need not be unit length: ``t`` is in their units.
+            Real (R, 3) arrays of any layout, converted to float32 as they are copied to
+            the GPU. Directions need not be unit length: ``t`` is in their units.
         t_min, t_max
             Numbers or (R,) arrays, non-negative; ``t_max`` may be infinite.
+        out
+            Arrays to fill instead of new ones, by name (any of the returned ones): each
+            C-contiguous, writable and of the dtype and shape below. Repeated casts into
+            the same arrays allocate nothing.
 
         Returns
         -------
@@ -216,23 +226,38 @@ class RayScene:
         ------
         RfwError
             (a ValueError) for a closed scene, arrays of the wrong shape or dtype, rows that
-            differ in number, non-finite origins or directions, zero directions, or a bad
-            ``t_min``/``t_max``; the message names the argument.
+            differ in number, non-finite origins or directions, zero directions, a bad
+            ``t_min``/``t_max`` or unfit ``out`` arrays; the message names the argument.
         """
         element = "RayScene.cast"
         if self.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
         try:
             rays = _rays(origins, directions, t_min, t_max, ("t_min", "t_max"))
-            return self._cast(*rays)
+            return self._cast(*rays, out=self._out(out))
         except RfwError as e:
             raise e.about(element) from None
 
+    def _keys(self) -> tuple[str, ...]:
+        return ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
+
+    def _out(self, out: Any) -> dict[str, np.ndarray] | None:
+        # the arrays themselves are checked by the backend, which knows the dtypes
+        if out is None:
+            return None
+        if not isinstance(out, dict):
+            raise RfwError(f"out must be a dict of arrays by name, got {type(out).__name__}")
+        unknown = sorted(set(out) - set(self._keys()), key=str)
+        if unknown:
+            raise RfwError(f"out has {unknown[0]!r}, which this scene does not return "
+                           f"(it returns {', '.join(self._keys())})")
+        return out
+
     def _cast(self, o: np.ndarray, d: np.ndarray, lo: np.ndarray | float,
-              hi: np.ndarray | float) -> dict[str, np.ndarray]:
+              hi: np.ndarray | float, *, out: dict[str, np.ndarray] | None = None,
+              ) -> dict[str, np.ndarray]:
         """Cast rays that :func:`_rays` has checked."""
-        keys = ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
-        return self._scene.cast(o, d, lo, hi, hits=keys)
+        return self._scene.cast(o, d, lo, hi, hits=self._keys(), out=out)
 
     def close(self) -> None:
         """Free the acceleration structures and buffers now (safe to call twice); the

@@ -81,6 +81,12 @@ RAY_WORDS, HIT_WORDS = 8, 5
 INVALID = {-2: ("origins", "non-finite values"), -3: ("directions", "non-finite values"),
            -4: ("directions", "zero-length rows")}
 
+# the parts of a cast's time in Raycaster.last: summed over its batches on the host, and on
+# the GPU between STAMPS timestamps per batch (before the copy in, the trace, the copy out)
+HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
+GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
+STAMPS = len(GPU_PARTS) + 1
+
 # rays and hits as records, for callers of Raycaster.trace
 RAY_DTYPE = np.dtype([("origin", "<f4", 3), ("tmin", "<f4"), ("direction", "<f4", 3),
                       ("tmax", "<f4")])
@@ -130,14 +136,15 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
 
 
 def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    """``dst[:] = src`` for every (dst, src) pair of equal-size 1-D arrays, the large ones in
-    :data:`COPY_THREADS` parts on a thread pool."""
+    """``dst[...] = src`` for every (dst, src) pair of arrays of one shape (any layout and
+    real dtype: a source is converted while it is copied), the large ones cut along their
+    first axis into :data:`COPY_THREADS` parts on a thread pool."""
     global _copy_pool
     parts = []
     for dst, src in jobs:
-        pieces = min(COPY_THREADS, dst.nbytes // COPY_SPLIT)
+        pieces = min(COPY_THREADS, dst.nbytes // COPY_SPLIT, len(dst))
         if pieces < 2:
-            dst[:] = src
+            _copy(dst, src)
             continue
         cuts = np.linspace(0, len(dst), pieces + 1).astype(int)
         parts += [(dst[a:b], src[a:b]) for a, b in itertools.pairwise(cuts)]
@@ -145,8 +152,42 @@ def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
         return
     if _copy_pool is None:
         _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
-    for done in [_copy_pool.submit(np.copyto, d, s_) for d, s_ in parts]:
+    for done in [_copy_pool.submit(_copy, d, s_) for d, s_ in parts]:
         done.result()
+
+
+def _copy(dst: np.ndarray, src: np.ndarray) -> None:
+    # unsafe: float64 and integer rays round to float32 as astype would
+    np.copyto(dst, src, casting="unsafe")
+
+
+def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,
+               ) -> dict[str, np.ndarray]:
+    """Arrays for ``n`` hits of the streams in ``names``: those in ``out`` (checked:
+    C-contiguous and writable, of the stream's dtype and shape), new ones for the rest."""
+    arrays = {}
+    for name, width in HIT_STREAMS:
+        if name not in names:
+            continue
+        shape = (n, width) if width > 1 else (n,)
+        dtype = np.dtype(np.float32 if name in ("t", "barycentrics") else np.int32)
+        given = (out or {}).get(name)
+        if given is None:
+            arrays[name] = np.empty(shape, dtype)
+            continue
+        if not (isinstance(given, np.ndarray) and given.dtype == dtype and given.shape == shape
+                and given.flags.c_contiguous and given.flags.writeable):
+            raise RfwError(f"out['{name}'] must be a writable C-contiguous {dtype} array of "
+                           f"shape {shape}, got {_describe(given)}")
+        arrays[name] = given
+    return arrays
+
+
+def _describe(a: Any) -> str:
+    if not isinstance(a, np.ndarray):
+        return type(a).__name__
+    layout = "" if a.flags.c_contiguous else " not C-contiguous"
+    return f"{a.dtype} {a.shape}{layout}{'' if a.flags.writeable else ' read-only'}"
 
 
 def check_rays(origins: np.ndarray, directions: np.ndarray) -> None:
@@ -217,10 +258,13 @@ class RayBuffers:
 
     def write_rays(self, slot: int, origins: np.ndarray, directions: np.ndarray, tmin: Any,
                    tmax: Any) -> int:
-        """Rays into upload buffer ``slot`` as raycast.glsl's streams; returns their bytes."""
+        """Rays into upload buffer ``slot`` as raycast.glsl's streams, each converted to
+        float32 while it is copied (one pass over the caller's arrays, whatever their
+        layout); returns their bytes."""
         k = len(origins)
         words = self.up[slot].map().view(np.float32)
-        jobs = [(words[:3 * k], origins.reshape(-1)), (words[3 * k:6 * k], directions.reshape(-1))]
+        jobs = [(words[:3 * k].reshape(k, 3), origins),
+                (words[3 * k:6 * k].reshape(k, 3), directions)]
         if np.ndim(tmin) or np.ndim(tmax):
             jobs += [(words[6 * k:7 * k], tmin), (words[7 * k:8 * k], tmax)]
         parallel_copy(jobs)
@@ -261,7 +305,9 @@ class Raycaster:
         self.pipeline: ComputePipeline | RayTracingPipeline | None = None
         self._tables: dict[int, ShaderBindingTable] = {}  # by hit-record count
         self.timer = self.commands = None
-        self._gpu_ns = 0  # the trace time of the cast under way
+        # the cast under way: host seconds and GPU nanoseconds of its parts
+        self._host: dict[str, float] = {}
+        self._gpu_ns: list[int] = []
         self.last: dict[str, Any] = {}
         self.plan: CompiledGraph = compiled(batch_graph(self.method))
         try:
@@ -276,7 +322,7 @@ class Raycaster:
                     [HitGroup(closest=SHADERS / "raycast.rchit.glsl")],
                     label=f"{label}:ray_pipeline")
             if "timestamp" in device.caps:
-                self.timer = TimestampPool(device, 2 * SLOTS, label=f"{label}:timestamps")
+                self.timer = TimestampPool(device, STAMPS * SLOTS, label=f"{label}:timestamps")
         except BaseException:
             self.destroy()
             raise
@@ -295,27 +341,30 @@ class Raycaster:
              directions: np.ndarray, tmin: Any = 0.0, tmax: Any = np.inf, *,
              batch: int = DEFAULT_BATCH, hits: tuple[str, ...] = ("t", "primitive",
                                                                    "instance", "barycentrics"),
-             ) -> dict[str, np.ndarray]:
-        """Closest hits of rays given as float32 C-contiguous (R, 3) ``origins`` and
-        ``directions`` with ``tmin``/``tmax`` numbers or (R,) float32 arrays, through
-        ``buffers`` (grown to the batch if needed). Returns the arrays named in ``hits``:
-        ``t`` (inf on a miss), ``primitive`` and ``instance`` (-1), ``barycentrics`` (R, 2).
+             out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """Closest hits of rays given as real (R, 3) ``origins`` and ``directions`` of any
+        layout (converted to float32 as they are copied to the GPU) with ``tmin``/``tmax``
+        numbers or (R,) float32 arrays, through ``buffers`` (grown to the batch if needed).
+        Returns the arrays named in ``hits``: ``t`` (inf on a miss), ``primitive`` and
+        ``instance`` (-1), ``barycentrics`` (R, 2); those in ``out`` (C-contiguous, of
+        :func:`hit_arrays`' dtypes and shapes) are filled and returned instead of new ones.
 
         A ray the shaders refuse (non-finite origin or direction, zero direction) raises
         :class:`RfwError` naming the argument and the first such row, after the cast.
-        ``last`` then holds the ray and batch counts and, with timestamps, the GPU time of
-        the traces alone (``gpu_ms``) and ``mrays_per_s``; ``wall_ms`` is the host's time
-        for everything (copies and waits included)."""
+        ``last`` then holds the ray and batch counts, ``wall_ms`` (the host's time for
+        everything, copies and waits included) and its parts summed over the batches
+        (``upload_ms``: rays into staging memory; ``submit_ms``: recording and submitting;
+        ``wait_ms``: waiting for the GPU; ``readback_ms``: hits out of staging memory). With
+        timestamps also the GPU's parts: ``gpu_upload_ms`` and ``gpu_readback_ms`` (the
+        copies), ``gpu_ms`` (the traces alone) and its ``mrays_per_s``."""
         if batch < 1:
             raise ValueError(f"batch must be positive, got {batch}")
         n = len(origins)
         want = dict(dict.fromkeys(hits), t=None, primitive=None)  # the check reads both
-        out = {name: np.empty((n, width) if width > 1 else n,
-                              np.float32 if name in ("t", "barycentrics") else np.int32)
-               for name, width in HIT_STREAMS if name in want}
+        arrays = hit_arrays(n, want, out)
         self.last = {"method": self.method, "rays": n, "batches": 0}
         if n == 0:
-            return {k: out[k] for k in hits}
+            return {k: arrays[k] for k in hits}
         per = min(batch, n, max(OVERLAP_MIN, -(-n // OVERLAP_PARTS)))
         wall = time.perf_counter()
         buffers.reserve(per)
@@ -323,30 +372,40 @@ class Raycaster:
         per_ray = not (np.ndim(tmin) == 0 and np.ndim(tmax) == 0)
         if per_ray:  # one of them an array: both are streams
             tmin, tmax = (np.broadcast_to(np.asarray(x, np.float32), (n,)) for x in (tmin, tmax))
-        self._gpu_ns = 0
+        self._host = dict.fromkeys(HOST_PARTS, 0.0)
+        self._gpu_ns = [0] * len(GPU_PARTS)
         flight: deque[tuple[int, int, int, Any]] = deque()  # (slot, start, rays, fence)
         try:
             for j, start in enumerate(range(0, n, per)):
                 slot = j % SLOTS
                 if len(flight) == SLOTS:  # the slot's last batch must be done and read
-                    self._finish(flight.popleft(), buffers, out)
+                    self._finish(flight.popleft(), buffers, arrays)
                 k = min(per, n - start)
                 part = slice(start, start + k)
                 lo, hi = (tmin[part], tmax[part]) if per_ray else (tmin, tmax)
+                t0 = time.perf_counter()
                 size = buffers.write_rays(slot, origins[part], directions[part], lo, hi)
+                t1 = time.perf_counter()
                 fence = self._submit(slot, k, size, buffers, sbt, per_ray, lo, hi)
+                self._host["upload_ms"] += t1 - t0
+                self._host["submit_ms"] += time.perf_counter() - t1
                 flight.append((slot, start, k, fence))
             while flight:
-                self._finish(flight.popleft(), buffers, out)
+                self._finish(flight.popleft(), buffers, arrays)
         finally:
             for *_, fence in flight:  # after an error: nothing may still run on the buffers
                 self._wait(fence)
-        self.last["wall_ms"] = (time.perf_counter() - wall) * 1e3
+        self._report(n, time.perf_counter() - wall)
+        _check_traced(arrays["t"], arrays["primitive"])
+        return {k: arrays[k] for k in hits}
+
+    def _report(self, n: int, wall_s: float) -> None:
+        """``last``'s times, in milliseconds."""
+        self.last["wall_ms"] = wall_s * 1e3
+        self.last.update({k: v * 1e3 for k, v in self._host.items()})
         if self.timer is not None:
-            self.last["gpu_ms"] = self._gpu_ns / 1e6
-            self.last["mrays_per_s"] = n / max(self._gpu_ns, 1) * 1e3
-        _check_traced(out["t"], out["primitive"])
-        return {k: out[k] for k in hits}
+            self.last.update({k: v / 1e6 for k, v in zip(GPU_PARTS, self._gpu_ns, strict=True)})
+            self.last["mrays_per_s"] = n / max(self._gpu_ns[1], 1) * 1e3
 
     def trace(self, accel: SceneAccel, rays: np.ndarray, *,
               batch: int = DEFAULT_BATCH) -> np.ndarray:
@@ -393,33 +452,45 @@ class Raycaster:
 
     def _finish(self, batch: tuple[int, int, int, Any], buffers: RayBuffers,
                 out: dict[str, np.ndarray]) -> None:
-        """Wait for a submitted batch, then read its hits and its trace time."""
+        """Wait for a submitted batch, then read its hits and its GPU times."""
         slot, start, k, fence = batch
+        t0 = time.perf_counter()
         self._wait(fence)
+        t1 = time.perf_counter()
         buffers.read_hits(slot, k, out, start)
+        self._host["wait_ms"] += t1 - t0
+        self._host["readback_ms"] += time.perf_counter() - t1
         if self.timer is not None:
-            t0, t1 = self.timer.results(2 * slot, 2)
-            self._gpu_ns += t1 - t0
+            stamps = self.timer.results(STAMPS * slot, STAMPS)
+            for i, (a, b) in enumerate(itertools.pairwise(stamps)):
+                self._gpu_ns[i] += b - a
         self.last["batches"] += 1
 
     def _record_batch(self, cmd: Any, plan: PlanRecorder, slot: int, k: int, size: int,
                       buffers: RayBuffers, sbt: ShaderBindingTable | None, per_ray: bool,
                       tmin: Any, tmax: Any) -> None:
-        # the work of each pass of batch_graph, behind the barriers its plan puts before it
+        # the work of each pass of batch_graph, behind the barriers its plan puts before it;
+        # timestamps between the passes time the copies and the trace apart
+        first = STAMPS * slot
+        if self.timer is not None:
+            vk.vkCmdResetQueryPool(cmd, self.timer.handle, first, STAMPS)
         plan.enter(cmd, "rays")
+        self._stamp(cmd, first)
         copy = ffi.new("VkBufferCopy*")
         copy.size = size
         lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
         plan.enter(cmd, "trace")
-        if self.timer is not None:
-            vk.vkCmdResetQueryPool(cmd, self.timer.handle, 2 * slot, 2)
-            self.timer.write(cmd, "ALL_COMMANDS", 2 * slot)
+        self._stamp(cmd, first + 1)
         self._record(cmd, buffers.bindings, sbt, k, per_ray,
                      0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
-        if self.timer is not None:
-            self.timer.write(cmd, "ALL_COMMANDS", 2 * slot + 1)
+        self._stamp(cmd, first + 2)
         plan.enter(cmd, "hits")
         copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
+        self._stamp(cmd, first + 3)
+
+    def _stamp(self, cmd: Any, query: int) -> None:
+        if self.timer is not None:
+            self.timer.write(cmd, "ALL_COMMANDS", query)
 
     def _record(self, cmd: Any, bindings: BindingSet, sbt: ShaderBindingTable | None,
                 count: int, per_ray: bool, tmin: float, tmax: float) -> None:
@@ -496,17 +567,19 @@ class RayScene:
     def cast(self, origins: np.ndarray, directions: np.ndarray, tmin: Any = 0.0,
              tmax: Any = np.inf, *, hits: tuple[str, ...] = ("t", "primitive", "instance",
                                                              "barycentrics"),
-             ) -> dict[str, np.ndarray]:
+             out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
         """:meth:`Raycaster.cast` against this scene (see there for the arguments)."""
         if self.accel is None:  # nothing to hit: no GPU work, so the host checks the rays
+            origins, directions = (np.asarray(a, np.float32) for a in (origins, directions))
             check_rays(origins, directions)
-            n = len(origins)
-            miss = {"t": np.full(n, np.inf, np.float32), "primitive": np.full(n, -1, np.int32),
-                    "instance": np.full(n, -1, np.int32),
-                    "barycentrics": np.zeros((n, 2), np.float32)}
-            return {k: miss[k] for k in hits}
+            arrays = hit_arrays(len(origins), hits, out)
+            for name, value in (("t", np.inf), ("primitive", -1), ("instance", -1),
+                                ("barycentrics", 0.0)):
+                if name in arrays:
+                    arrays[name][...] = value
+            return {k: arrays[k] for k in hits}
         return self.caster.cast(self.accel, self.buffers, origins, directions, tmin, tmax,
-                                batch=self.batch, hits=hits)
+                                batch=self.batch, hits=hits, out=out)
 
     @property
     def last(self) -> dict[str, Any]:
