@@ -361,44 +361,79 @@ def embree_one_thread(v, f, o, d, repeats):
     return statistics.median(times)
 
 
+# where a cast's wall time goes (Raycaster.last, summed over its batches): the host's parts,
+# then the GPU's (timestamps); "other" is the wall time outside them (checks, result arrays)
+HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
+GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
+PLACEMENTS = ("staged", "mapped")
+
+
+def _casts(rs, o, d, repeats, out=None):
+    """Median wall seconds and median parts (ms) of ``repeats`` casts after a warm-up."""
+    rs.cast(o, d, out=out)  # warm-up: the buffers grow to the batch once
+    walls, parts, hits = [], [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        hits = rs.cast(o, d, out=out)
+        walls.append(time.perf_counter() - t0)
+        parts.append(rs.last)
+    wall = statistics.median(walls)
+    med = {k: statistics.median(p[k] for p in parts) for k in HOST_PARTS + GPU_PARTS
+           if all(k in p for p in parts)}
+    med["other_ms"] = wall * 1e3 - sum(med.get(k, 0.0) for k in HOST_PARTS)
+    return wall, med, hits, parts[-1]["batches"]
+
+
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
-    """Per method: RayScene build, then casts (wall: what the caller waits for; GPU: the
-    trace alone), and the one-shot rfw.raycast's wall; hit-or-miss agreement with Embree's
-    ``ref_t``."""
+    """Per method and ray placement (staged through copies, or mapped: the trace reads and
+    writes host-visible memory; RFW_RAYCAST_MAPPED picks it): RayScene build, then casts
+    (wall: what the caller waits for, and its parts; GPU: the trace alone), casts into
+    reused ``out=`` arrays, and the one-shot rfw.raycast's wall; hit-or-miss agreement with
+    Embree's ``ref_t``. Every placement's hits must equal the first one's bit for bit."""
     import rfw
     from rfw.errors import RfwError
 
-    rows = []
-    for method in METHODS:
+    rows, first = [], None
+    for method, placement in itertools.product(METHODS, PLACEMENTS):
         t0 = time.perf_counter()
+        saved = os.environ.get("RFW_RAYCAST_MAPPED")
+        os.environ["RFW_RAYCAST_MAPPED"] = "1" if placement == "mapped" else "0"
         try:
             rs = rfw.RayScene.from_scene(scene, device=device, method=method)
         except RfwError as e:  # the device lacks the method: say so
             notes.add(f"RayScene {method}: skipped on {device.name} ({e})")
             continue
+        finally:
+            if saved is None:
+                del os.environ["RFW_RAYCAST_MAPPED"]
+            else:
+                os.environ["RFW_RAYCAST_MAPPED"] = saved
         build = time.perf_counter() - t0
         with rs:
-            rs.cast(o, d)  # warm-up: the buffers grow to the batch once
-            walls, gpus = [], []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                hits = rs.cast(o, d)
-                walls.append(time.perf_counter() - t0)
-                gpus.append(rs.last.get("gpu_ms"))
-            batches = rs.last["batches"]
-        t0 = time.perf_counter()
-        rfw.raycast(origins=o, directions=d, scene=scene, device=device, method=method)
-        one_shot = time.perf_counter() - t0
-        gpu = statistics.median(gpus) / 1e3 if None not in gpus else None
+            wall, parts, hits, batches = _casts(rs, o, d, repeats)
+            out = {k: np.empty_like(v) for k, v in hits.items()}
+            wall_out, parts_out, hits_out, _ = _casts(rs, o, d, repeats, out=out)
+        first = first or hits
+        for got in (hits, hits_out):
+            if any(not np.array_equal(got[k], first[k]) for k in first):
+                notes.add(f"RayScene {method} {placement}: hits differ from the first caster's")
+        one_shot = None
+        if placement == "staged":
+            t0 = time.perf_counter()
+            rfw.raycast(origins=o, directions=d, scene=scene, device=device, method=method)
+            one_shot = time.perf_counter() - t0
         agree = float((np.isfinite(hits["t"]) == np.isfinite(ref_t)).mean())
-        rows.append({"method": method, "rays": len(o), "build_s": build, "batches": batches,
-                     "wall_s": statistics.median(walls), "gpu_s": gpu,
+        rows.append({"method": method, "placement": placement, "rays": len(o),
+                     "build_s": build, "batches": batches, "wall_s": wall,
+                     "wall_out_s": wall_out, "parts_ms": parts, "parts_out_ms": parts_out,
+                     "gpu_s": parts["gpu_ms"] / 1e3 if "gpu_ms" in parts else None,
                      "one_shot_s": one_shot, "agreement": agree})
     return rows
 
 
 def cast_lines(rows, embree, n):
-    """The report's table: rays/s and the ratio to Embree on all cores."""
+    """The report's tables: rays/s and the ratio to Embree on all cores, then where the
+    wall time of each cast goes."""
     all_s, workers, one_s = embree["all_cores_s"], embree["workers"], embree["one_thread_s"]
     lines = [f"Persistent ray scene, {n:,} primary rays (ratio: Embree on all {workers} cores "
              "/ this, >1 is faster than Embree):", "",
@@ -410,16 +445,39 @@ def cast_lines(rows, embree, n):
                      f"{agree} |")
 
     for r in rows:
-        row(f"RayScene.cast {r['method']} (wall: upload + trace + readback)", r["wall_s"],
-            f"{r['agreement']:.5f}")
+        name = f"RayScene.cast {r['method']} {r['placement']}"
+        row(f"{name} (wall: upload + trace + readback)", r["wall_s"], f"{r['agreement']:.5f}")
+        row(f"{name} (wall, into reused out= arrays)", r["wall_out_s"])
         if r["gpu_s"]:
-            row(f"RayScene.cast {r['method']} (trace only, GPU timestamps)", r["gpu_s"])
-        row(f"rfw.raycast {r['method']} (one shot: builds every call)", r["one_shot_s"])
+            row(f"{name} (trace only, GPU timestamps)", r["gpu_s"])
+        if r["one_shot_s"]:
+            row(f"rfw.raycast {r['method']} (one shot: builds every call)", r["one_shot_s"])
     row(f"Embree, {workers} processes (embreex)", all_s)
     row("Embree, 1 thread (embreex)", one_s)
-    builds = ", ".join(f"{r['method']} {r['build_s'] * 1e3:.0f} ms" for r in rows)
+    builds = ", ".join(f"{r['method']} {r['placement']} {r['build_s'] * 1e3:.0f} ms"
+                       for r in rows)
     lines += ["", f"RayScene builds (once per scene, not in the casts): {builds}.", ""]
-    return lines
+    return lines + breakdown_lines(rows)
+
+
+def breakdown_lines(rows):
+    """Where each cast's wall time goes (ms, medians): host parts summed over the batches
+    (they overlap the GPU's), the rest of the wall time, and the GPU's parts."""
+    if not rows:
+        return []
+    lines = ["Where the wall time of a cast goes (ms, medians; host parts summed over the "
+             "batches, which overlap the GPU's work; other = checks and result arrays):", "",
+             "| caster | batches | wall | host: upload | submit | wait | readback | other "
+             "| GPU: copy in | trace | copy out |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        for label, wall, parts in (("", r["wall_s"], r["parts_ms"]),
+                                   (", out=", r["wall_out_s"], r["parts_out_ms"])):
+            cells = [fmt(parts.get(k)) for k in (*HOST_PARTS, "other_ms", *GPU_PARTS)]
+            lines.append(f"| {r['method']} {r['placement']}{label} | {r['batches']} | "
+                         f"{wall * 1e3:.2f} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
 
 # ---------------------------------------------------------------------------------------------
 # the report

@@ -47,15 +47,26 @@ import numpy as np
 from rfw.errors import RfwError
 from rfw.graph import Buffer as BufferSlot
 from rfw.graph import CompiledGraph, Graph, GraphBuilder
+from rfw.graph.sync import State
 from rfw.scene.model import Scene
 
 from .accel import SceneAccel
 from .accel.plan import PlanRecorder, compiled
+from .allocation import (
+    DEVICE_LOCAL,
+    HOST_CACHED,
+    HOST_COHERENT,
+    HOST_VISIBLE,
+    DeviceMemory,
+    flags_of,
+)
 from .buffers import Buffer, staging_buffer
 from .commands import (
     FENCE_TIMEOUT_NS,
+    HOST_READ,
     CommandPool,
     TimestampPool,
+    barrier,
     begin_label,
     copy_to_host,
     end_label,
@@ -86,6 +97,9 @@ INVALID = {-2: ("origins", "non-finite values"), -3: ("directions", "non-finite 
 HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
 GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
 STAMPS = len(GPU_PARTS) + 1
+
+# what a mapped batch's trace waits for: the writes of every earlier command on the queue
+EARLIER_WRITES = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
 
 # rays and hits as records, for callers of Raycaster.trace
 RAY_DTYPE = np.dtype([("origin", "<f4", 3), ("tmin", "<f4"), ("direction", "<f4", 3),
@@ -161,6 +175,36 @@ def _copy(dst: np.ndarray, src: np.ndarray) -> None:
     np.copyto(dst, src, casting="unsafe")
 
 
+def mapped_type_bits(device: VkDevice, *, readback: bool) -> int:
+    """The memory types (as bits) that suit a mapped stream: host-visible and coherent and
+    device-local, and for one the host reads (``readback``) also host-cached (uncached
+    reads are slow); for reads without such memory, any host-cached type."""
+    need = [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT] + [HOST_CACHED] * readback
+    bits = _type_bits(device, need)
+    return bits or (_type_bits(device, [HOST_VISIBLE, HOST_COHERENT, HOST_CACHED])
+                    if readback else 0)
+
+
+def _type_bits(device: VkDevice, names: list[str]) -> int:
+    need = flags_of(names)
+    return sum(1 << i for i, (props, _) in enumerate(device.memory_types)
+               if props & need == need)
+
+
+def mapped_streams(device: VkDevice) -> bool:
+    """Whether casts on ``device`` map rays and hits (:class:`RayBuffers`) rather than
+    stage them: ``RFW_RAYCAST_MAPPED=1`` or ``0`` says so; unset (or ``auto``), where
+    memory is device-local, host-visible and host-cached at once (unified memory: no copy
+    is worth making). A discrete GPU stages, its host copies overlapping the traces."""
+    value = os.environ.get("RFW_RAYCAST_MAPPED", "auto")
+    if value not in ("0", "1", "auto"):
+        raise RfwError(f"RFW_RAYCAST_MAPPED is 0, 1 or auto, not {value!r}",
+                       element="vkext.raycast")
+    if value != "auto":
+        return value == "1"
+    return bool(_type_bits(device, [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT, HOST_CACHED]))
+
+
 def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,
                ) -> dict[str, np.ndarray]:
     """Arrays for ``n`` hits of the streams in ``names``: those in ``out`` (checked:
@@ -211,46 +255,85 @@ def _check_traced(t: np.ndarray, primitive: np.ndarray) -> None:
 
 
 class RayBuffers:
-    """The rays and hits of one batch: device-local buffers ``<label>.rays`` and
-    ``<label>.hits``, :data:`SLOTS` pairs of staging buffers (one per batch in flight) and
-    the descriptor set binding the device buffers with a TLAS.
+    """The rays and hits of one batch, placed one of two ways (``mapped``, see
+    :func:`mapped_streams`):
 
+    - staged: device-local buffers ``<label>.rays`` and ``<label>.hits`` that the trace
+      reads and writes, and :data:`SLOTS` pairs of staging buffers (one per batch in flight)
+      the host fills and reads, copied on the GPU;
+    - mapped: :data:`SLOTS` pairs of host-visible buffers that the trace itself reads and
+      writes (no copies): on unified memory (lavapipe, integrated GPUs) the host then works
+      at memory speed.
+
+    ``up[slot]`` and ``down[slot]`` are what the host writes and reads either way, and
+    ``sets[slot]`` the descriptor set binding the slot's buffers with a TLAS.
     :meth:`reserve` grows them for a larger batch (``allocations`` counts the times buffers
     were made) and never shrinks them."""
 
-    def __init__(self, caster: Raycaster, tlas: Any, *, label: str = "raycast"):
+    def __init__(self, caster: Raycaster, tlas: Any, *, label: str = "raycast",
+                 mapped: bool | None = None):
         self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
+        self.mapped = mapped_streams(self.device) if mapped is None else bool(mapped)
         self.capacity = self.allocations = 0
         self._made: list[Any] = []
-        self.rays = self.hits = self.bindings = None
+        self.rays = self.hits = None
         self.up: list[Buffer] = []
         self.down: list[Buffer] = []
+        self.sets: list[BindingSet] = []
 
     def reserve(self, rays: int) -> None:
         if rays <= self.capacity:
             return
         self._free()
-        dev, label = self.device, self.label
         try:
-            self.rays = self._keep(Buffer(dev, rays * RAY_WORDS * 4, ("storage", "transfer_dst"),
-                                          label=f"{label}.rays"))
-            self.rays.allocate()
-            self.hits = self._keep(Buffer(dev, rays * HIT_WORDS * 4, ("storage", "transfer_src"),
-                                          label=f"{label}.hits"))
-            self.hits.allocate()
-            for slot in range(SLOTS):
-                self.up.append(self._keep(staging_buffer(
-                    dev, self.rays.bytes, label=f"{label}:rays upload {slot}")))
-                self.down.append(self._keep(staging_buffer(
-                    dev, self.hits.bytes, readback=True, label=f"{label}:hits readback {slot}")))
-            self.bindings = self._keep(BindingSet(self.caster.pipeline.layout,
-                                                  label=f"{label}:descriptors"))
-            self.bindings.write(tlas=self.tlas, rays=self.rays, hits=self.hits)
+            if self.mapped:
+                self._make_mapped(rays)
+            else:
+                self._make_staged(rays)
         except BaseException:
             self._free()
             raise
         self.capacity = rays
         self.allocations += 1
+
+    def _make_staged(self, rays: int) -> None:
+        dev, label = self.device, self.label
+        self.rays = self._keep(Buffer(dev, rays * RAY_WORDS * 4, ("storage", "transfer_dst"),
+                                      label=f"{label}.rays"))
+        self.rays.allocate()
+        self.hits = self._keep(Buffer(dev, rays * HIT_WORDS * 4, ("storage", "transfer_src"),
+                                      label=f"{label}.hits"))
+        self.hits.allocate()
+        for slot in range(SLOTS):
+            self.up.append(self._keep(staging_buffer(
+                dev, self.rays.bytes, label=f"{label}:rays upload {slot}")))
+            self.down.append(self._keep(staging_buffer(
+                dev, self.hits.bytes, readback=True, label=f"{label}:hits readback {slot}")))
+        self.sets = [self._binding_set(self.rays, self.hits, "")] * SLOTS
+
+    def _make_mapped(self, rays: int) -> None:
+        for slot in range(SLOTS):
+            up = self._mapped(rays * RAY_WORDS * 4, readback=False, name=f"rays {slot}")
+            down = self._mapped(rays * HIT_WORDS * 4, readback=True, name=f"hits {slot}")
+            self.up.append(up)
+            self.down.append(down)
+            self.sets.append(self._binding_set(up, down, f" {slot}"))
+
+    def _mapped(self, size: int, *, readback: bool, name: str) -> Buffer:
+        """A storage buffer in host-visible memory, device-local where it can be."""
+        buf = self._keep(Buffer(self.device, size, ("storage",), label=f"{self.label}.{name}"))
+        bits = buf.type_bits & mapped_type_bits(self.device, readback=readback)
+        mem = self._keep(DeviceMemory(self.device, buf.size, bits or buf.type_bits,
+                                      host_visible=True, readback=readback,
+                                      label=f"{self.label}:{name} memory"))
+        buf.bind(mem, 0)
+        return buf
+
+    def _binding_set(self, rays: Buffer, hits: Buffer, suffix: str) -> BindingSet:
+        bindings = self._keep(BindingSet(self.caster.pipeline.layout,
+                                         label=f"{self.label}:descriptors{suffix}"))
+        bindings.write(tlas=self.tlas, rays=rays, hits=hits)
+        return bindings
 
     def _keep(self, obj: Any) -> Any:
         self._made.append(obj)
@@ -286,8 +369,8 @@ class RayBuffers:
         for obj in reversed(self._made):
             obj.destroy()
         self._made.clear()
-        self.rays = self.hits = self.bindings = None
-        self.up, self.down = [], []
+        self.rays = self.hits = None
+        self.up, self.down, self.sets = [], [], []
         self.capacity = 0
 
     def destroy(self) -> None:
@@ -305,9 +388,7 @@ class Raycaster:
         self.pipeline: ComputePipeline | RayTracingPipeline | None = None
         self._tables: dict[int, ShaderBindingTable] = {}  # by hit-record count
         self.timer = self.commands = None
-        # the cast under way: host seconds and GPU nanoseconds of its parts
-        self._host: dict[str, float] = {}
-        self._gpu_ns: list[int] = []
+        self._host: dict[str, float] = {}  # the cast under way: host seconds of its parts
         self.last: dict[str, Any] = {}
         self.plan: CompiledGraph = compiled(batch_graph(self.method))
         try:
@@ -373,7 +454,8 @@ class Raycaster:
         if per_ray:  # one of them an array: both are streams
             tmin, tmax = (np.broadcast_to(np.asarray(x, np.float32), (n,)) for x in (tmin, tmax))
         self._host = dict.fromkeys(HOST_PARTS, 0.0)
-        self._gpu_ns = [0] * len(GPU_PARTS)
+        batches = -(-n // per)
+        self._timestamps(batches)
         flight: deque[tuple[int, int, int, Any]] = deque()  # (slot, start, rays, fence)
         try:
             for j, start in enumerate(range(0, n, per)):
@@ -386,7 +468,8 @@ class Raycaster:
                 t0 = time.perf_counter()
                 size = buffers.write_rays(slot, origins[part], directions[part], lo, hi)
                 t1 = time.perf_counter()
-                fence = self._submit(slot, k, size, buffers, sbt, per_ray, lo, hi)
+                fence = self._submit(slot, STAMPS * j, k, size, buffers, sbt, per_ray, lo,
+                                     hi)
                 self._host["upload_ms"] += t1 - t0
                 self._host["submit_ms"] += time.perf_counter() - t1
                 flight.append((slot, start, k, fence))
@@ -395,17 +478,30 @@ class Raycaster:
         finally:
             for *_, fence in flight:  # after an error: nothing may still run on the buffers
                 self._wait(fence)
-        self._report(n, time.perf_counter() - wall)
+        self._report(n, batches, time.perf_counter() - wall)
         _check_traced(arrays["t"], arrays["primitive"])
         return {k: arrays[k] for k in hits}
 
-    def _report(self, n: int, wall_s: float) -> None:
+    def _timestamps(self, batches: int) -> None:
+        # every batch of a cast has its own queries, read once after the last fence: a
+        # query read with WAIT while later batches run may wait for them too (lavapipe does)
+        if self.timer is None or self.timer.count >= STAMPS * batches:
+            return
+        self.timer.destroy()
+        self.timer = None
+        self.timer = TimestampPool(self.device, STAMPS * batches,
+                                   label=f"{self.label}:timestamps")
+
+    def _report(self, n: int, batches: int, wall_s: float) -> None:
         """``last``'s times, in milliseconds."""
         self.last["wall_ms"] = wall_s * 1e3
         self.last.update({k: v * 1e3 for k, v in self._host.items()})
-        if self.timer is not None:
-            self.last.update({k: v / 1e6 for k, v in zip(GPU_PARTS, self._gpu_ns, strict=True)})
-            self.last["mrays_per_s"] = n / max(self._gpu_ns[1], 1) * 1e3
+        if self.timer is None:
+            return
+        stamps = np.array(self.timer.results(0, STAMPS * batches), np.int64)
+        gpu_ns = np.diff(stamps.reshape(batches, STAMPS), axis=1).sum(axis=0)
+        self.last.update({k: int(v) / 1e6 for k, v in zip(GPU_PARTS, gpu_ns, strict=True)})
+        self.last["mrays_per_s"] = n / max(int(gpu_ns[1]), 1) * 1e3
 
     def trace(self, accel: SceneAccel, rays: np.ndarray, *,
               batch: int = DEFAULT_BATCH) -> np.ndarray:
@@ -429,16 +525,17 @@ class Raycaster:
         out["u"], out["v"] = got["barycentrics"][:, 0], got["barycentrics"][:, 1]
         return out
 
-    def _submit(self, slot: int, k: int, size: int, buffers: RayBuffers,
+    def _submit(self, slot: int, query: int, k: int, size: int, buffers: RayBuffers,
                 sbt: ShaderBindingTable | None, per_ray: bool, tmin: Any, tmax: Any) -> Any:
-        """Record slot ``slot``'s command buffer for a batch of ``k`` rays, submit it and
-        return its fence (the caller waits in :meth:`_finish`)."""
+        """Record slot ``slot``'s command buffer for a batch of ``k`` rays (its timestamps
+        from ``query`` on), submit it and return its fence (the caller waits in
+        :meth:`_finish`)."""
         cmd = self.cmds[slot]
         vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
             flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
         begin_label(self.device, cmd, f"{self.label}: {k} rays")
-        self._record_batch(cmd, PlanRecorder(self.plan), slot, k, size, buffers, sbt, per_ray,
-                           tmin, tmax)
+        self._record_batch(cmd, PlanRecorder(self.plan), slot, query, k, size, buffers, sbt,
+                           per_ray, tmin, tmax)
         end_label(self.device, cmd)
         vk.vkEndCommandBuffer(cmd)
         return submit(self.device, [cmd], wait=False)
@@ -452,7 +549,7 @@ class Raycaster:
 
     def _finish(self, batch: tuple[int, int, int, Any], buffers: RayBuffers,
                 out: dict[str, np.ndarray]) -> None:
-        """Wait for a submitted batch, then read its hits and its GPU times."""
+        """Wait for a submitted batch, then read its hits."""
         slot, start, k, fence = batch
         t0 = time.perf_counter()
         self._wait(fence)
@@ -460,33 +557,41 @@ class Raycaster:
         buffers.read_hits(slot, k, out, start)
         self._host["wait_ms"] += t1 - t0
         self._host["readback_ms"] += time.perf_counter() - t1
-        if self.timer is not None:
-            stamps = self.timer.results(STAMPS * slot, STAMPS)
-            for i, (a, b) in enumerate(itertools.pairwise(stamps)):
-                self._gpu_ns[i] += b - a
         self.last["batches"] += 1
 
-    def _record_batch(self, cmd: Any, plan: PlanRecorder, slot: int, k: int, size: int,
-                      buffers: RayBuffers, sbt: ShaderBindingTable | None, per_ray: bool,
-                      tmin: Any, tmax: Any) -> None:
+    def _record_batch(self, cmd: Any, plan: PlanRecorder, slot: int, first: int, k: int,
+                      size: int, buffers: RayBuffers, sbt: ShaderBindingTable | None,
+                      per_ray: bool, tmin: Any, tmax: Any) -> None:
         # the work of each pass of batch_graph, behind the barriers its plan puts before it;
         # timestamps between the passes time the copies and the trace apart
-        first = STAMPS * slot
         if self.timer is not None:
             vk.vkCmdResetQueryPool(cmd, self.timer.handle, first, STAMPS)
-        plan.enter(cmd, "rays")
+        mapped = buffers.mapped
+        if mapped:  # no copies: the last batch's accesses, then the trace (stamps 0, 1 meet)
+            barrier(cmd, memory_barriers=[(EARLIER_WRITES, self._trace_state())])
+        else:
+            plan.enter(cmd, "rays")
         self._stamp(cmd, first)
-        copy = ffi.new("VkBufferCopy*")
-        copy.size = size
-        lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
-        plan.enter(cmd, "trace")
+        if not mapped:
+            copy = ffi.new("VkBufferCopy*")
+            copy.size = size
+            lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
+            plan.enter(cmd, "trace")
         self._stamp(cmd, first + 1)
-        self._record(cmd, buffers.bindings, sbt, k, per_ray,
+        self._record(cmd, buffers.sets[slot], sbt, k, per_ray,
                      0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
         self._stamp(cmd, first + 2)
-        plan.enter(cmd, "hits")
-        copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
+        if mapped:  # the hits, written where the host reads them
+            barrier(cmd, memory_barriers=[(self._trace_state(), HOST_READ)])
+        else:
+            plan.enter(cmd, "hits")
+            copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
         self._stamp(cmd, first + 3)
+
+    def _trace_state(self) -> State:
+        stage = "COMPUTE_SHADER" if self.method == "ray_query" else "RAY_TRACING_SHADER_KHR"
+        return State(None, frozenset({stage}),
+                     frozenset({"SHADER_STORAGE_READ", "SHADER_STORAGE_WRITE"}))
 
     def _stamp(self, cmd: Any, query: int) -> None:
         if self.timer is not None:
