@@ -323,3 +323,156 @@ def test_parallel_copy_copies_every_element():
         np.testing.assert_array_equal(a, b)
     dst[3][123] = -1.0  # negative control: the comparison sees one element off
     assert not np.array_equal(dst[3], src[3])
+
+
+def _placed(monkeypatch, placement: str) -> None:
+    monkeypatch.setenv("RFW_RAYCAST_MAPPED", {"staged": "0", "mapped": "1"}[placement])
+
+
+@pytest.mark.parametrize("placement", ["staged", "mapped"])
+@pytest.mark.parametrize("method", METHODS)
+def test_repeated_casts_of_changing_sizes(vk_device, monkeypatch, counts, method, placement):
+    """One scene casts 300, 3000, 40, 3000, 12000 and 300 rays (batch 4096: the largest in
+    three batches, two in flight): the buffers grow twice, never shrink, and every cast equals staged
+    rfw.raycast's hits bit for bit, so no cast reads another's rays or hits. Negative
+    control: one ray turned gives different hits."""
+    method = _method(vk_device, method)
+    mesh = MESHES["noisy_sphere"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 12000, seed=17)
+    _placed(monkeypatch, "staged")
+    ref = rfw.raycast(v, mesh.faces, o, d, device=vk_device, method=method)
+    _placed(monkeypatch, placement)
+    with rfw.RayScene(v, mesh.faces, device=vk_device, method=method, batch=4096) as scene:
+        assert scene._scene.buffers.mapped is (placement == "mapped")
+        made = []
+        for n in (300, 3000, 40, 3000, 12000, 300):
+            got = scene.cast(o[:n], d[:n])
+            _same(got, {k: a[:n] for k, a in ref.items()})
+            made.append(scene._scene.allocations)
+        assert made == [1, 2, 2, 2, 3, 3]
+        turned = d.copy()
+        turned[123] = -turned[123]
+        assert not np.array_equal(scene.cast(o, turned)["t"], ref["t"])
+
+
+def test_staged_and_mapped_give_the_same_hits(vk_device, monkeypatch):
+    """On the courtyard (every instance), casts through copies and through mapped memory
+    agree bit for bit; per-ray intervals go through both too."""
+    scene = default_scene()
+    v, _, _ = flatten(scene)
+    o, d = _rays_around(v, 7000, seed=31)
+    t_max = np.random.default_rng(3).uniform(1.0, 40.0, len(o))
+    got = {}
+    for placement in ("staged", "mapped"):
+        _placed(monkeypatch, placement)
+        with rfw.RayScene.from_scene(scene, device=vk_device, batch=3000) as rs:
+            got[placement] = (rs.cast(o, d), rs.cast(o, d, t_max=t_max))
+            assert rs.last["batches"] == 3
+    for a, b in zip(got["staged"], got["mapped"], strict=True):
+        _same(a, b)
+    assert not np.array_equal(got["staged"][0]["t"], got["staged"][1]["t"])  # t_max acts
+
+
+def test_ray_layouts_and_dtypes_give_the_same_hits(vk_device):
+    """Rays as float64, Fortran-ordered or strided views are converted while they are
+    copied: the hits equal those of float32 C-contiguous rays bit for bit. Negative
+    control: rays rounded to float16 first give other hits."""
+    mesh = MESHES["torus"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 3000, seed=5)
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
+        ref = scene.cast(o, d)
+        wide = np.zeros((len(o), 8), np.float32)
+        wide[:, 1:4], wide[:, 4:7] = o, d
+        for oo, dd in ((o.astype(np.float64), d.astype(np.float64)),
+                       (np.asfortranarray(o), np.asfortranarray(d)),
+                       (wide[:, 1:4], wide[:, 4:7]),
+                       (o[::-1][::-1], np.asfortranarray(d.astype(np.float64)))):
+            _same(scene.cast(oo, dd), ref)
+        rounded = scene.cast(o.astype(np.float16), d.astype(np.float16))
+        assert not np.array_equal(rounded["t"], ref["t"])
+
+
+def test_out_arrays_are_filled_and_returned(vk_device, monkeypatch):
+    """Casts into given arrays return those very arrays with the hits of a plain cast, for
+    every key or some; a larger cast into the same arrays is refused (their shape)."""
+    mesh = MESHES["icosphere"]
+    v = mesh.vertices.astype(np.float32)
+    o, d = _rays_around(v, 2500, seed=9)
+    with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
+        ref = scene.cast(o, d)
+        out = {k: np.full_like(a, 7) for k, a in ref.items()}
+        for _ in range(2):
+            got = scene.cast(o, d, out=out)
+            assert all(got[k] is out[k] for k in out)
+            _same(got, ref)
+        only_t = {"t": np.empty(len(o), np.float32)}
+        got = scene.cast(o, d, out=only_t)
+        assert got["t"] is only_t["t"] and got["primitive"] is not out["primitive"]
+        _same(got, ref)
+        # negative control: the arrays really are written (a stale one would not match)
+        out["t"][:] = 0
+        assert not np.array_equal(out["t"], ref["t"])
+        scene.cast(o, d, out=out)
+        _same(out, ref)
+    # a scene without triangles fills them with misses
+    with rfw.RayScene(_TRI, np.zeros((0, 3), np.int32), device=vk_device) as empty:
+        got = empty.cast(o, d, out=out)
+        assert got["t"] is out["t"] and np.isinf(out["t"]).all()
+        assert (out["primitive"] == -1).all() and not out["barycentrics"].any()
+
+
+def _bad_out(n: int) -> list[tuple[object, str]]:
+    t = np.empty(n, np.float32)
+    ro = np.empty(n, np.float32)
+    ro.flags.writeable = False
+    return [
+        ({"t": np.empty(n, np.float64)}, "out['t'] must be a writable C-contiguous float32 "
+                                         f"array of shape ({n},), got float64 ({n},)"),
+        ({"t": t[:-1]}, f"got float32 ({n - 1},)"),
+        ({"barycentrics": np.empty((2, n), np.float32).T}, "not C-contiguous"),
+        ({"t": ro}, "read-only"),
+        ({"primitive": [0] * n}, "got list"),
+        ({"instance": np.empty(n, np.int32)}, "out has 'instance', which this scene does "
+                                              "not return (it returns t, primitive, "
+                                              "barycentrics)"),
+        ([t], "out must be a dict of arrays by name, got list"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(7))
+def test_bad_out_is_one_line(vk_device, case):
+    o, d = _rays()
+    out, message = _bad_out(len(o))[case]
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+        with pytest.raises(RfwError) as err:
+            scene.cast(o, d, out=out)
+        text = str(err.value)
+        assert text.startswith("RayScene.cast: ") and message in text and "\n" not in text
+        assert np.isfinite(scene.cast(o, d)["t"]).all()  # the scene goes on casting
+
+
+def test_a_bad_placement_setting_is_one_line(vk_device, monkeypatch):
+    monkeypatch.setenv("RFW_RAYCAST_MAPPED", "yes")
+    with pytest.raises(RfwError, match=r"^vkext\.raycast: RFW_RAYCAST_MAPPED is 0, 1 or "
+                                        r"auto, not 'yes'$"):
+        rfw.RayScene(_TRI, _FACES, device=vk_device)
+    monkeypatch.setenv("RFW_RAYCAST_MAPPED", "auto")  # control: the documented values pass
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+        assert np.isfinite(scene.cast(*_rays())["t"]).all()
+
+
+def test_last_breaks_the_cast_down(vk_device):
+    """``last`` names where a cast's time went: the host's parts and, with timestamps, the
+    GPU's (each batch's queries read once after the cast)."""
+    from vkext.raycast import GPU_PARTS, HOST_PARTS
+
+    o, d = _rays()
+    with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=97) as scene:
+        scene.cast(o, d)
+        last = scene.last
+    assert last["batches"] == 4
+    keys = HOST_PARTS + (GPU_PARTS if "timestamp" in vk_device.caps else ())
+    assert all(last[k] >= 0 for k in keys)
+    assert sum(last[k] for k in HOST_PARTS) <= last["wall_ms"]
