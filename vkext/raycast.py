@@ -12,24 +12,29 @@ A :class:`RayScene` keeps what casting needs from call to call: the scene's acce
 structures (built once), the device's pipeline (:func:`raycaster`) and the ray and hit
 buffers (:class:`RayBuffers`, grown when a batch is larger, never shrunk). Rays and hits are
 *streams* (origins, directions, optional per-ray tmin and tmax; t, primitive, instance,
-barycentrics), so the host fills and reads each with one contiguous copy of the caller's
-arrays (split among threads when large: :func:`parallel_copy`). The shaders check every ray
-as they read it (finite origin and direction, a direction that is not zero): such a ray is
-not traced, and :meth:`Raycaster.cast` raises naming the argument and the first bad row.
+barycentrics), so the host fills and reads each with one copy of the caller's arrays, the
+rays converted to float32 in that same copy whatever their dtype and layout (split among
+threads when large: :func:`parallel_copy`); hits go into new arrays or the caller's
+(``out``). The shaders check every ray as they read it (finite origin and direction, a
+direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
+naming the argument and the first bad row.
 
 Rays go through in batches of at most ``batch`` rays (a large cast in at least
-:data:`OVERLAP_PARTS`): per batch one submit copies the rays from a staging buffer to
-device-local memory, traces, and copies the hits back. Two batches are in flight, each with
-staging buffers of its own, so the host fills one batch's rays and reads another's hits
-while the GPU works; memory stays bounded (about 160 bytes a ray of the batch, staging
-included) for any ray count.
-Timestamps around each trace (the copies excluded) give ``last["gpu_ms"]`` and Mrays/s.
+:data:`OVERLAP_PARTS`), :data:`SLOTS` in flight, so the host fills one batch's rays and
+reads another's hits while the GPU works; memory stays bounded for any ray count. Where
+the buffers live (:func:`mapped_streams`): on a discrete GPU, per batch one submit copies
+the rays from a staging buffer to device-local memory, traces, and copies the hits back
+(about 160 bytes a ray of the batch, staging included); where memory is device-local and
+host-cached at once (lavapipe, integrated GPUs) the trace reads and writes mapped buffers,
+one pair per slot, and nothing is copied. Timestamps around each copy and each trace give
+``last``'s GPU parts, read once after the last batch; ``last`` also has the host's.
 
 A batch is a tiny frame graph (:func:`batch_graph`: copy the rays in, trace, copy the hits
 out), compiled once; its barriers are recorded by ``vkext.accel.plan.PlanRecorder``, as the
 acceleration-structure builds record theirs. Both buffers persist from batch to batch, so
 the plan also orders a batch's copy of the rays after the last batch's trace read them, and
-its trace after the last batch's hits were copied out.
+its trace after the last batch's hits were copied out. A mapped batch has no copies: two
+barriers order its trace after earlier work and its hits before the host reads them.
 """
 
 from __future__ import annotations
