@@ -45,6 +45,7 @@ IDENTICAL = set(PORTABLE)
 # config -> the pass a wgpu run refuses first, and the capability wgpu lacks
 VK_ONLY = {
     "deferred_meshlet": ("cull", "VK_EXT_mesh_shader"),
+    "deferred_vis": ("vis", "geometry_shader"),
     "meshlet": ("cull", "VK_EXT_mesh_shader"),
     "rt_primary": ("accel", "VK_KHR_acceleration_structure"),
 }

@@ -46,6 +46,7 @@ ADAPTER = "llvmpipe-llvm15-256bit-mesa-25.0"
 SWITCHES = {
     "deferred": ["shadow.enabled=true"],
     "deferred_meshlet": ["shadow.enabled=true"],
+    "deferred_vis": ["shadow.enabled=true"],
     "deferred_mixed": ["shadow.enabled=false"],
     "deferred_ssao_shadows": ["shadows=off", "ao=off"],
     "flat": ["flat.ambient=0.2", "flat.ambient=0.3"],
@@ -60,7 +61,8 @@ SKIPPED = {"deferred_ssao_shadows": "fxaa", "flat": None, "rt_primary": None}  #
 LINEAR = ("flat", "rt_primary")
 # goldens added after the AMD renders (tests/data/golden-other-cpu/README.md): re-render them
 # on another processor and empty this
-NO_OTHER_CPU_YET = {"flat__courtyard.png", "flat__tiny.png"}
+NO_OTHER_CPU_YET = {"flat__courtyard.png", "flat__tiny.png", "deferred_vis__courtyard.png",
+                    "deferred_vis__tiny.png"}
 
 
 def controls(name: str) -> list[str]:

@@ -63,7 +63,8 @@ EXTENSIONS: dict[str, tuple[str | None, str | None, tuple[str, ...]]] = {
 # stays off
 WANTED: dict[str, tuple[str, ...]] = {
     "VkPhysicalDeviceFeatures": (
-        "fullDrawIndexUint32", "imageCubeArray", "independentBlend", "depthClamp",
+        "fullDrawIndexUint32", "imageCubeArray", "independentBlend", "geometryShader",
+        "depthClamp",
         "depthBiasClamp", "fillModeNonSolid", "multiDrawIndirect", "drawIndirectFirstInstance",
         "samplerAnisotropy", "textureCompressionBC", "pipelineStatisticsQuery",
         "vertexPipelineStoresAndAtomics", "fragmentStoresAndAtomics",
@@ -519,8 +520,11 @@ class VkDevice:
     def _caps(self) -> frozenset[str]:
         v12 = self.features["VkPhysicalDeviceVulkan12Features"]
         v13 = self.features["VkPhysicalDeviceVulkan13Features"]
+        v10 = self.features["VkPhysicalDeviceFeatures"]
         caps = set(self.extensions)
         named = {"buffer_device_address": "bufferDeviceAddress" in v12,
+                 # gl_PrimitiveID in a fragment shader (the visibility buffer) needs it
+                 "geometry_shader": "geometryShader" in v10,
                  "descriptor_indexing": "descriptorIndexing" in v12
                  and "runtimeDescriptorArray" in v12,
                  "timeline_semaphore": "timelineSemaphore" in v12,

@@ -561,7 +561,7 @@ class VkScene:
                 lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
                 lib.vkCmdBindIndexBuffer(cmd, buffers.index, buffers.index_offset, index_type)
                 last_mesh = (inst.mesh, mirrored)
-            lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, 0)
+            lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, k)
             draws += 1
         return draws
 

@@ -32,40 +32,19 @@ layout(set = 3, binding = 0, std140) uniform InstanceBlock {
     layout(offset = 64) mat4 normal;       // inverse transpose of the model matrix
 } instance;                                // 128 bytes
 
-struct Surface {
-    vec4 base_color;
-    vec3 normal;
-    float metallic;
-    float roughness;
-    float occlusion;
-    vec3 emissive;
-};
+#ifndef MESH_VERTEX_INPUT
+// implicit-lod sampling of the bound material: fragment stage only (WGSL leaves it out of
+// vertex entry points by reachability)
+#define MATERIAL_TEXTURE(name, uv) texture(sampler2D(name, material_sampler), uv)
+#endif
+#include "material.glsl"
 
 #ifndef MESH_VERTEX_INPUT
-// the material at a point, with the normal map applied in world space; implicit-lod
-// sampling, so fragment stage only (WGSL leaves it out of vertex entry points by reachability)
+// the bound material at a point, with the normal map applied in world space
 Surface surface(vec2 uv, vec3 n_in, vec4 t_in) {
-    Surface s;
-    s.base_color = material.base_color * texture(sampler2D(base_color_tex, material_sampler), uv);
-    vec4 mr = texture(sampler2D(metal_rough_tex, material_sampler), uv);
-    s.metallic = clamp(material.params.x * mr.b, 0.0, 1.0);
-    s.roughness = clamp(material.params.y * mr.g, 0.045, 1.0);
-    float ao = texture(sampler2D(occlusion_tex, material_sampler), uv).r;
-    s.occlusion = mix(1.0, ao, material.params.z);
-    s.emissive = material.emissive.rgb *
-        texture(sampler2D(emissive_tex, material_sampler), uv).rgb;
-    vec3 n = normalize(n_in);
-    vec3 t = t_in.xyz - n * dot(n, t_in.xyz);
-    if (dot(t, t) < 1e-12) {
-        s.normal = n;
-        return s;
-    }
-    t = normalize(t);
-    vec3 b = cross(n, t) * t_in.w;
-    vec3 m = texture(sampler2D(normal_tex, material_sampler), uv).xyz * 2.0 - 1.0;
-    m = vec3(m.xy * material.emissive.w, m.z);
-    s.normal = normalize(m.x * t + m.y * b + m.z * n);
-    return s;
+    MaterialFactors m = MaterialFactors(material.base_color, material.emissive,
+                                        material.params, material.flags);
+    return material_surface(m, uv, n_in, t_in);
 }
 #endif
 

@@ -1,0 +1,105 @@
+"""Visibility-buffer resolve: the G-buffer computed from instance and triangle ids."""
+
+import numpy as np
+
+from rfw import ComputePass, Tex2D, register_pass
+from rfw.backends.scene_data import instance_blocks, material_bytes
+
+# the std430 twins of vis_resolve.comp.glsl's VisMesh, VisInstance and VisMaterial
+MESH_DTYPE = np.dtype([("addresses", "<u8", 5), ("material", "<u4"), ("pad", "<u4")])
+INSTANCE_DTYPE = np.dtype([("matrices", "<f4", 32), ("mesh", "<u4", 4)])
+MATERIAL_DTYPE = np.dtype([("factors", "u1", 64), ("textures", "<i4", 8)])
+
+
+@register_pass("vis_resolve")
+class VisResolvePass(ComputePass):
+    """The ``gbuffer`` pass's outputs, made by one compute thread per pixel from a
+    ``visbuffer``: the thread reads the triangle's three vertices from the scene's own
+    vertex and index buffers (device addresses), solves perspective-correct barycentrics
+    and their screen-space derivatives from the camera and the three clip-space corners,
+    interpolates normal, uv and tangent as the rasteriser would, and evaluates the material
+    with the G-buffer's own code (``shaders/common/material.glsl``), sampling with explicit
+    gradients (any material of the scene: descriptor indexing). Where ``depth`` is 1 every
+    output is zero, the G-buffer's clear.
+
+    ``albedo`` is ``rgba16float`` instead of the G-buffer's ``rgba8unorm-srgb`` (a storage
+    image cannot be sRGB): it holds the 8-bit sRGB level decoded, the linear value lighting
+    reads from the G-buffer's attachment. Vulkan only.
+    """
+
+    shader = "vis_resolve.comp.glsl"
+    requires = ("descriptor_indexing", "buffer_device_address")
+    backend = "vk"
+    inputs = {
+        "ids": Tex2D(desc="instance, triangle (visbuffer.ids)"),
+        "depth": Tex2D(desc="scene depth: 1 is background"),
+    }
+    outputs = {
+        "albedo": Tex2D("rgba16float", size_of="ids", desc="base color, linear (alpha: coverage)"),
+        "normal": Tex2D("rgba16float", size_of="ids", desc="world-space normal"),
+        "material": Tex2D("rgba8unorm", size_of="ids", desc="occlusion, roughness, metallic"),
+        "emissive": Tex2D("rgba16float", size_of="ids", desc="emitted radiance"),
+    }
+
+    def setup(self, ex) -> None:
+        """The scene's mesh, instance and material tables (host-visible storage buffers)."""
+        self.tables = None
+        if ex.scene is None:
+            return
+        self.tables = {name: _buffer(ex, f"{self.name}:{name}", data)
+                       for name, data in scene_tables(ex.scene).items()}
+
+    def record(self, ctx) -> None:
+        scene = ctx.scene
+        textures, samplers = texture_lists(scene)
+        ctx.dispatch(threads=ctx.extent("albedo"),
+                     defines={"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers)},
+                     t_ids=ctx.sampled("ids"), t_depth=ctx.sampled("depth"),
+                     textures=textures, samplers=samplers,
+                     o_albedo=ctx.storage("albedo"), o_normal=ctx.storage("normal"),
+                     o_material=ctx.storage("material"), o_emissive=ctx.storage("emissive"),
+                     **self.tables)
+
+
+def texture_lists(scene) -> tuple[list, list]:
+    """The textures (the scene's, then its white, white sRGB and flat-normal defaults) and
+    samplers (the scene's, then its default) that the material table indexes."""
+    return ([*scene.textures, scene.white, scene.white_srgb, scene.flat_normal],
+            [*scene.samplers, scene.default_sampler])
+
+
+def scene_tables(vk_scene) -> dict[str, np.ndarray]:
+    """Per mesh its streams' device addresses and material; per instance its matrices, mesh
+    and mirroring; per material its factors and texture and sampler slots (the ones the
+    G-buffer binds: a missing texture is the default that ``VkScene`` binds in its place)."""
+    scene = vk_scene.scene
+    meshes = np.zeros(max(1, len(scene.meshes)), MESH_DTYPE)
+    for k, m in enumerate(scene.meshes):
+        meshes[k] = ([p.address for p in vk_scene.mesh_buffers[k]], m.material, 0)
+    instances = np.zeros(max(1, len(scene.instances)), INSTANCE_DTYPE)
+    if scene.instances:
+        instances["matrices"] = instance_blocks([i.transform for i in scene.instances])
+        instances["mesh"][:, 0] = [i.mesh for i in scene.instances]
+        instances["mesh"][:, 1] = vk_scene.mirrored
+    # texture_lists' order: the scene's textures, then white, white sRGB, flat normal; the
+    # scene's samplers (one per texture), then the default
+    n = len(scene.textures)
+    white, white_srgb, flat, default_sampler = n, n + 1, n + 2, n
+    materials = np.zeros(max(1, len(scene.materials)), MATERIAL_DTYPE)
+    for k, m in enumerate(scene.materials):
+        slots = [_or(m.base_color_texture, white_srgb), _or(m.metallic_roughness_texture, white),
+                 _or(m.normal_texture, flat), _or(m.occlusion_texture, white),
+                 _or(m.emissive_texture, white_srgb),
+                 _or(m.base_color_texture, default_sampler), 0, 0]
+        materials[k] = (np.frombuffer(material_bytes(m), np.uint8), slots)
+    return {"meshes": meshes, "instances": instances, "materials": materials}
+
+
+def _or(index: int | None, fallback: int) -> int:
+    return fallback if index is None else index
+
+
+def _buffer(ex, label: str, data: np.ndarray):
+    buf = ex.allocator.create_buffer(data.nbytes, ("storage",), host_visible=True, label=label)
+    buf.write(data)
+    return buf
