@@ -117,6 +117,7 @@ HIT_DTYPE = np.dtype([("t", "<f4"), ("primitive", "<i4"), ("instance", "<i4"), (
 COPY_THREADS = min(8, os.cpu_count() or 1)
 COPY_SPLIT = 1 << 20  # bytes: smaller copies stay on the calling thread
 _copy_pool: ThreadPoolExecutor | None = None
+_generations = itertools.count(1)
 
 # the pass type that traces: its shader stages read the rays and write the hits
 _PASS_TYPE = {"ray_query": "compute", "ray_pipeline": "ray_tracing"}
@@ -280,6 +281,7 @@ class RayBuffers:
         self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
         self.mapped = mapped_streams(self.device) if mapped is None else bool(mapped)
         self.capacity = self.allocations = 0
+        self.generation = 0  # new buffers, new number: commands recorded for old ones expire
         self._made: list[Any] = []
         self.rays = self.hits = None
         self.up: list[Buffer] = []
@@ -300,6 +302,7 @@ class RayBuffers:
             raise
         self.capacity = rays
         self.allocations += 1
+        self.generation = next(_generations)
 
     def _make_staged(self, rays: int) -> None:
         dev, label = self.device, self.label
@@ -394,11 +397,13 @@ class Raycaster:
         self._tables: dict[int, ShaderBindingTable] = {}  # by hit-record count
         self.timer = self.commands = None
         self._host: dict[str, float] = {}  # the cast under way: host seconds of its parts
+        # per batch index of a cast: its command buffer and what it was recorded for
+        self.cmds: list[tuple[Any, tuple | None]] = []
+        self.recorded = self._timer_generation = 0
         self.last: dict[str, Any] = {}
         self.plan: CompiledGraph = compiled(batch_graph(self.method))
         try:
-            self.commands = CommandPool(device, label=f"{label}:commands")
-            self.cmds = self.commands.allocate(SLOTS)
+            self.commands = CommandPool(device, transient=False, label=f"{label}:commands")
             if self.method == "ray_query":
                 self.pipeline = ComputePipeline(device, SHADERS / "raycast.comp.glsl",
                                                 label=f"{label}:ray_query")
@@ -473,8 +478,7 @@ class Raycaster:
                 t0 = time.perf_counter()
                 size = buffers.write_rays(slot, origins[part], directions[part], lo, hi)
                 t1 = time.perf_counter()
-                fence = self._submit(slot, STAMPS * j, k, size, buffers, sbt, per_ray, lo,
-                                     hi)
+                fence = self._submit(j, k, size, buffers, sbt, per_ray, lo, hi)
                 self._host["upload_ms"] += t1 - t0
                 self._host["submit_ms"] += time.perf_counter() - t1
                 flight.append((slot, start, k, fence))
@@ -496,6 +500,7 @@ class Raycaster:
         self.timer = None
         self.timer = TimestampPool(self.device, STAMPS * batches,
                                    label=f"{self.label}:timestamps")
+        self._timer_generation += 1
 
     def _report(self, n: int, batches: int, wall_s: float) -> None:
         """``last``'s times, in milliseconds."""
@@ -530,19 +535,29 @@ class Raycaster:
         out["u"], out["v"] = got["barycentrics"][:, 0], got["barycentrics"][:, 1]
         return out
 
-    def _submit(self, slot: int, query: int, k: int, size: int, buffers: RayBuffers,
+    def _submit(self, j: int, k: int, size: int, buffers: RayBuffers,
                 sbt: ShaderBindingTable | None, per_ray: bool, tmin: Any, tmax: Any) -> Any:
-        """Record slot ``slot``'s command buffer for a batch of ``k`` rays (its timestamps
-        from ``query`` on), submit it and return its fence (the caller waits in
-        :meth:`_finish`)."""
-        cmd = self.cmds[slot]
-        vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
-            flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
-        begin_label(self.device, cmd, f"{self.label}: {k} rays")
-        self._record_batch(cmd, PlanRecorder(self.plan), slot, query, k, size, buffers, sbt,
-                           per_ray, tmin, tmax)
-        end_label(self.device, cmd)
-        vk.vkEndCommandBuffer(cmd)
+        """Submit batch ``j`` of ``k`` rays and return its fence (the caller waits in
+        :meth:`_finish`). Its command buffer is recorded again only when what it records
+        changed since the last cast (``recorded`` counts the recordings): a cast like the
+        last one records nothing."""
+        slot = j % SLOTS
+        if per_ray:  # the numbers are not recorded then
+            tmin = tmax = 0.0
+        key = (buffers.generation, slot, k, size, per_ray, float(tmin), float(tmax), id(sbt),
+               self._timer_generation)
+        while len(self.cmds) <= j:
+            self.cmds.append((self.commands.allocate(1)[0], None))
+        cmd, recorded = self.cmds[j]
+        if recorded != key:
+            vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo())
+            begin_label(self.device, cmd, f"{self.label}: {k} rays")
+            self._record_batch(cmd, PlanRecorder(self.plan), slot, STAMPS * j, k, size,
+                               buffers, sbt, per_ray, tmin, tmax)
+            end_label(self.device, cmd)
+            vk.vkEndCommandBuffer(cmd)
+            self.cmds[j] = (cmd, key)
+            self.recorded += 1
         return submit(self.device, [cmd], wait=False)
 
     def _wait(self, fence: Any) -> None:

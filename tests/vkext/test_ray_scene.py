@@ -476,3 +476,23 @@ def test_last_breaks_the_cast_down(vk_device):
     keys = HOST_PARTS + (GPU_PARTS if "timestamp" in vk_device.caps else ())
     assert all(last[k] >= 0 for k in keys)
     assert sum(last[k] for k in HOST_PARTS) <= last["wall_ms"]
+
+
+def test_a_cast_like_the_last_records_nothing(vk_device):
+    """Each batch's command buffer is kept: a cast like the last one only submits (counted
+    recordings), with the same hits; another interval or ray count records again (negative
+    controls), and its hits show the new commands really ran."""
+    o, d = _rays()
+    with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=97) as scene:
+        caster = scene._scene.caster
+        first = scene.cast(o, d)
+        recorded = caster.recorded
+        for _ in range(3):
+            _same(scene.cast(o, d), first)
+        assert caster.recorded == recorded
+        short = scene.cast(o, d, t_max=0.5)  # every ray's hit is at t = 1
+        assert caster.recorded == recorded + 4 and np.isinf(short["t"]).all()
+        _same(scene.cast(o, d), first)
+        assert caster.recorded == recorded + 8
+        _same(scene.cast(o[:150], d[:150]), {k: a[:150] for k, a in first.items()})
+        assert caster.recorded == recorded + 8 + 1  # batch 1 of 2 has fewer rays
