@@ -377,11 +377,12 @@ def _casts(rs, o, d, repeats, out=None):
         hits = rs.cast(o, d, out=out)
         walls.append(time.perf_counter() - t0)
         parts.append(rs.last)
-    wall = statistics.median(walls)
-    med = {k: statistics.median(p[k] for p in parts) for k in HOST_PARTS + GPU_PARTS
+    for w, p in zip(walls, parts, strict=True):  # per cast, so that the parts add up
+        p["other_ms"] = w * 1e3 - sum(p[k] for k in HOST_PARTS)
+    med = {k: statistics.median(p[k] for p in parts) for k in (*HOST_PARTS, "other_ms",
+                                                                 *GPU_PARTS)
            if all(k in p for p in parts)}
-    med["other_ms"] = wall * 1e3 - sum(med.get(k, 0.0) for k in HOST_PARTS)
-    return wall, med, hits, parts[-1]["batches"]
+    return statistics.median(walls), med, hits, parts[-1]["batches"]
 
 
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
@@ -410,9 +411,16 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
                 os.environ["RFW_RAYCAST_MAPPED"] = saved
         build = time.perf_counter() - t0
         with rs:
-            wall, parts, hits, batches = _casts(rs, o, d, repeats)
-            out = {k: np.empty_like(v) for k, v in hits.items()}
-            wall_out, parts_out, hits_out, _ = _casts(rs, o, d, repeats, out=out)
+            try:
+                wall, parts, hits, batches = _casts(rs, o, d, repeats)
+                out = {k: np.empty_like(v) for k, v in hits.items()}
+                wall_out, parts_out, hits_out, _ = _casts(rs, o, d, repeats, out=out)
+            except RfwError as e:  # e.g. no room for mapped buffers: say so, go on
+                notes.add(f"RayScene {method} {placement}: failed on {device.name} ({e})")
+                continue
+            memory = rs._scene.buffers.memory()
+        notes.add(f"RayScene {placement} on {device.name}: rays in "
+                  f"{memory.get('rays')}, hits in {memory.get('hits')}")
         first = first or hits
         for got in (hits, hits_out):
             if any(not np.array_equal(got[k], first[k]) for k in first):

@@ -63,6 +63,7 @@ from .allocation import (
     HOST_COHERENT,
     HOST_VISIBLE,
     DeviceMemory,
+    byte_text,
     flags_of,
 )
 from .buffers import Buffer, staging_buffer
@@ -342,6 +343,21 @@ class RayBuffers:
                                          label=f"{self.label}:descriptors{suffix}"))
         bindings.write(tlas=self.tlas, rays=rays, hits=hits)
         return bindings
+
+    def memory(self) -> dict[str, str]:
+        """Where the host's rays and hits live: memory properties and heap size, for
+        reports (empty before the first cast)."""
+        names = (("DEVICE_LOCAL", DEVICE_LOCAL), ("HOST_VISIBLE", HOST_VISIBLE),
+                 ("HOST_COHERENT", HOST_COHERENT), ("HOST_CACHED", HOST_CACHED))
+        out = {}
+        for stream, bufs in (("rays", self.up), ("hits", self.down)):
+            if bufs:
+                mem = bufs[0].memory
+                props, heap = self.device.memory_types[mem.type_index]
+                flags = "|".join(n for n, f in names if props & flags_of([f])) or "none"
+                size = byte_text(self.device.memory_heaps[heap][0])
+                out[stream] = f"type {mem.type_index} {flags} (heap {heap}: {size})"
+        return out
 
     def _keep(self, obj: Any) -> Any:
         self._made.append(obj)
