@@ -12,6 +12,13 @@
 #   bash benchmarks/device_rt.sh                     # 1920x1080, courtyard + dragon + city
 #   bash benchmarks/device_rt.sh --size 1280x720     # anything else goes to the benchmark
 #
+# RayScene.cast alone (921,600 primary rays on the courtyard: wall time, where it goes, staged
+# and mapped placements, against Embree on every core), from the repository root:
+#
+#   source benchmarks/device_env.sh
+#   OUT=$OUT/rt bash benchmarks/device_rt.sh --sections cast --size 1280x720 --scenes "" \
+#       --repeats 7
+#
 # A device without VK_KHR_ray_query (NVIDIA's at the time of writing) gets the ray-pipeline
 # rows only; the report's notes say which rows were skipped and why.
 set -euo pipefail
