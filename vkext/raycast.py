@@ -179,6 +179,12 @@ def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
 
 def _copy(dst: np.ndarray, src: np.ndarray) -> None:
     # unsafe: float64 and integer rays round to float32 as astype would
+    if src.ndim == 2 and 0 < src.strides[0] < src.strides[1]:
+        # column-major rows (a transpose's): column by column reads each one in order,
+        # about twice as fast as numpy's element order for (N, 3)
+        for j in range(src.shape[1]):
+            np.copyto(dst[:, j], src[:, j], casting="unsafe")
+        return
     np.copyto(dst, src, casting="unsafe")
 
 
