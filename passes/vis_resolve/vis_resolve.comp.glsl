@@ -14,6 +14,9 @@
 #ifndef MAX_TEXTURES
 #define MAX_TEXTURES 1
 #endif
+#ifndef TRIANGLE_BITS
+#define TRIANGLE_BITS 16
+#endif
 #ifndef MAX_SAMPLERS
 #define MAX_SAMPLERS 1
 #endif
@@ -117,7 +120,9 @@ void main() {
         write_background(px);
         return;
     }
-    uvec2 ids = texelFetch(t_ids, px, 0).xy;
+    uint id = texelFetch(t_ids, px, 0).r;
+    // visbuffer.py's triangle_bits: the instance in the high bits, the triangle below
+    uvec2 ids = uvec2(id >> TRIANGLE_BITS, id & ((1u << TRIANGLE_BITS) - 1u));
     VisInstance inst = instances.i[ids.x];
     VisMesh mesh = meshes.m[inst.mesh.x];
     Uints index = Uints(mesh.indices);

@@ -5,6 +5,8 @@ import numpy as np
 from rfw import ComputePass, Tex2D, register_pass
 from rfw.backends.scene_data import instance_blocks, material_bytes
 
+from ..visbuffer.visbuffer import triangle_bits
+
 # the std430 twins of vis_resolve.comp.glsl's VisMesh, VisInstance and VisMaterial
 MESH_DTYPE = np.dtype([("addresses", "<u8", 5), ("material", "<u4"), ("pad", "<u4")])
 INSTANCE_DTYPE = np.dtype([("matrices", "<f4", 32), ("mesh", "<u4", 4)])
@@ -31,7 +33,7 @@ class VisResolvePass(ComputePass):
     requires = ("descriptor_indexing", "buffer_device_address")
     backend = "vk"
     inputs = {
-        "ids": Tex2D(desc="instance, triangle (visbuffer.ids)"),
+        "ids": Tex2D(desc="instance and triangle ids (visbuffer.ids)"),
         "depth": Tex2D(desc="scene depth: 1 is background"),
     }
     outputs = {
@@ -53,7 +55,8 @@ class VisResolvePass(ComputePass):
         scene = ctx.scene
         textures, samplers = texture_lists(scene)
         ctx.dispatch(threads=ctx.extent("albedo"),
-                     defines={"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers)},
+                     defines={"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers),
+                              "TRIANGLE_BITS": triangle_bits(scene.scene)},
                      t_ids=ctx.sampled("ids"), t_depth=ctx.sampled("depth"),
                      textures=textures, samplers=samplers,
                      o_albedo=ctx.storage("albedo"), o_normal=ctx.storage("normal"),

@@ -1,12 +1,12 @@
 #version 460
-// the two words of the visibility buffer; an alpha-masked material's test is
-// gbuffer.frag.glsl's (material_cut on the same product), so both cut the same pixels
+// the visibility buffer's one word; an alpha-masked material's test is gbuffer.frag.glsl's
+// (material_cut on the same product), so both cut the same pixels
 #include "mesh.glsl"
 
 layout(location = 0) in vec2 i_uv;
 layout(location = 1) flat in uint i_instance;
 
-layout(location = 0) out uvec2 o_ids;
+layout(location = 0) out uint o_id;
 
 void main() {
     MaterialFactors m = MaterialFactors(material.base_color, material.emissive,
@@ -17,5 +17,6 @@ void main() {
             discard;
         }
     }
-    o_ids = uvec2(i_instance, uint(gl_PrimitiveID));
+    // visbuffer.py's triangle_bits: the instance in the high bits, the triangle below
+    o_id = (i_instance << TRIANGLE_BITS) | uint(gl_PrimitiveID);
 }

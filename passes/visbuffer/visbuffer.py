@@ -2,16 +2,18 @@
 
 from rfw import RenderPass, register_pass
 from rfw.graph import Attachment, DepthAttachment
+from rfw.scene.model import SceneError
 
 
 @register_pass("visbuffer")
 class VisBufferPass(RenderPass):
     """The first half of a G-buffer made in two passes: the scene rasterised into depth and
-    one ``rg32uint`` target holding, per pixel, the instance (the scene's index) and the
-    triangle of the mesh that is nearest. The fragment shader writes those two words and
-    nothing else; alpha-masked materials still test their alpha, so coverage and depth are
-    the ``gbuffer`` pass's. ``ids`` is not cleared: where ``depth`` is 1 (the background)
-    it holds whatever was there, and its reader (``vis_resolve``) looks at depth first.
+    one ``r32uint`` id per pixel of the nearest surface: its instance (the scene's index)
+    in the high bits, its triangle in the mesh in the low ``triangle_bits(scene)``. The
+    fragment shader writes that word and nothing else (raster writes cost by the byte);
+    alpha-masked materials still test their alpha, so coverage and depth are the
+    ``gbuffer`` pass's. ``ids`` is not cleared: where ``depth`` is 1 (the background) it
+    holds whatever was there, and its reader (``vis_resolve``) looks at depth first.
 
     Vulkan only: a fragment shader's ``gl_PrimitiveID`` needs the ``geometryShader``
     feature, and the instance comes from the draw's firstInstance.
@@ -21,10 +23,27 @@ class VisBufferPass(RenderPass):
     requires = ("geometry_shader",)
     backend = "vk"
     outputs = {
-        "ids": Attachment("rg32uint", desc="instance, triangle (undefined where depth is 1)"),
+        "ids": Attachment("r32uint", desc="instance << triangle_bits | triangle "
+                                          "(undefined where depth is 1)"),
         "depth": DepthAttachment("depth32float", desc="0 near, 1 far"),
     }
 
     def record(self, ctx) -> None:
         # less-equal as the gbuffer pass draws: equal depths resolve to the same surface
-        ctx.draw_scene(color=[("ids", None)], depth=("depth", 1.0), depth_compare="less-equal")
+        ctx.draw_scene(color=[("ids", None)], depth=("depth", 1.0), depth_compare="less-equal",
+                       defines={"TRIANGLE_BITS": triangle_bits(ctx.scene.scene)})
+
+
+def triangle_bits(scene) -> int:
+    """How many low bits of an id hold the triangle: what the instances' index leaves of
+    32 bits. A scene whose instances and largest mesh do not fit raises a SceneError."""
+    instance_bits = max(1, (len(scene.instances) - 1).bit_length())
+    bits = 32 - instance_bits
+    triangles = max((len(m.indices) // 3 for m in scene.meshes), default=0)
+    if triangles > 1 << bits:
+        raise SceneError(f"{len(scene.instances):,} instances and a mesh of {triangles:,} "
+                         "triangles do not fit the visibility buffer's 32-bit ids "
+                         f"({instance_bits} bits for the instance leave {bits} for the "
+                         "triangle): use the raster G-buffer (geometry=raster)",
+                         element="visbuffer")
+    return bits

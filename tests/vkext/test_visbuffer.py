@@ -173,3 +173,19 @@ def test_wgpu_refuses_the_visibility_buffer_in_one_line(tmp_path):
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
     assert lines[0].startswith("rfw: error: pass 'vis' (visbuffer) needs geometry_shader")
+
+
+def test_ids_hold_instance_and_triangle_in_32_bits():
+    from types import SimpleNamespace as NS
+
+    from passes.visbuffer.visbuffer import triangle_bits
+    from rfw.errors import RfwError
+
+    def scene(instances: int, triangles: int):
+        return NS(instances=[None] * instances, meshes=[NS(indices=np.zeros(3 * triangles))])
+
+    assert triangle_bits(scene(405, 2304)) == 23  # the courtyard: 9 bits of instance
+    assert triangle_bits(scene(1, 10)) == 31
+    assert triangle_bits(scene(1 << 16, 1 << 16)) == 16  # exactly full
+    with pytest.raises(RfwError, match="do not fit the visibility buffer's 32-bit ids"):
+        triangle_bits(scene((1 << 16) + 1, 1 << 16))  # one more instance: 17 + 16 bits
