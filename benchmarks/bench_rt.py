@@ -16,7 +16,11 @@ Per scene (the embedded courtyard, and the fetched ``dragon``/``city`` where pre
    caller waits for) and the trace alone (GPU timestamps), against the one-shot
    ``rfw.raycast`` (which builds the scene every call) and Embree on one thread and on all
    CPU cores (one process per core, each with its own BVH, hits into shared memory), all in
-   the same run; hit-or-miss agreement with Embree beside them.
+   the same run; hit-or-miss agreement with Embree beside them. Each ray placement
+   (``staged``: copies on the GPU; ``mapped``: the trace reads and writes host-visible
+   memory) casts into new arrays, into reused ``out=`` arrays, and in one submit, and a
+   second table says where each cast's wall time went (``Raycaster.last``: the host's
+   upload, submit, wait and readback, the rest, and the GPU's copies and trace).
 4. **Shadows in the frame**: ``configs/rt_shadows.toml`` with the shadow map, ray-query and
    ray-pipeline shadows (sun only, so the images are comparable): the GPU ms of the shadow
    pass and the share of pixels within 8/255 of the shadow-map image.
@@ -385,6 +389,19 @@ def _casts(rs, o, d, repeats, out=None):
     return statistics.median(walls), med, hits, parts[-1]["batches"]
 
 
+def _one_submit(rs, o, d, repeats, out):
+    """:func:`_casts` into ``out`` with every ray in one batch (one submit, no overlap of the
+    host's copies with the GPU's work), the same-run baseline for the overlapped batches."""
+    from vkext import raycast
+
+    saved = raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN
+    raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN = 1, len(o)
+    try:
+        return _casts(rs, o, d, repeats, out=out)
+    finally:
+        raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN = saved
+
+
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
     """Per method and ray placement (staged through copies, or mapped: the trace reads and
     writes host-visible memory; RFW_RAYCAST_MAPPED picks it): RayScene build, then casts
@@ -415,6 +432,8 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
                 wall, parts, hits, batches = _casts(rs, o, d, repeats)
                 out = {k: np.empty_like(v) for k, v in hits.items()}
                 wall_out, parts_out, hits_out, _ = _casts(rs, o, d, repeats, out=out)
+                wall_one, parts_one, hits_one, one_batches = _one_submit(rs, o, d, repeats,
+                                                                         out)
             except RfwError as e:  # e.g. no room for mapped buffers: say so, go on
                 notes.add(f"RayScene {method} {placement}: failed on {device.name} ({e})")
                 continue
@@ -422,7 +441,7 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
         notes.add(f"RayScene {placement} on {device.name}: rays in "
                   f"{memory.get('rays')}, hits in {memory.get('hits')}")
         first = first or hits
-        for got in (hits, hits_out):
+        for got in (hits, hits_out, hits_one):
             if any(not np.array_equal(got[k], first[k]) for k in first):
                 notes.add(f"RayScene {method} {placement}: hits differ from the first caster's")
         one_shot = None
@@ -434,6 +453,8 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
         rows.append({"method": method, "placement": placement, "rays": len(o),
                      "build_s": build, "batches": batches, "wall_s": wall,
                      "wall_out_s": wall_out, "parts_ms": parts, "parts_out_ms": parts_out,
+                     "wall_one_s": wall_one, "parts_one_ms": parts_one,
+                     "one_batches": one_batches,
                      "gpu_s": parts["gpu_ms"] / 1e3 if "gpu_ms" in parts else None,
                      "one_shot_s": one_shot, "agreement": agree})
     return rows
@@ -456,6 +477,7 @@ def cast_lines(rows, embree, n):
         name = f"RayScene.cast {r['method']} {r['placement']}"
         row(f"{name} (wall: upload + trace + readback)", r["wall_s"], f"{r['agreement']:.5f}")
         row(f"{name} (wall, into reused out= arrays)", r["wall_out_s"])
+        row(f"{name} (wall, out=, all rays in one submit)", r["wall_one_s"])
         if r["gpu_s"]:
             row(f"{name} (trace only, GPU timestamps)", r["gpu_s"])
         if r["one_shot_s"]:
@@ -479,10 +501,12 @@ def breakdown_lines(rows):
              "| GPU: copy in | trace | copy out |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
-        for label, wall, parts in (("", r["wall_s"], r["parts_ms"]),
-                                   (", out=", r["wall_out_s"], r["parts_out_ms"])):
+        for label, batches, wall, parts in (
+                ("", r["batches"], r["wall_s"], r["parts_ms"]),
+                (", out=", r["batches"], r["wall_out_s"], r["parts_out_ms"]),
+                (", out=, one submit", r["one_batches"], r["wall_one_s"], r["parts_one_ms"])):
             cells = [fmt(parts.get(k)) for k in (*HOST_PARTS, "other_ms", *GPU_PARTS)]
-            lines.append(f"| {r['method']} {r['placement']}{label} | {r['batches']} | "
+            lines.append(f"| {r['method']} {r['placement']}{label} | {batches} | "
                          f"{wall * 1e3:.2f} | " + " | ".join(cells) + " |")
     return [*lines, ""]
 
