@@ -156,16 +156,18 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
     return method
 
 
-def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
+def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]], *, cached: bool = True) -> None:
     """``dst[...] = src`` for every (dst, src) pair of arrays of one shape (any layout and
     real dtype: a source is converted while it is copied), the large ones cut along their
-    first axis into :data:`COPY_THREADS` parts on a thread pool."""
+    first axis into :data:`COPY_THREADS` parts on a thread pool. Without ``cached`` the
+    destinations are written in order only (they may be write-combined memory)."""
     global _copy_pool
     parts = []
+    copy = _copy if cached else _copy_in_order
     for dst, src in jobs:
         pieces = min(COPY_THREADS, dst.nbytes // COPY_SPLIT, len(dst))
         if pieces < 2:
-            _copy(dst, src)
+            copy(dst, src)
             continue
         cuts = np.linspace(0, len(dst), pieces + 1).astype(int)
         parts += [(dst[a:b], src[a:b]) for a, b in itertools.pairwise(cuts)]
@@ -173,18 +175,22 @@ def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]]) -> None:
         return
     if _copy_pool is None:
         _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
-    for done in [_copy_pool.submit(_copy, d, s_) for d, s_ in parts]:
+    for done in [_copy_pool.submit(copy, d, s_) for d, s_ in parts]:
         done.result()
 
 
 def _copy(dst: np.ndarray, src: np.ndarray) -> None:
-    # unsafe: float64 and integer rays round to float32 as astype would
     if src.ndim == 2 and 0 < src.strides[0] < src.strides[1]:
         # column-major rows (a transpose's): column by column reads each one in order,
         # about twice as fast as numpy's element order for (N, 3)
         for j in range(src.shape[1]):
             np.copyto(dst[:, j], src[:, j], casting="unsafe")
         return
+    _copy_in_order(dst, src)
+
+
+def _copy_in_order(dst: np.ndarray, src: np.ndarray) -> None:
+    # unsafe: float64 and integer rays round to float32 as astype would
     np.copyto(dst, src, casting="unsafe")
 
 
@@ -289,6 +295,7 @@ class RayBuffers:
         self.mapped = mapped_streams(self.device) if mapped is None else bool(mapped)
         self.capacity = self.allocations = 0
         self.generation = 0  # new buffers, new number: commands recorded for old ones expire
+        self.up_cached = True  # whether the host writes rays into host-cached memory
         self._made: list[Any] = []
         self.rays = self.hits = None
         self.up: list[Buffer] = []
@@ -310,6 +317,7 @@ class RayBuffers:
         self.capacity = rays
         self.allocations += 1
         self.generation = next(_generations)
+        self.up_cached = bool(self.up[0].memory.properties & flags_of([HOST_CACHED]))
 
     def _make_staged(self, rays: int) -> None:
         dev, label = self.device, self.label
@@ -320,8 +328,10 @@ class RayBuffers:
                                       label=f"{label}.hits"))
         self.hits.allocate()
         for slot in range(SLOTS):
+            # host-cached where there is such memory (readback=True prefers it): a
+            # converting copy writes partial lines, slow in write-combined memory
             self.up.append(self._keep(staging_buffer(
-                dev, self.rays.bytes, label=f"{label}:rays upload {slot}")))
+                dev, self.rays.bytes, readback=True, label=f"{label}:rays upload {slot}")))
             self.down.append(self._keep(staging_buffer(
                 dev, self.hits.bytes, readback=True, label=f"{label}:hits readback {slot}")))
         self.sets = [self._binding_set(self.rays, self.hits, "")] * SLOTS
@@ -380,7 +390,7 @@ class RayBuffers:
                 (words[3 * k:6 * k].reshape(k, 3), directions)]
         if np.ndim(tmin) or np.ndim(tmax):
             jobs += [(words[6 * k:7 * k], tmin), (words[7 * k:8 * k], tmax)]
-        parallel_copy(jobs)
+        parallel_copy(jobs, cached=self.up_cached)
         return (8 if len(jobs) > 2 else 6) * k * 4
 
     def read_hits(self, slot: int, k: int, out: dict[str, np.ndarray], start: int) -> None:

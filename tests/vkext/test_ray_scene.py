@@ -325,6 +325,24 @@ def test_parallel_copy_copies_every_element():
     assert not np.array_equal(dst[3], src[3])
 
 
+@pytest.mark.parametrize("cached", [True, False])
+def test_parallel_copy_converts_any_layout(cached):
+    """Rows of rays in Fortran order, float64 or strided views land in C-order float32 as
+    astype would round them, column by column (cached) or in order (write-combined)."""
+    from vkext.raycast import parallel_copy
+
+    rng = np.random.default_rng(2)
+    base = rng.normal(size=((1 << 17) + 3, 3)) * 1e3
+    wide = np.zeros((len(base), 5))
+    wide[:, 1:4] = base
+    for src in (np.asfortranarray(base), np.asfortranarray(base.astype(np.float32)),
+                wide[:, 1:4], base[::-1]):
+        dst = np.zeros(src.shape, np.float32)
+        parallel_copy([(dst, src)], cached=cached)
+        np.testing.assert_array_equal(dst, src.astype(np.float32))
+        assert not np.array_equal(dst, src.astype(np.float16))  # control: rounding shows
+
+
 def _placed(monkeypatch, placement: str) -> None:
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", {"staged": "0", "mapped": "1"}[placement])
 
