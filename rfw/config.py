@@ -39,7 +39,8 @@ from .graph.resources import SizeRule
 from .passes import Pass
 from .registry import get_pass
 
-_KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames")
+_KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames",
+         "async_compute")
 _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
@@ -70,6 +71,7 @@ class Config:
     chosen: dict[str, str] = field(default_factory=dict)  # variant -> option in force
     base: list[PassEntry] = field(default_factory=list)  # the passes as the file declares
     explicit: list[tuple[str, Any]] = field(default_factory=list)  # --set pass.key=value
+    async_compute: str = "auto"  # compute beside raster on a second queue (rfw.graph.queues)
 
     def entry(self, name: str) -> PassEntry:
         for p in self.passes:
@@ -246,7 +248,9 @@ def load_config(path: str | Path) -> Config:
                           file=source, element="frames")
     cfg = Config(_string(data.get("name", path.stem), "name", source), passes, list(outputs),
                  scene, _size_of(data.get("size", [1280, 720]), source), camera, variants,
-                 frames, source, base=list(passes))
+                 frames, source, base=list(passes),
+                 async_compute=_async_compute(data.get("async_compute", "auto"), source,
+                                              "async_compute"))
     for vname, v in variants.items():
         default = v.get("default")
         if isinstance(default, bool):  # a switch: default = true
@@ -422,16 +426,29 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
             cfg = replace(cfg, scene=value)
         elif key == "frames":
             cfg = replace(cfg, frames=_frames(value, cfg.source))
+        elif key == "async_compute":
+            cfg = replace(cfg, async_compute=_async_compute(value, cfg.source,
+                                                            "--set async_compute"))
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
-                known = [p.name for p in cfg.passes] + list(cfg.variants) + ["size", "scene",
-                                                                             "frames"]
+                known = [p.name for p in cfg.passes] + list(cfg.variants) + [
+                    "size", "scene", "frames", "async_compute"]
                 raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
                             + did_you_mean(head, known))
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
             cfg = replace(cfg, explicit=[*cfg.explicit, (key, value)])
     return cfg
+
+
+def _async_compute(value: Any, source: str, element: str) -> str:
+    """``auto``, or any boolean spelling (TOML true/false, on/off, ...) as ``on``/``off``."""
+    word = str(value).lower() if isinstance(value, bool | str) else None
+    if word == "auto":
+        return word
+    if word in _TRUE or word in _FALSE:
+        return "on" if word in _TRUE else "off"
+    raise _fail(source, f"must be true, false or \"auto\", not {value!r}", element)
 
 
 def _frames(text: str, source: str) -> int:
@@ -501,4 +518,4 @@ def build(cfg: Config) -> Built:
             instances[entry.name] = inst
             slots[entry.name] = mapping
     g.output(*cfg.outputs)
-    return Built(g.build(), instances, slots)
+    return Built(replace(g.build(), async_compute=cfg.async_compute), instances, slots)

@@ -31,9 +31,18 @@ from .plan import (  # the result types are imported from here too
     ResourcePlan,
     _Problems,
 )
+from .queues import (
+    names_of,
+    overlap_spans,
+    plan_order,
+    plan_submissions,
+    plan_transfers,
+    queue_mode,
+    queue_plan,
+)
 from .resolve import Resolved, check_attachment_sizes, resolve
 from .resources import ResourceDecl
-from .schedule import cull, lifetimes, order, parallel_levels
+from .schedule import cull, lifetimes, parallel_levels
 from .validate import validate
 
 __all__ = ["IMPLIED_CAPS", "STATS", "Access", "Barrier", "CompiledGraph", "Diagnostic",
@@ -102,7 +111,9 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         keep, culled = cull(declared)
     else:
         keep, culled = list(range(len(declared.passes))), []
-    schedule = order(declared, keep, order_seed)
+    mode, why = queue_mode(graph, declared, caps)
+    schedule, on_compute = plan_order(declared, keep, mode, order_seed)
+    queue_of, submissions = plan_submissions(declared, schedule, on_compute)
     used = _used_resources(declared, schedule)
     declared = _kept_history(declared, set(used))
     resolved = resolve(declared, used, size, problems)
@@ -110,6 +121,9 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
     check_attachment_sizes(declared, schedule, resolved, problems)
     problems.raise_if_any()
     spans = lifetimes(declared, schedule)
+    if on_compute:  # memory in use on both queues at once is never shared
+        spans = overlap_spans(spans, names_of(declared, schedule), submissions,
+                              declared.accesses)
     transient = {n for n in used if n in spans and _is_transient(n, declared, resolved)}
     items, heap_of, align = _memory_items(declared, resolved, spans, transient, memory)
     mem_key = (items, memory.alias)
@@ -119,6 +133,8 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         heaps, offsets = _remember(_MEMORY_CACHE, mem_key, assign_memory(items, memory.alias))
     placement = {n: (heap_of[n], offsets[n], offsets[n] + align[n]) for n in transient}
     barriers = plan_barriers(declared, schedule, resolved, placement, transient, spans)
+    transfers = plan_transfers(names_of(declared, schedule), queue_of, declared.accesses,
+                               barriers) if mode == "two families" and on_compute else []
     flat = [it for heap in items for it in heap]
     names = [declared.passes[i].name for i in schedule]
     kept = set(schedule)
@@ -140,6 +156,7 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         step_barriers=tuple(plan_step_barriers(declared, schedule)),
         steps={n: tuple(s.name for s in declared.passes[i].steps)
                for n, i in zip(names, schedule, strict=True) if declared.passes[i].steps},
+        queues=queue_plan(mode, why, queue_of, submissions, transfers),
         follow_output=sum(_follows_output(n, declared.resources) for n, r in resolved.items()
                           if r.kind == "image" and r.format),
     )

@@ -87,10 +87,12 @@ class Graph:
     strict: bool = True
     source: str | None = field(default=None, compare=False)
     diagnostics: tuple[tuple[str, str], ...] = field(default=(), compare=False)  # from loading
+    async_compute: str = "auto"  # "auto" | "on" | "off": compute beside raster (graph.queues)
 
     @cached_property
     def _hash(self) -> int:
-        return hash((self.name, self.passes, self.imports, self.outputs, self.size, self.strict))
+        return hash((self.name, self.passes, self.imports, self.outputs, self.size, self.strict,
+                     self.async_compute))
 
     def __hash__(self) -> int:
         return self._hash

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from ..units import MiB
 from .compile import Barrier, CompiledGraph
 
@@ -55,6 +57,9 @@ def describe(c: CompiledGraph) -> str:
     out.append("parallel levels:")
     out += [f"  {i}: {', '.join(level)}" for i, level in enumerate(c.parallel_levels)]
     out.append("")
+    if c.queues is not None:
+        out += _queues(c.queues)
+        out.append("")
     heaps = ", ".join(f"#{i} {_mib(b)}" for i, b in enumerate(c.heaps)) or "-"
     out.append(f"heaps:              {heaps}")
     out.append(f"transient_bytes:    {c.transient_bytes:>14,}  ({_mib(c.transient_bytes)})")
@@ -86,6 +91,32 @@ def _barriers(c: CompiledGraph) -> list[str]:
             part = "" if b.mips is None and b.bytes is None else f" {b.part()}"
             out.append(_barrier_line(b, f"{b.pass_name} step {b.step} ({step}) / "
                                         f"{b.resource}{part}"))
+    return out
+
+
+def _queues(q: Any) -> list[str]:
+    """Queues, submissions with their semaphore signal and waits, ownership transfers
+    (``rfw.graph.queues``)."""
+    out = [f"queues: {', '.join(q.queues)} ({q.mode}: {q.why})"]
+    if len(q.queues) == 1:
+        return out
+    out.append(f"submissions ({len(q.submissions)}; a timeline semaphore per queue, "
+               "values relative to the frame's base):")
+    for s in q.submissions:
+        waits = "; ".join(f"wait {w.queue} "
+                          + ("end of last frame" if w.submission < 0 else f"= {w.value}")
+                          + f" at {'|'.join(sorted(w.stages))}" for w in s.waits)
+        out.append(f"  #{s.index} {s.queue:<8} [{', '.join(s.passes) or 'join'}]"
+                   + (f"  {waits};" if waits else "")
+                   + f"  signal {s.queue} = {s.value} after {'|'.join(sorted(s.signal_stages))}")
+    if q.transfers:
+        out.append(f"ownership transfers ({len(q.transfers)}):")
+        for t in q.transfers:
+            rel, acq = t.release.to_json(), t.acquire.to_json()
+            out.append(f"  {t.resource}: {t.src} -> {t.dst}; release after {t.after} "
+                       f"({rel['from']['stages']}:{rel['from']['access']}), acquire before "
+                       f"{t.before} ({acq['to']['stages']}:{acq['to']['access']}); "
+                       f"{rel['from']['layout']} -> {acq['to']['layout']}")
     return out
 
 

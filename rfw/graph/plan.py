@@ -161,6 +161,9 @@ class CompiledGraph:
     follow_output: int = field(default=0, compare=False)
     step_barriers: tuple[Barrier, ...] = ()  # inside passes, before the step they name
     steps: dict[str, tuple[str, ...]] = field(default_factory=dict, compare=False)  # names
+    # queues, submissions, semaphores and ownership transfers (rfw.graph.queues); None: one
+    # graphics queue, one submission
+    queues: Any = None
 
     def barriers_before_step(self, pass_name: str, index: int,
                              previous: int) -> tuple[Barrier, ...]:
@@ -200,6 +203,7 @@ class CompiledGraph:
             "barriers": [b.to_json() for b in self.barriers],
             "step_barriers": [b.to_json() for b in self.step_barriers],
             "parallel_levels": [list(level) for level in self.parallel_levels],
+            "queues": None if self.queues is None else self.queues.to_json(),
             "diagnostics": [d.to_json() for d in self.diagnostics],
         }
 

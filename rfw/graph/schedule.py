@@ -28,11 +28,14 @@ def _producer_edges(passes: list[PassDecl], accesses: dict[str, tuple[Access, ..
 
 
 def _stable_toposort(n: int, edges: Iterable[tuple[int, int]], passes: list[PassDecl],
-                     keep: Iterable[int] | None = None, seed: int | None = None) -> list[int]:
+                     keep: Iterable[int] | None = None, seed: int | None = None,
+                     priority: dict[int, int] | None = None) -> list[int]:
     """Kahn's algorithm, smallest declaration index first; a cycle raises with its path.
 
     With a ``seed``, each step takes a ready pass at random instead: every valid order can
     come out (schedule fuzzing, ``vkext.poison``), and the same seed gives the same order.
+    A ``priority`` (lower first, then declaration index) puts async compute and what it needs
+    early, so the graphics work it can overlap comes after it (``rfw.graph.queues``).
     """
     nodes = set(range(n) if keep is None else keep)
     succ: dict[int, list[int]] = defaultdict(list)
@@ -41,18 +44,20 @@ def _stable_toposort(n: int, edges: Iterable[tuple[int, int]], passes: list[Pass
         if a in nodes and b in nodes:
             succ[a].append(b)
             indeg[b] += 1
-    ready = [i for i in nodes if indeg[i] == 0]
+    rank = (lambda i: i) if priority is None or seed is not None else \
+        (lambda i: priority.get(i, 0) * n + i)
+    ready = [rank(i) for i in nodes if indeg[i] == 0]
     heapq.heapify(ready)
     rng = None if seed is None else random.Random(seed)
     push = heapq.heappush if rng is None else list.append
     order: list[int] = []
     while ready:
-        i = heapq.heappop(ready) if rng is None else _pop_random(ready, rng)
+        i = (heapq.heappop(ready) if rng is None else _pop_random(ready, rng)) % max(n, 1)
         order.append(i)
         for j in succ[i]:
             indeg[j] -= 1
             if indeg[j] == 0:
-                push(ready, j)
+                push(ready, rank(j))
     if len(order) != len(nodes):
         raise GraphError(_cycle_message(nodes - set(order), succ, passes))
     return order
@@ -166,10 +171,13 @@ def cull(declared: Declared) -> tuple[list[int], list[str]]:
 # step 3: order
 
 
-def order(declared: Declared, keep: list[int], seed: int | None = None) -> list[int]:
+def order(declared: Declared, keep: list[int], seed: int | None = None,
+          priority: dict[int, int] | None = None) -> list[int]:
     """Stable topological order of the kept passes (ties: declaration order; with a
-    ``seed``, ties broken at random: another valid order, for schedule fuzzing)."""
-    return _stable_toposort(len(declared.passes), declared.edges, declared.passes, keep, seed)
+    ``seed``, ties broken at random: another valid order, for schedule fuzzing; with a
+    ``priority``, lower first among ready passes)."""
+    return _stable_toposort(len(declared.passes), declared.edges, declared.passes, keep, seed,
+                            priority)
 
 
 # ---------------------------------------------------------------------------------------------
