@@ -348,9 +348,9 @@ class RayBuffers:
         """A storage buffer in host-visible memory, device-local where it can be."""
         buf = self._keep(Buffer(self.device, size, ("storage",), label=f"{self.label}.{name}"))
         bits = buf.type_bits & mapped_type_bits(self.device, readback=readback)
-        mem = self._keep(DeviceMemory(self.device, buf.size, bits or buf.type_bits,
-                                      host_visible=True, readback=readback,
-                                      label=f"{self.label}:{name} memory"))
+        mem = DeviceMemory(self.device, buf.size, bits or buf.type_bits, host_visible=True,
+                           readback=readback, label=f"{self.label}:{name} memory")
+        self._made.insert(self._made.index(buf), mem)  # freed after the buffer
         buf.bind(mem, 0)
         return buf
 
