@@ -10,12 +10,14 @@ Measured on lavapipe (Mesa 25.0.7, LLVM 15), courtyard, 192x108:
   emissive: identical;
 - the final image: largest 6 levels, 0.67 % of pixels over 2 levels, FLIP mean 0.010,
   mean signed difference 0.06 levels.
-The differences are texture filtering: the raster path's implicit lookups take llvmpipe's
+On the tiny scene mirrored, with normal maps, an alpha-masked cube and an emissive slab
+(``cutout_scene``): depth and coverage identical, normal, material and emissive identical,
+albedo within 0.06 levels. The courtyard's differences are texture filtering: the raster path's implicit lookups take llvmpipe's
 own per-quad derivatives and LOD, the resolve takes explicit gradients (the same quad
 differences, computed on the triangle's plane). The bounds below sit about 2x above these;
-the negative controls (the resolve given another material, or instances moved by 2 cm, or
-its outputs shifted by one pixel; the final image at 3 % more exposure, or with shadows)
-each exceed them.
+the negative controls (the resolve given another material, instances moved by 2 cm, its
+outputs shifted by one pixel, mirrored instances' tangents left unflipped; the final image
+at 3 % more exposure, or with shadows) each exceed them.
 """
 
 from __future__ import annotations
@@ -136,6 +138,47 @@ def test_comparison_rejects_a_wrong_resolve(vk_device, courtyard, raster, monkey
     _tables_with(monkeypatch, change)
     why = differences(gbuffer(vk_device, courtyard), raster)
     assert why and not any("depth" in w or "coverage" in w for w in why), why
+
+
+def cutout_scene():
+    """The tiny scene mirrored through x = 0 (every instance: its triangles' corners swapped,
+    its tangents' w flipped), a normal map on every surface, the cube alpha-masked by a
+    checkerboard and the slab emissive: what the courtyard lacks."""
+    from rfw.scene.model import Texture
+
+    from ..test_mirrored import bumpy_scene, mirrored
+
+    s = bumpy_scene()
+    checker = np.zeros((8, 8, 4), np.uint8)
+    checker[...] = (230, 200, 40, 255)
+    checker[(np.add.outer(np.arange(8), np.arange(8)) % 2) == 1, 3] = 0
+    s.textures.append(Texture("checker", checker, srgb=True, mag_filter="nearest"))
+    cube = s.materials[s.meshes[1].material]
+    cube.alpha_mode, cube.alpha_cutoff, cube.base_color_texture = "MASK", 0.5, 1
+    s.materials[s.meshes[0].material].emissive = (0.2, 0.1, 0.05)
+    return mirrored(s)
+
+
+@pytest.fixture(scope="module")
+def cutout_raster(vk_device):
+    return gbuffer(vk_device, cutout_scene(), "geometry=raster")
+
+
+def test_resolve_matches_with_alpha_masks_mirrors_and_normal_maps(vk_device, cutout_raster):
+    vis = gbuffer(vk_device, cutout_scene())
+    cut = cutout_raster["albedo"][..., 3] == 0
+    assert 0.05 < cut.mean() < 0.95  # background and cut-out pixels, and covered ones
+    assert cutout_raster["emissive"][..., :3].max() > 0.1
+    assert differences(vis, cutout_raster) == []
+
+
+def test_comparison_rejects_an_unmirrored_tangent_frame(vk_device, cutout_raster, monkeypatch):
+    def unmirrored(t):
+        t["instances"]["mesh"][:, 1] = 0
+
+    _tables_with(monkeypatch, unmirrored)
+    why = differences(gbuffer(vk_device, cutout_scene()), cutout_raster)
+    assert why and all(w.startswith("normal") for w in why), why
 
 
 def rfw(*args: str) -> subprocess.CompletedProcess:
