@@ -242,6 +242,24 @@ if ffi is not None:
         return 0  # VK_FALSE: do not abort the call
 
 
+def compute_queue_choice(families: list[tuple[int, int, int]],
+                         graphics: int) -> tuple[int, int] | None:
+    """The second queue for async compute (``rfw.graph.queues``), as (family, index), from
+    each family's (queue flags, queue count, timestamp valid bits): a second queue of the
+    graphics family where it has one (no ownership transfers: the scene's buffers, made
+    exclusive, are read by both queues), else the first queue of a compute-only family
+    whose timestamps work where the graphics family's do (the passes on it are timed);
+    else None."""
+    if families[graphics][1] > 1:
+        return graphics, 1
+    bits = families[graphics][2]
+    for i, (flags, count, valid) in enumerate(families):
+        only = flags & vk.VK_QUEUE_COMPUTE_BIT and not flags & vk.VK_QUEUE_GRAPHICS_BIT
+        if only and count > 0 and (valid > 0 or not bits):
+            return i, 0
+    return None
+
+
 class VkDevice:
     """A Vulkan 1.3 device with the features and extensions rfw can use.
 
@@ -403,6 +421,29 @@ class VkDevice:
         return None
 
     # -----------------------------------------------------------------------------------------
+    # queues: the graphics+compute one, and a second that runs compute where there is one
+
+    def _pick_compute_queue(self) -> None:
+        families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
+        pick = compute_queue_choice([(f.queueFlags, f.queueCount, f.timestampValidBits)
+                                     for f in families], self.queue_family)
+        self.compute_family, self.compute_index = pick or (None, None)
+
+    def _queue_infos(self) -> tuple[Any, int]:
+        self._pick_compute_queue()
+        same = self.compute_family == self.queue_family
+        priorities = ffi.new("float[2]", [1.0, 1.0])
+        count = 1 if self.compute_family is None or same else 2
+        infos = ffi.new("VkDeviceQueueCreateInfo[]", count)
+        families = [(self.queue_family, 2 if same else 1), (self.compute_family, 1)]
+        for info, (family, n) in zip(infos, families[:count], strict=True):
+            info.sType = const("VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO")
+            info.queueFamilyIndex, info.queueCount = family, n
+            info.pQueuePriorities = priorities
+        self._keep.append(priorities)
+        return infos, count
+
+    # -----------------------------------------------------------------------------------------
     # features, extensions, logical device
 
     def _feature_chain(self, structs: list[str]) -> tuple[Any, dict[str, Any]]:
@@ -451,18 +492,13 @@ class VkDevice:
             self.features[struct] = frozenset(on)
         self._feature_keep = (enable, nodes, query, supported)
 
-        priorities = ffi.new("float[1]", [1.0])
-        queue_info = ffi.new("VkDeviceQueueCreateInfo*")
-        queue_info.sType = const("VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO")
-        queue_info.queueFamilyIndex = self.queue_family
-        queue_info.queueCount = 1
-        queue_info.pQueuePriorities = priorities
+        queue_info, queue_count = self._queue_infos()
         ext_names = [ffi.new("char[]", s.encode()) for s in enabled_exts]
         ext_array = ffi.new("char*[]", ext_names)
         info = ffi.new("VkDeviceCreateInfo*")
         info.sType = const("VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO")
         info.pNext = enable
-        info.queueCreateInfoCount, info.pQueueCreateInfos = 1, queue_info
+        info.queueCreateInfoCount, info.pQueueCreateInfos = queue_count, queue_info
         info.enabledExtensionCount, info.ppEnabledExtensionNames = len(ext_names), ext_array
         try:
             self.device = vk.vkCreateDevice(pd, info, None)
@@ -470,6 +506,8 @@ class VkDevice:
             raise VkUnavailableError(f"vkCreateDevice failed on {self.name} "
                                      f"({type(e).__name__})") from None
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
+        self.compute_queue = None if self.compute_family is None else \
+            vk.vkGetDeviceQueue(self.device, self.compute_family, self.compute_index)
         self.extensions = tuple(enabled_exts)
         for ext in enabled_exts:
             for cmd in COMMANDS.get(ext, ()):
@@ -528,6 +566,11 @@ class VkDevice:
                  "descriptor_indexing": "descriptorIndexing" in v12
                  and "runtimeDescriptorArray" in v12,
                  "timeline_semaphore": "timelineSemaphore" in v12,
+                 # async compute (rfw.graph.queues): a second queue, of this family or not
+                 "compute_queue": self.compute_family == self.queue_family
+                 and "timelineSemaphore" in v12,
+                 "compute_family": self.compute_family not in (None, self.queue_family)
+                 and "timelineSemaphore" in v12,
                  "host_query_reset": "hostQueryReset" in v12,
                  "separate_depth_stencil_layouts": "separateDepthStencilLayouts" in v12,
                  "dynamic_rendering": "dynamicRendering" in v13,
