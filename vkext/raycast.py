@@ -116,7 +116,7 @@ HIT_DTYPE = np.dtype([("t", "<f4"), ("primitive", "<i4"), ("instance", "<i4"), (
 # host copies of a cast are split among threads (numpy copies release the GIL): one core
 # cannot fill a wide memory bus, and first touches of fresh output pages fault in parallel
 COPY_THREADS = min(8, os.cpu_count() or 1)
-COPY_SPLIT = 1 << 20  # bytes: smaller copies stay on the calling thread
+COPY_SPLIT = 1 << 18  # bytes: the least a part gets; jobs smaller in all stay on this thread
 _copy_pool: ThreadPoolExecutor | None = None
 _generations = itertools.count(1)
 
@@ -158,21 +158,21 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
 
 def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]], *, cached: bool = True) -> None:
     """``dst[...] = src`` for every (dst, src) pair of arrays of one shape (any layout and
-    real dtype: a source is converted while it is copied), the large ones cut along their
-    first axis into :data:`COPY_THREADS` parts on a thread pool. Without ``cached`` the
-    destinations are written in order only (they may be write-combined memory)."""
+    real dtype: a source is converted while it is copied). Jobs of at least two
+    :data:`COPY_SPLIT` in all go to a thread pool together, each cut along its first axis
+    into up to :data:`COPY_THREADS` parts. Without ``cached`` the destinations are written
+    in order only (they may be write-combined memory)."""
     global _copy_pool
-    parts = []
     copy = _copy if cached else _copy_in_order
-    for dst, src in jobs:
-        pieces = min(COPY_THREADS, dst.nbytes // COPY_SPLIT, len(dst))
-        if pieces < 2:
+    if COPY_THREADS < 2 or sum(dst.nbytes for dst, _ in jobs) < 2 * COPY_SPLIT:
+        for dst, src in jobs:
             copy(dst, src)
-            continue
+        return
+    parts = []
+    for dst, src in jobs:  # small streams too: they copy beside the large ones
+        pieces = max(1, min(COPY_THREADS, dst.nbytes // COPY_SPLIT, len(dst)))
         cuts = np.linspace(0, len(dst), pieces + 1).astype(int)
         parts += [(dst[a:b], src[a:b]) for a, b in itertools.pairwise(cuts)]
-    if not parts:
-        return
     if _copy_pool is None:
         _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
     for done in [_copy_pool.submit(copy, d, s_) for d, s_ in parts]:
