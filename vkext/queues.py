@@ -19,6 +19,7 @@ they are (a pass's begin and end are on its own queue).
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 from rfw.errors import RfwError
@@ -38,6 +39,7 @@ from .consts import const, ffi, lib, vk
 from .device import VkDevice
 from .memory import Buffer, Image
 
+SPAN_ENV = "RFW_VK_FRAME_SPAN"
 # the frame's first graphics batch opens with this (frames in flight: what ran before on
 # the queue is done; the executor's barriers chain after it); compute batches wait for it
 _BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
@@ -46,11 +48,14 @@ _AFTER = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEM
 
 def async_queues(device: VkDevice, plan: CompiledGraph,
                  barriers: tuple[dict[str, list], ...] = ()) -> AsyncQueues | None:
-    """The runner of ``plan``'s submissions, or None when the plan has one queue. The
+    """The runner of ``plan``'s submissions, or None when the plan has one queue (unless
+    ``RFW_VK_FRAME_SPAN=1``: then a one-queue frame is one batch through the runner too, and
+    its GPU span is measured the same way, the baseline ``benchmarks/bench_async.py``
+    compares against). The
     barriers an ownership acquire replaces are taken out of each ``barriers`` dict (pass ->
     its barriers, the executor's)."""
     q = plan.queues
-    if q is None or COMPUTE not in q.queues:
+    if q is None or (COMPUTE not in q.queues and os.environ.get(SPAN_ENV, "0") != "1"):
         return None
     runner = AsyncQueues(device, q)
     for table in barriers:
