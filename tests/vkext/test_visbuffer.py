@@ -12,9 +12,9 @@ Measured on lavapipe (Mesa 25.0.7, LLVM 15), courtyard, 192x108:
   mean signed difference 0.06 levels.
 On the tiny scene mirrored, with normal maps, an alpha-masked cube and an emissive slab
 (``cutout_scene``): depth and coverage identical, normal, material and emissive identical,
-albedo within 0.06 levels. The courtyard's differences are texture filtering: the raster path's implicit lookups take llvmpipe's
-own per-quad derivatives and LOD, the resolve takes explicit gradients (the same quad
-differences, computed on the triangle's plane). The bounds below sit about 2x above these;
+albedo within 0.06 levels. The courtyard's differences are texture filtering: the raster
+path's implicit lookups take llvmpipe's own per-quad derivatives and LOD, the resolve
+explicit gradients (the same quad differences, computed on the triangle's plane). The bounds below sit about 2x above these;
 the negative controls (the resolve given another material, instances moved by 2 cm, its
 outputs shifted by one pixel, mirrored instances' tangents left unflipped; the final image
 at 3 % more exposure, or with shadows) each exceed them.
