@@ -4,12 +4,24 @@ camera a config asks for, and the fields of ``timings.json`` every backend write
 
 ``prepare`` fits each backend's part of the graph to its device (the whole graph on one
 backend, or the per-backend parts of a mixed plan, :func:`rfw.mixed.split`), ``start``
-uploads the scene and makes the executors, and the :class:`Frame` runs them."""
+uploads the scene and makes the executors, and the :class:`Frame` runs them.
+
+**Frames in flight.** An executor submits a frame and returns without waiting for it: up to
+``frames_in_flight()`` frames (default 2, ``RFW_FRAMES_IN_FLIGHT=1`` waits for each, as
+before) run on the GPU while the next ones record. Each has a slot (:class:`InFlight`) with
+its own command buffer, fence, timestamp queries and readback; a frame waits only for the
+frame that last used its slot, and that frame's timings are appended then. Everything that
+reads results (``read``, bridges, ``clear_timings``, ``destroy``, the reports) drains the
+frames in flight first, and ``run(n)`` returns with its frames done (the bench's wall time
+counts that drain), so images and timing samples are what waiting for every frame gave."""
 
 from __future__ import annotations
 
+import os
 import statistics
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,9 +30,86 @@ import numpy as np
 
 from .backend import Backend, Devices, get_backend
 from .config import Built, Config, pass_class
-from .errors import RfwError
+from .errors import RfwError, check_number
 from .graph import CompiledGraph
 from .mixed import MixedPlan, split
+
+FRAMES_IN_FLIGHT_ENV = "RFW_FRAMES_IN_FLIGHT"
+DEFAULT_FRAMES_IN_FLIGHT = 2
+MAX_FRAMES_IN_FLIGHT = 8
+
+
+def frames_in_flight(value: Any = None) -> int:
+    """How many frames an executor keeps in flight: ``value`` when given, else the
+    environment's ``RFW_FRAMES_IN_FLIGHT``, else 2. 1 waits for every frame before the next
+    one records (the same-run baseline); a bad value is one line naming where it came from."""
+    if value is not None:
+        return check_number(value, "frames_in_flight", kind=int, lo=1,
+                            hi=MAX_FRAMES_IN_FLIGHT, element="frames_in_flight")
+    raw = os.environ.get(FRAMES_IN_FLIGHT_ENV, "").strip()
+    if not raw:
+        return DEFAULT_FRAMES_IN_FLIGHT
+    try:
+        number = int(raw, 10)
+    except ValueError:
+        raise RfwError(f"must be a whole number from 1 to {MAX_FRAMES_IN_FLIGHT}, not "
+                       f"{raw!r}", element=FRAMES_IN_FLIGHT_ENV) from None
+    return check_number(number, FRAMES_IN_FLIGHT_ENV, kind=int, lo=1, hi=MAX_FRAMES_IN_FLIGHT,
+                        element=FRAMES_IN_FLIGHT_ENV)
+
+
+class InFlight:
+    """An executor's ring of frame slots and the frames submitted from them, oldest first.
+
+    ``slot(i)`` hands frame ``i`` its slot once the frame that used it last is finished
+    (frames finish in submission order, so every older one is finished first);
+    ``submitted(slot, finish)`` records that ``finish()`` waits for a submitted frame and
+    appends its timings; ``drain()`` finishes every frame in flight."""
+
+    def __init__(self, slots: list[Any]):
+        self.slots = slots
+        self._pending: deque[tuple[Any, Callable[[], None]]] = deque()
+
+    def __len__(self) -> int:
+        return len(self.slots)
+
+    @property
+    def busy(self) -> int:
+        """Frames submitted and not yet finished."""
+        return len(self._pending)
+
+    def slot(self, frame_index: int) -> Any:
+        slot = self.slots[frame_index % len(self.slots)]
+        while any(s is slot for s, _ in self._pending):
+            self._finish_oldest()
+        return slot
+
+    def submitted(self, slot: Any, finish: Callable[[], None]) -> None:
+        self._pending.append((slot, finish))
+
+    def drain(self) -> None:
+        while self._pending:
+            self._finish_oldest()
+
+    def forget(self) -> None:
+        """Drop the frames in flight without their timings (the device is idle or gone)."""
+        self._pending.clear()
+
+    def _finish_oldest(self) -> None:
+        _, finish = self._pending.popleft()
+        finish()
+
+
+def run_frames(executor: Any, frames: int) -> None:
+    """``frames`` frames of ``executor``; the last one also drains the frames in flight, so
+    ``run`` returns with its frames done and a per-frame clock around ``frame()`` (the
+    bench's) counts the drain."""
+    for k in range(frames):
+        executor.drain_after_frame = k == frames - 1
+        try:
+            executor.frame()
+        finally:
+            executor.drain_after_frame = False
 
 
 @dataclass
@@ -114,13 +203,35 @@ class Frame:
         self._devices: Devices | None = None  # devices open_frame made, closed by destroy
 
     def run(self, frames: int = 1) -> None:
+        """``frames`` frames; returns once they are done (the last one drains)."""
         if len(self.executors) == 1 and not self.mixed.bridges:
             for ex in self.executors.values():  # one side: the executor's own frames
                 ex.run(frames)
             self.frame_index += frames
             return
-        for _ in range(frames):
-            self.frame()
+        for k in range(frames):
+            self._drain_after = k == frames - 1
+            try:
+                self.frame()
+            finally:
+                self._drain_after = False
+
+    _drain_after = False  # the last frame of a run drains (inside frame(): the bench's clock)
+
+    def drain(self) -> None:
+        """Wait for every executor's frames in flight (their timings are appended)."""
+        for ex in self.executors.values():
+            drain = getattr(ex, "drain", None)  # an executor without frames in flight waits
+            if drain is not None:
+                drain()
+
+    def set_camera(self, camera: Any) -> None:
+        """Render from ``camera`` from the next frame on: every backend's scene writes it
+        (a host write into memory frames in flight read, so they are drained first)."""
+        self.drain()
+        for sc in self.scenes:
+            sc.camera = camera
+            sc.set_viewport(sc.size)  # the size start() gave it
 
     def frame(self) -> None:
         exs = self.executors
@@ -144,9 +255,12 @@ class Frame:
             timing.bytes = int(data.nbytes)
         for ex in exs.values():
             ex.end_frame()
+        if self._drain_after:
+            self.drain()
         self.frame_index += 1
 
     def clear_timings(self) -> None:
+        self.drain()  # a frame in flight appends its timings when it finishes
         for ex in self.executors.values():
             for t in ex.timings.values():
                 t.gpu_ms.clear()
@@ -155,7 +269,9 @@ class Frame:
             t.cpu_ms.clear()
 
     def read(self, resource: str) -> np.ndarray:
-        """An output (or any resource) from the backend that holds it."""
+        """An output (or any resource) from the backend that holds it, after every frame in
+        flight is done."""
+        self.drain()
         return self.executors[self.mixed.owner[resource]].read(resource)
 
     def pass_timings(self) -> list[dict[str, Any]]:
@@ -173,7 +289,8 @@ class Frame:
         return out
 
     def destroy(self) -> None:
-        """Destroy the executors, then the scenes (then the devices open_frame made)."""
+        """Destroy the executors (each drains first), then the scenes (then the devices
+        open_frame made)."""
         for ex in self.executors.values():
             ex.destroy()
         for sc in reversed(self.scenes):

@@ -24,6 +24,9 @@ from .frame import (
     prepare,
     start,
 )
+from .frame import (
+    frames_in_flight as in_flight_setting,
+)
 from .graph.formats import format_info
 
 # timings.json's fields a backend adds, in this order after the ones every run has
@@ -32,7 +35,8 @@ EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
 
 def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
            device: Any = None, devices: Iterable[Any] = (), backend: str = "wgpu",
-           validation: bool = False, alias: bool = True) -> Result:
+           validation: bool = False, alias: bool = True,
+           frames_in_flight: int | None = None) -> Result:
     """Build, compile and run ``cfg`` on ``backend`` (a name in the ``rfw.backends``
     entry-point group: ``wgpu``, ``vk`` or an installed one); returns images and timings
     (GPU ms from timestamps): the one frame driver of every backend.
@@ -47,11 +51,17 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
 
     A config that pins passes to a backend other than ``backend`` runs on both
     (:mod:`rfw.mixed` plans it): ``backend`` is then the one of unpinned passes, bridges copy
-    resources across through host memory and are timed as passes of their own."""
+    resources across through host memory and are timed as passes of their own.
+
+    ``frames_in_flight`` frames run on the GPU while the next ones record (default
+    ``RFW_FRAMES_IN_FLIGHT``, else 2; 1 waits for every frame: :mod:`rfw.frame`). Images
+    and timing samples are the same either way: the frames are drained before anything is
+    read, and the last timed frame's drain is part of its wall time."""
     run = get_backend(backend, file=cfg.source)
     check_outputs(cfg)
     if frames is not None:
         check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
+    in_flight = in_flight_setting(frames_in_flight)  # a bad value fails before any device work
     devs = Devices((device, *devices), validation=validation)
     frame = None
     try:
@@ -63,10 +73,14 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         scene = load_scene_for(cfg, scene)
         frame = start(mixed, sides, scene=scene, camera=camera_for(cfg, scene), size=cfg.size,
                       alias=alias)
+        for ex in frame.executors.values():  # a backend without frames in flight waits
+            if hasattr(ex, "keep_in_flight") and len(ex.in_flight) != in_flight:
+                ex.keep_in_flight(in_flight)
         n = frames or cfg.frames
         frame.run(warmup)
         frame.clear_timings()
         frame.run(n)
+        frame.drain()  # run() has; said again for what reads results below
         images = {name: frame.read(name) for name in frame.plan.outputs}
         extras = {k: v for s in sides.values()  # e.g. what the frame allocated
                   for k, v in s.backend.collect(frame.executors[s.backend.name]).items()}
@@ -84,6 +98,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
                                                for s in sides.values())))
     if mix:
         timings.update(_bridges(frame, timings["passes"]))
+    timings["frames_in_flight"] = in_flight
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
     return Result(cfg, images, timings, frame if mix else frame.executors[backend])

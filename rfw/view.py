@@ -214,6 +214,7 @@ class Viewer:
                 self.canvas.close()
 
     def report(self) -> None:
+        self.executor.drain()  # frames in flight append their timings once done
         parts = []
         for name, t in self.executor.timings.items():
             recent = t.gpu_ms[-30:] or t.cpu_ms[-30:]

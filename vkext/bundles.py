@@ -280,8 +280,11 @@ class BundleCache:
                         depthAttachmentFormat=depth, stencilAttachmentFormat=stencil,
                         rasterizationSamples=samples)
         inherit = new("VkCommandBufferInheritanceInfo", pNext=rendering)
+        # simultaneous use: frames in flight (vkext.executor) replay a bundle in the next
+        # frame's primary while the last one's is still pending
         info = new("VkCommandBufferBeginInfo",
-                   flags=const("VK_COMMAND_BUFFER_USAGE_RENDER_PASS_CONTINUE_BIT"),
+                   flags=const("VK_COMMAND_BUFFER_USAGE_RENDER_PASS_CONTINUE_BIT")
+                   | const("VK_COMMAND_BUFFER_USAGE_SIMULTANEOUS_USE_BIT"),
                    pInheritanceInfo=inherit)
         vk.vkBeginCommandBuffer(cmd, info)
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ import numpy as np
 from rfw.backends.base import FrameExecutor
 from rfw.context import check_sampler
 from rfw.errors import naming
+from rfw.frame import InFlight, frames_in_flight, run_frames
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
 from rfw.passes import Pass
@@ -40,6 +41,7 @@ from rfw.units import MiB
 from . import poison
 from .bundles import BundleCache, SetCache
 from .commands import (
+    FENCE_TIMEOUT_NS,
     GLOBAL,
     CommandPool,
     ImageBarrier,
@@ -63,9 +65,14 @@ from .device import VkDevice
 from .fitting import check_passes, shader_paths
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
 from .programs import Programs
+from .queues import async_queues
 from .scene import Sampler, VkScene, make_sampler
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
+# with frames in flight a frame opens with this barrier: everything submitted before it
+# (the last frame, still on the GPU) is done and its writes are visible
+FRAME_BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
+FRAME_AFTER = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
 
 
 @dataclass
@@ -73,6 +80,35 @@ class PassTiming:
     name: str
     gpu_ms: list[float] = field(default_factory=list)
     cpu_ms: list[float] = field(default_factory=list)
+
+
+@dataclass(eq=False)
+class FrameSlot:
+    """What one frame in flight owns until it is finished: its command buffer (and pool),
+    timestamp queries, per-frame descriptor sets and uniforms, and its submit's fence."""
+
+    pool: CommandPool
+    cmd: Any
+    timestamps: TimestampPool | None
+    descriptors: FrameDescriptors
+    ring: UniformRing
+    fence: Any = None  # the last submit's, until a wait destroys it
+
+    def destroy(self, device: VkDevice) -> None:
+        if self.fence is not None and device.alive:
+            vk.vkDestroyFence(device.device, self.fence, None)
+        self.fence = None
+        for obj in (self.descriptors, self.timestamps, self.pool):
+            if obj is not None:
+                obj.destroy()
+
+
+def _chained(b: Any) -> Any:
+    # a barrier that waits for nothing (a transient's first use, from UNDEFINED) waits for
+    # its own stages instead: its layout change then chains after the frame's first barrier
+    if b.src.stages or not b.dst.stages:
+        return b
+    return replace(b, src=State(b.src.layout, b.dst.stages, frozenset()))
 
 
 def _runs(slots: list[int]) -> list[tuple[int, int]]:
@@ -137,23 +173,20 @@ class VkExecutor(FrameExecutor):
         self.sets: SetCache | None = None
         self.pool: CommandPool | None = None
         self.timestamps: TimestampPool | None = None
-        self._pin_begin = False
+        # llvmpipe resolves a timestamp when its binned scene is flushed, i.e. at the next
+        # timestamp write: one scratch write per pass pins the begin before the pass's work
+        # (without it compute passes read ~0 ms)
+        self._pin_begin = "timestamp" in device.caps and device.driver_name == "llvmpipe"
+        self.in_flight = InFlight([])
+        self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
+        self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
+        self._frame_barriers = {p: [_chained(b) for b in bs] for p, bs in self._barriers.items()}
+        # async compute: the plan's submissions on two queues (vkext.queues); None: one
+        self.queues = async_queues(device, plan, (self._barriers, self._frame_barriers))
         try:
             self._allocate()
-            self.pool = CommandPool(device, transient=False, label="rfw:frames")
-            self.cmd = self.pool.allocate(1)[0]
-            if "timestamp" in device.caps:
-                # llvmpipe resolves a timestamp when its binned scene is flushed, i.e. at the
-                # next timestamp write: one scratch write per pass pins the begin before the
-                # pass's work (without it compute passes read ~0 ms)
-                self._pin_begin = device.driver_name == "llvmpipe"
-                n = len(plan.order)
-                self.timestamps = TimestampPool(device, max(2, (3 if self._pin_begin else 2) * n),
-                                                label="rfw:timestamps")
             self.programs = Programs(device, scene)
-            self.descriptors = FrameDescriptors(device)
-            self.ring = UniformRing(self.allocator,
-                                    int(device.limits["minUniformBufferOffsetAlignment"]))
+            self.keep_in_flight(frames_in_flight())
             # descriptor sets written once and scene draws recorded once, then replayed
             # (vkext.bundles); RFW_VK_BUNDLES=0 writes and records them every frame: the
             # baseline a benchmark measures against in the same run
@@ -294,11 +327,57 @@ class VkExecutor(FrameExecutor):
         return out
 
     # frames -------------------------------------------------------------------------------
+    def keep_in_flight(self, frames: int) -> None:
+        """Keep up to ``frames`` frames in flight (:func:`rfw.frame.frames_in_flight`): one
+        :class:`FrameSlot` each. Frames in flight now are finished first."""
+        frames = frames_in_flight(frames)
+        self.drain()
+        for slot in self.in_flight.slots:
+            slot.destroy(self.device)
+        self.in_flight = InFlight([])
+        for k in range(frames):
+            self.in_flight.slots.append(self._slot(k))
+
+    def _slot(self, k: int) -> FrameSlot:
+        dev = self.device
+        pool = CommandPool(dev, transient=False, label=f"rfw:frames{k}")
+        slot = FrameSlot(pool, pool.allocate(1)[0], None, FrameDescriptors(dev),
+                         UniformRing(self.allocator,
+                                     int(dev.limits["minUniformBufferOffsetAlignment"])))
+        if "timestamp" in dev.caps:
+            n = len(self.plan.order)
+            slot.timestamps = TimestampPool(dev, max(2, (3 if self._pin_begin else 2) * n),
+                                            label=f"rfw:timestamps{k}")
+        return slot
+
+    def run(self, frames: int = 1) -> None:
+        """``frames`` frames; returns once they are done (the last one drains)."""
+        run_frames(self, frames)
+
+    def drain(self) -> None:
+        """Wait for every frame in flight; their timings are appended, oldest first."""
+        self.in_flight.drain()
+
     # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
     def begin_frame(self) -> None:
         """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded
-        and wait, ``end_frame`` to finish. Descriptors and uniforms live until the next
-        ``begin_frame``."""
+        and wait, ``end_frame`` to submit the rest without waiting. The frame takes the
+        next slot once the frame that used it last is finished; its descriptors and
+        uniforms live until the slot comes round again.
+
+        A frame records while earlier ones run, so what it writes from the host must not
+        be what they read: settings (a pass's ``params``) and the scene it draws are host
+        writes (uniform values, bundles recorded again), so a frame that finds any of them
+        changed first drains the frames in flight. The scene's camera is written by
+        ``set_viewport``: drain before it (``rfw.frame.Frame.set_camera`` does)."""
+        inputs = (self.scene, *(getattr(p, "params", None) for p in self.passes.values()))
+        last, self._inputs = self._inputs, inputs  # objects kept: their ids stay theirs
+        if last is not None and (len(last) != len(inputs) or
+                                 any(a is not b for a, b in zip(last, inputs, strict=False))):
+            self.drain()
+        slot = self._frame_slot = self.in_flight.slot(self.frame_index)
+        self.pool, self.cmd, self.timestamps = slot.pool, slot.cmd, slot.timestamps
+        self.descriptors, self.ring = slot.descriptors, slot.ring
         dev, ts = self.device, self.timestamps
         if self.frame_index:  # ping-pong: last frame's value is this frame's @prev
             for copy, name in self._history:
@@ -323,6 +402,9 @@ class VkExecutor(FrameExecutor):
         before and after, and ``record(ctx)``. A pass without an instance (a bridge's side
         on this device) records its barriers only: the copy itself goes through the host
         (``rfw.frame``), between flushes."""
+        if self.queues is not None:  # async compute: the command buffer of the pass's batch
+            self.cmd = self.queues.command_buffer(name, self._frame_slot, self._frame_resources)
+            self._recording = True
         dev, cmd, ts = self.device, self.cmd, self.timestamps
         if not self._recording:
             vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
@@ -330,11 +412,14 @@ class VkExecutor(FrameExecutor):
             self._recording = True
             if ts is not None and "host_query_reset" not in dev.caps:
                 ts.reset(cmd)
+            if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
+                barrier(cmd, memory_barriers=[(FRAME_BEFORE, FRAME_AFTER)])
         k = self._position[name]
         p = self.passes.get(name)
         try:
             with label(dev, cmd, name):
-                barriers = self._barriers[name]
+                barriers = (self._frame_barriers if len(self.in_flight) > 1
+                            else self._barriers)[name]
                 if self.poison is not None:  # fill what starts its lifetime here first
                     barriers = self.poison.fill(cmd, name, barriers, self._frame_resources)
                 record_barriers(cmd, barriers, self._frame_resources)
@@ -365,39 +450,77 @@ class VkExecutor(FrameExecutor):
 
     def flush(self) -> None:
         """Submit what was recorded since the last flush, wait for it and collect its
-        timestamps. Nothing recorded: nothing happens."""
-        if not self._recording:
+        timestamps (a bridge then copies what it wrote). Nothing recorded: nothing happens."""
+        fence = self._submit()
+        if fence is None:
             return
-        dev, cmd, ts = self.device, self.cmd, self.timestamps
-        self._recording = False
-        try:
-            vk.vkEndCommandBuffer(cmd)
-        except BaseException:
-            self.pool.reset()
-            raise
-        submit(dev, [cmd])
-        if ts is not None and self._pending:
-            order = self.plan.order
-            for first, count in _runs(sorted(self._pending)):
-                ns = ts.results(2 * first, 2 * count)
-                for i in range(count):
-                    name = order[first + i]
-                    ms = max(0, ns[2 * i + 1] - ns[2 * i]) * 1e-6
-                    self._gpu[name] = self._gpu.get(name, 0.0) + ms
+        self._wait(fence)
+        self._collect(self._frame_slot.timestamps, self._pending, self._gpu)
         self._pending = []
 
     def end_frame(self) -> None:
-        """Flush what is left and append the frame's timings of the passes recorded."""
-        self.flush()
-        for name in dict.fromkeys(self._recorded):
-            self.timings[name].cpu_ms.append(self._cpu[name])
-            if self.timestamps is not None:
-                self.timings[name].gpu_ms.append(self._gpu[name])
+        """Submit what is left without waiting: the frame's timings are appended when it
+        is finished (its slot comes round again, or a drain). One frame in flight (or the
+        last frame of ``run``) waits here, as every frame did before frames in flight."""
+        slot = self._frame_slot
+        slot.fence = self._submit()
+        frame = (self._cpu, self._gpu, self._pending, self._recorded)
+        self._pending = []
+        self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
         self.frame_index += 1
+        if len(self.in_flight) == 1 or self.drain_after_frame:
+            self.drain()
+
+    def _submit(self) -> Any:
+        """End the command buffer and submit it: its fence, or None if nothing was recorded."""
+        if not self._recording:
+            return None
+        self._recording = False
+        try:
+            vk.vkEndCommandBuffer(self.cmd)
+        except BaseException:
+            self.pool.reset()
+            raise
+        if self.queues is not None:  # async compute: every batch, with its semaphores
+            return self.queues.submit(self.cmd)
+        return submit(self.device, [self.cmd], wait=False)
+
+    def _wait(self, fence: Any) -> None:
+        dev = self.device.device
+        try:
+            vk.vkWaitForFences(dev, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
+        finally:
+            vk.vkDestroyFence(dev, fence, None)
+
+    def _finish(self, slot: FrameSlot, cpu: dict[str, float], gpu: dict[str, float],
+                pending: list[int], recorded: list[str]) -> None:
+        """Wait for a submitted frame, then append its timings of the passes recorded."""
+        fence, slot.fence = slot.fence, None
+        if fence is not None:
+            self._wait(fence)
+        self._collect(slot.timestamps, pending, gpu)
+        for name in dict.fromkeys(recorded):
+            self.timings[name].cpu_ms.append(cpu[name])
+            if slot.timestamps is not None:
+                self.timings[name].gpu_ms.append(gpu[name])
+
+    def _collect(self, ts: TimestampPool | None, pending: list[int],
+                 gpu: dict[str, float]) -> None:
+        # a finished submit's timestamps, per pass, added to the frame's GPU ms
+        if ts is None or not pending:
+            return
+        order = self.plan.order
+        for first, count in _runs(sorted(pending)):
+            ns = ts.results(2 * first, 2 * count)
+            for i in range(count):
+                name = order[first + i]
+                ms = max(0, ns[2 * i + 1] - ns[2 * i]) * 1e-6
+                gpu[name] = gpu.get(name, 0.0) + ms
 
     def upload(self, resource: str, array: np.ndarray) -> None:
         """Fill an external image from an (H, W, C) array of its texel type; it stays in the
         layout the plan expects at the start of a frame."""
+        self.drain()  # a frame in flight may read it
         start = self._start.get(resource, "UNDEFINED")
         after = start if start != "UNDEFINED" else "SHADER_READ_ONLY_OPTIMAL"
         upload_image(self.device, self.image(resource), array, layout_after=after,
@@ -405,7 +528,8 @@ class VkExecutor(FrameExecutor):
 
     def read(self, resource: str) -> np.ndarray:
         """Read an image back as (H, W, C) in its own texel type (buffers as bytes), left in
-        the state the frame leaves it in."""
+        the state the frame leaves it in, once every frame in flight is done."""
+        self.drain()
         state = self._final.get(resource)
         if resource in self.buffers:
             return read_buffer(self.device, self.buffers[resource], state)
@@ -415,11 +539,23 @@ class VkExecutor(FrameExecutor):
                           layout_after=state if state is not None else None)
 
     def destroy(self) -> None:
-        """Destroy every Vulkan object the executor made (safe to call twice)."""
+        """Destroy every Vulkan object the executor made (safe to call twice); frames in
+        flight are finished first (or dropped, if that fails)."""
+        in_flight = getattr(self, "in_flight", InFlight([]))
+        failed = None
+        try:
+            if self.device.alive:
+                in_flight.drain()
+        except Exception as e:  # destroy everything still, then say what went wrong
+            failed = e
+        in_flight.forget()
         if self.device.alive:
             self.device.wait_idle()
-        for obj in (self.bundles, self.sets, self.programs, self.descriptors, self.timestamps,
-                    self.pool, self.transients, self.allocator):
+        for slot in in_flight.slots:
+            slot.destroy(self.device)
+        in_flight.slots.clear()
+        for obj in (self.bundles, self.sets, self.programs, getattr(self, "queues", None),
+                    self.transients, self.allocator):
             if obj is not None:
                 obj.destroy()
         for smp in self._samplers.values():
@@ -432,3 +568,5 @@ class VkExecutor(FrameExecutor):
         self.bundles = self.sets = None
         self.transients = self.allocator = None
         self.ring = None
+        if failed is not None:
+            raise failed

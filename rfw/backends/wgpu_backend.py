@@ -24,6 +24,7 @@ import wgpu
 
 from ..context import check_sampler
 from ..errors import naming
+from ..frame import InFlight, frames_in_flight, run_frames
 from ..graph import CompiledGraph
 from ..graph.compile import IMPLIED_CAPS, ResourcePlan
 from ..graph.formats import format_info
@@ -731,6 +732,29 @@ def check_caps(passes: dict[str, Pass], caps: frozenset[str]) -> None:
                               "(run it on vk: --backend vk, or backend = \"vk\" on the pass)")
 
 
+@dataclass(eq=False)
+class FrameSlot:
+    """What one frame in flight owns until it is finished: its timestamp query set, the
+    buffer its queries resolve into and the mappable copy of it read when the slot comes
+    round again (without timestamps, a 16-byte copy whose mapping says the frame is done)."""
+
+    query_set: Any
+    resolve: Any
+    readback: Any
+    mapping: Any = None  # the promise of the readback's mapping, after a submit
+
+    def wait(self) -> None:
+        """Wait until the readback is mapped (the submit that wrote it is done)."""
+        mapping, self.mapping = self.mapping, None
+        if mapping is not None:
+            mapping.sync_wait()
+
+    def destroy(self) -> None:
+        for obj in (self.query_set, self.resolve, self.readback):
+            if obj is not None:
+                obj.destroy()
+
+
 class Executor(FrameExecutor):
     """Owns the textures of one compiled graph on one device and records its frames."""
 
@@ -770,14 +794,10 @@ class Executor(FrameExecutor):
         self._packs: dict[tuple[str, str], tuple[tuple, bytes]] = {}  # Settings.pack() kept
         self._allocate()
         self._timestamp_enabled = "timestamp-query" in device.features
-        self._query_set = None
-        if self._timestamp_enabled:
-            n = 2 * len(plan.order) * 4  # up to four GPU passes per rfw pass
-            self._query_set = device.device.create_query_set(type="timestamp", count=n,
-                                                             label="rfw:timestamps")
-            self._query_buffer = device.device.create_buffer(
-                size=8 * n, usage=wgpu.BufferUsage.QUERY_RESOLVE | wgpu.BufferUsage.COPY_SRC,
-                label="rfw:timestamps")
+        self._query_set = None  # the frame's slot's
+        self.in_flight = InFlight([])
+        self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
+        self.keep_in_flight(frames_in_flight())
         check_caps(passes, device.caps)
         for p in passes.values():
             p.setup(self)
@@ -928,9 +948,46 @@ class Executor(FrameExecutor):
         return {"query_set": self._query_set, "beginning_of_pass_write_index": k,
                 "end_of_pass_write_index": k + 1}
 
+    def keep_in_flight(self, frames: int) -> None:
+        """Keep up to ``frames`` frames in flight (:func:`rfw.frame.frames_in_flight`): one
+        :class:`FrameSlot` each. Frames in flight now are finished first."""
+        frames = frames_in_flight(frames)
+        self.drain()
+        for slot in self.in_flight.slots:
+            slot.destroy()
+        self.in_flight = InFlight([self._slot(k) for k in range(frames)])
+
+    def _slot(self, k: int) -> FrameSlot:
+        dev = self.device.device
+        if not self._timestamp_enabled:
+            return FrameSlot(None, None, dev.create_buffer(
+                size=16, usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST,
+                label=f"rfw:frame-done{k}"))
+        n = 2 * len(self.plan.order) * 4  # up to four GPU passes per rfw pass
+        return FrameSlot(
+            dev.create_query_set(type="timestamp", count=n, label=f"rfw:timestamps{k}"),
+            dev.create_buffer(size=8 * n, usage=wgpu.BufferUsage.QUERY_RESOLVE |
+                              wgpu.BufferUsage.COPY_SRC, label=f"rfw:timestamps{k}"),
+            dev.create_buffer(size=8 * n, usage=wgpu.BufferUsage.MAP_READ |
+                              wgpu.BufferUsage.COPY_DST, label=f"rfw:timestamps{k}:read"))
+
+    def run(self, frames: int = 1) -> None:
+        """``frames`` frames; returns once they are done (the last one drains)."""
+        run_frames(self, frames)
+
+    def drain(self) -> None:
+        """Wait for every frame in flight; their timings are appended, oldest first."""
+        self.in_flight.drain()
+
     # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
     def begin_frame(self) -> None:
-        """Start a frame; ``record`` passes into it, ``flush`` to run what was recorded."""
+        """Start a frame; ``record`` passes into it, ``flush`` to run what was recorded and
+        wait for it, ``end_frame`` to submit the rest without waiting. The frame takes the
+        next slot once the frame that used it last is finished. Host writes need no drain
+        here: WebGPU orders ``queue.write_buffer`` before the next submit and keeps what a
+        submitted frame uses alive."""
+        slot = self._frame_slot = self.in_flight.slot(self.frame_index)
+        self._query_set = slot.query_set
         self._encoder: Any = None
         self._next_query = 0
         self._query_owner: list[str] = []
@@ -963,50 +1020,77 @@ class Executor(FrameExecutor):
 
     def flush(self) -> None:
         """Submit what was recorded since the last flush, wait for it and collect its
-        timestamps. Nothing recorded: nothing happens."""
-        encoder = self._encoder
-        if encoder is None:
+        timestamps (a bridge then copies what it wrote). Nothing recorded: nothing happens."""
+        slot, owners = self._frame_slot, self._query_owner
+        if not self._submit(slot):
             return
-        self._encoder = None
-        self._segment += 1
-        if self._timestamp_enabled and self._next_query:
-            encoder.resolve_query_set(self._query_set, 0, self._next_query,
-                                      self._query_buffer, 0)
-        self.device.device.queue.submit([encoder.finish()])
-        gpu = self._read_timestamps()  # also waits for the work to finish
-        if gpu is not None:
-            self._gpu = self._gpu or {}
-            for name, ms in gpu.items():
-                self._gpu[name] = self._gpu.get(name, 0.0) + ms
-        self._next_query = 0
-        self._query_owner = []
+        slot.wait()
+        self._gpu = self._read_timestamps(slot, owners, self._gpu)
 
     def end_frame(self) -> None:
-        """Flush what is left and append the frame's timings of the passes recorded."""
-        self.flush()
+        """Submit what is left without waiting: the frame's timings are appended when it
+        is finished (its slot comes round again, or a drain). One frame in flight (or the
+        last frame of ``run``) waits here, as every frame did before frames in flight."""
+        slot, owners = self._frame_slot, self._query_owner
+        self._submit(slot)
         # bind groups unused last frame and this one name objects no pass binds any more
         if len(self._bind_groups) > 64:
             self._bind_groups = {k: v for k, v in self._bind_groups.items()
                                  if v[2] >= self.frame_index - 1}
-        for name in dict.fromkeys(self._recorded):
-            self.timings[name].cpu_ms.append(self._cpu[name])
-            if self._gpu is not None:
-                self.timings[name].gpu_ms.append(self._gpu.get(name, 0.0))
+        frame = (owners, self._cpu, self._gpu, self._recorded)
+        self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
         self.frame_index += 1
+        if len(self.in_flight) == 1 or self.drain_after_frame:
+            self.drain()
 
-    def _read_timestamps(self) -> dict[str, float] | None:
-        dev = self.device.device
-        if not self._timestamp_enabled or not self._next_query:
-            # read something back so the frame is finished before returning
-            dev.queue.read_buffer(self._fence_buffer())
-            return None
-        raw = np.frombuffer(dev.queue.read_buffer(self._query_buffer, 0,
-                                                  8 * self._next_query), np.uint64)
-        out: dict[str, float] = defaultdict(float)
-        for k, name in enumerate(self._query_owner):
+    def _submit(self, slot: FrameSlot) -> bool:
+        """Submit the open encoder with its queries resolved into ``slot``'s readback (or,
+        without queries, a copy into it) and start mapping that: False if none is open."""
+        encoder = self._encoder
+        if encoder is None:
+            return False
+        self._encoder = None
+        self._segment += 1
+        n = self._next_query
+        if n:
+            encoder.resolve_query_set(slot.query_set, 0, n, slot.resolve, 0)
+            encoder.copy_buffer_to_buffer(slot.resolve, 0, slot.readback, 0, 8 * n)
+        else:
+            encoder.copy_buffer_to_buffer(self._fence_buffer(), 0, slot.readback, 0, 16)
+        queue = self.device.device.queue
+        queue.submit([encoder.finish()])
+        slot.mapping = slot.readback.map_async("READ", 0, max(16, 8 * n))
+        self._next_query = 0
+        self._query_owner = []
+        return True
+
+    def _finish(self, slot: FrameSlot, owners: list[str], cpu: dict[str, float],
+                gpu: dict[str, float] | None, recorded: list[str]) -> None:
+        """Wait for a submitted frame, then append its timings of the passes recorded."""
+        if slot.mapping is not None:
+            slot.wait()
+            gpu = self._read_timestamps(slot, owners, gpu)
+        for name in dict.fromkeys(recorded):
+            self.timings[name].cpu_ms.append(cpu[name])
+            if gpu is not None:
+                self.timings[name].gpu_ms.append(gpu.get(name, 0.0))
+
+    def _read_timestamps(self, slot: FrameSlot, owners: list[str],
+                         gpu: dict[str, float] | None) -> dict[str, float] | None:
+        """A finished submit's timestamps (mapped in ``slot``), per pass, added to the
+        frame's GPU ms (None while no pass of the frame was timed); unmaps the readback."""
+        try:
+            if not owners:
+                return gpu
+            raw = np.frombuffer(slot.readback.read_mapped(0, 16 * len(owners)), np.uint64)
+        finally:
+            slot.readback.unmap()
+        gpu = {} if gpu is None else gpu
+        for k, name in enumerate(owners):
             begin, end = int(raw[2 * k]), int(raw[2 * k + 1])
-            out[name] += max(0, end - begin) * self.device.timestamp_period * 1e-6
-        return out
+            gpu[name] = gpu.get(name, 0.0) + max(0, end - begin) * \
+                self.device.timestamp_period * 1e-6
+        return gpu
 
     def _fence_buffer(self) -> Any:
         buf = getattr(self, "_fence", None)
@@ -1025,7 +1109,9 @@ class Executor(FrameExecutor):
             data, {"bytes_per_row": data.nbytes // r.height}, (r.width, r.height, 1))
 
     def read(self, resource: str) -> np.ndarray:
-        """Read an image back as (H, W, C) numpy array in its own texel type."""
+        """Read an image back as (H, W, C) numpy array in its own texel type, once every
+        frame in flight is done."""
+        self.drain()
         r = self.plan.resource(resource)
         info = format_info(r.format)
         tex = self.texture(resource)
@@ -1040,6 +1126,17 @@ class Executor(FrameExecutor):
         return arr.reshape(r.height, r.width, -1)
 
     def destroy(self) -> None:
+        """Destroy what the executor made; frames in flight are finished first (or
+        dropped, if that fails)."""
+        failed = None
+        try:
+            self.drain()
+        except Exception as e:  # destroy everything still, then say what went wrong
+            failed = e
+        self.in_flight.forget()
+        for slot in self.in_flight.slots:
+            slot.destroy()
+        self.in_flight.slots.clear()
         for t in self._textures.values():
             t.destroy()
         self._textures.clear()
@@ -1055,6 +1152,6 @@ class Executor(FrameExecutor):
         self._written.clear()
         self._packs.clear()
         self._samplers.clear()
-        if self._query_set is not None:
-            self._query_set.destroy()
-            self._query_buffer.destroy()
+        self._query_set = None
+        if failed is not None:
+            raise failed

@@ -1,0 +1,138 @@
+"""Frames in flight (rfw.frame.InFlight): on wgpu and vk, K = 1, 2 and 3 frames in flight give
+the same images, bit for bit, and one timing sample per pass and frame; with K > 1 frames do
+overlap (a frame is submitted while the last one is still pending); the last timed frame
+drains inside its own frame() call, so the bench's per-frame wall clock counts the drain; a
+bad RFW_FRAMES_IN_FLIGHT is one line and exit 2 through the CLI."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rfw.backends.base import FrameExecutor
+from rfw.config import apply_overrides, load_config
+from rfw.errors import RfwError
+from rfw.frame import InFlight, frames_in_flight
+from rfw.render import render
+
+from .conftest import tiny_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+FRAMES = 4
+
+
+def _config(name: str = "deferred", size: str = "96x54"):
+    return apply_overrides(load_config(ROOT / "configs" / f"{name}.toml"),
+                           ["shadow.enabled=true", f"size={size}"])
+
+
+@pytest.fixture
+def overlap(monkeypatch):
+    """The most frames ever in flight at once, per run (InFlight.submitted counted)."""
+    seen: list[int] = []
+    submitted = InFlight.submitted
+
+    def counted(self, slot, finish):
+        submitted(self, slot, finish)
+        seen.append(self.busy)
+
+    monkeypatch.setattr(InFlight, "submitted", counted)
+    return seen
+
+
+@pytest.mark.parametrize("backend", ["wgpu", "vk"])
+def test_images_and_samples_equal_for_one_two_and_three_frames_in_flight(backend, overlap):
+    runs = {}
+    for k in (1, 2, 3):
+        overlap.clear()
+        result = render(_config(), scene=tiny_scene(), frames=FRAMES, backend=backend,
+                        frames_in_flight=k)
+        runs[k] = result
+        assert result.timings["frames_in_flight"] == k
+        # K = 1 never has two frames pending; K > 1 submits while the last is pending
+        assert max(overlap) == k
+        for name, t in result.executor.timings.items():
+            assert len(t.cpu_ms) == FRAMES, name
+            assert len(t.gpu_ms) == (FRAMES if result.timings["timestamps"] else 0), name
+    images = {k: r.images["tonemap.ldr"] for k, r in runs.items()}
+    assert images[1][..., :3].std() > 10  # a picture, not a cleared target
+    assert np.array_equal(images[1], images[2]) and np.array_equal(images[1], images[3])
+
+
+def test_a_different_state_gives_a_different_image():
+    # negative control of the equality above: the same run with another setting differs
+    a = render(_config(), scene=tiny_scene(), frames=2, frames_in_flight=2)
+    b = render(apply_overrides(_config(), ["tonemap.exposure=1.5"]), scene=tiny_scene(),
+               frames=2, frames_in_flight=2)
+    assert not np.array_equal(a.images["tonemap.ldr"], b.images["tonemap.ldr"])
+
+
+@pytest.mark.parametrize("backend", ["wgpu", "vk"])
+def test_the_last_timed_frame_drains_inside_its_frame_call(backend, monkeypatch):
+    """What the bench's FrameClock times (FrameExecutor.frame) includes the final drain:
+    when the last frame() returns, nothing is in flight and every frame's timings are in."""
+    after: list[tuple[int, int]] = []  # (frames in flight, cpu samples of one pass)
+    frame = FrameExecutor.frame
+
+    def timed(self):
+        frame(self)
+        after.append((self.in_flight.busy, len(next(iter(self.timings.values())).cpu_ms)))
+
+    monkeypatch.setattr(FrameExecutor, "frame", timed)
+    render(_config(), scene=tiny_scene(), frames=FRAMES, warmup=2, backend=backend,
+           frames_in_flight=2)
+    warmup, timed_frames = after[:2], after[2:]
+    # frames overlap inside a run: a frame returns with itself and the one before in flight
+    assert [busy for busy, _ in timed_frames[:-1]] == [1] + [2] * (FRAMES - 2)
+    assert warmup[0][0] == 1
+    # ... and the last frame of each run returns with everything finished and counted
+    assert warmup[-1] == (0, 2)
+    assert timed_frames[-1] == (0, FRAMES)
+
+
+def test_frames_in_flight_setting(monkeypatch):
+    monkeypatch.delenv("RFW_FRAMES_IN_FLIGHT", raising=False)
+    assert frames_in_flight() == 2
+    monkeypatch.setenv("RFW_FRAMES_IN_FLIGHT", " 3 ")
+    assert frames_in_flight() == 3
+    assert frames_in_flight(1) == 1  # an explicit value wins
+    for bad in ("0", "9", "two", "1.5", "-1"):
+        monkeypatch.setenv("RFW_FRAMES_IN_FLIGHT", bad)
+        with pytest.raises(RfwError, match="RFW_FRAMES_IN_FLIGHT"):
+            frames_in_flight()
+    for bad in (0, 9, 2.0, True, "2"):
+        with pytest.raises(RfwError, match="frames_in_flight"):
+            frames_in_flight(bad)
+
+
+def _rfw_run(tmp_path: Path, value: str | None) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in __import__("os").environ.items() if k != "RFW_FRAMES_IN_FLIGHT"}
+    if value is not None:
+        env["RFW_FRAMES_IN_FLIGHT"] = value
+    return subprocess.run(
+        [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" / "flat.toml"),
+         "--size", "32x18", "--frames", "2", "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, env=env, timeout=600)
+
+
+@pytest.mark.parametrize("value", ["0", "many", "100"])
+def test_a_bad_value_is_one_line_and_exit_2_through_the_cli(tmp_path, value):
+    run = _rfw_run(tmp_path, value)
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rfw: error: RFW_FRAMES_IN_FLIGHT: ")
+    assert "Traceback" not in run.stderr and not (tmp_path / "out" / "timings.json").exists()
+
+
+def test_a_good_value_runs_through_the_cli(tmp_path):
+    # negative control of the refusals: the same command with a valid value renders
+    run = _rfw_run(tmp_path, "3")
+    assert run.returncode == 0, run.stderr
+    import json
+
+    timings = json.loads((tmp_path / "out" / "timings.json").read_text())
+    assert timings["frames_in_flight"] == 3 and timings["frames"] == 2
