@@ -44,21 +44,22 @@ class VisResolvePass(ComputePass):
     }
 
     def setup(self, ex) -> None:
-        """The scene's mesh, instance and material tables (host-visible storage buffers)."""
+        """The scene's mesh, instance and material tables (host-visible storage buffers),
+        and what every dispatch binds besides them (fixed while the scene is)."""
         self.tables = None
         if ex.scene is None:
             return
-        self.tables = {name: _buffer(ex, f"{self.name}:{name}", data)
-                       for name, data in scene_tables(ex.scene).items()}
+        scene = ex.scene
+        tables = {name: _buffer(ex, f"{self.name}:{name}", data)
+                  for name, data in scene_tables(scene).items()}
+        textures, samplers = texture_lists(scene)
+        self.defines = {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers),
+                        "TRIANGLE_BITS": triangle_bits(scene.scene)}
+        self.tables = {**tables, "textures": textures, "samplers": samplers}
 
     def record(self, ctx) -> None:
-        scene = ctx.scene
-        textures, samplers = texture_lists(scene)
-        ctx.dispatch(threads=ctx.extent("albedo"),
-                     defines={"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers),
-                              "TRIANGLE_BITS": triangle_bits(scene.scene)},
+        ctx.dispatch(threads=ctx.extent("albedo"), defines=self.defines,
                      t_ids=ctx.sampled("ids"), t_depth=ctx.sampled("depth"),
-                     textures=textures, samplers=samplers,
                      o_albedo=ctx.storage("albedo"), o_normal=ctx.storage("normal"),
                      o_material=ctx.storage("material"), o_emissive=ctx.storage("emissive"),
                      **self.tables)

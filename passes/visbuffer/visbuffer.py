@@ -28,10 +28,15 @@ class VisBufferPass(RenderPass):
         "depth": DepthAttachment("depth32float", desc="0 near, 1 far"),
     }
 
+    def setup(self, ex) -> None:
+        # fixed while the scene is: the split of the id's bits
+        self.defines = {} if ex.scene is None else \
+            {"TRIANGLE_BITS": triangle_bits(ex.scene.scene)}
+
     def record(self, ctx) -> None:
         # less-equal as the gbuffer pass draws: equal depths resolve to the same surface
         ctx.draw_scene(color=[("ids", None)], depth=("depth", 1.0), depth_compare="less-equal",
-                       defines={"TRIANGLE_BITS": triangle_bits(ctx.scene.scene)})
+                       defines=self.defines)
 
 
 def triangle_bits(scene) -> int:
