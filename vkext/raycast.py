@@ -159,24 +159,37 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
 def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]], *, cached: bool = True) -> None:
     """``dst[...] = src`` for every (dst, src) pair of arrays of one shape (any layout and
     real dtype: a source is converted while it is copied). Jobs of at least two
-    :data:`COPY_SPLIT` in all go to a thread pool together, each cut along its first axis
-    into up to :data:`COPY_THREADS` parts. Without ``cached`` the destinations are written
-    in order only (they may be write-combined memory)."""
+    :data:`COPY_SPLIT` in all are cut along their first axis into parts of at least that,
+    and the parts shared among up to :data:`COPY_THREADS` tasks of about equal bytes on a
+    thread pool (one task per thread: a task costs more Python than a part). Without
+    ``cached`` the destinations are written in order only (they may be write-combined
+    memory)."""
     global _copy_pool
     copy = _copy if cached else _copy_in_order
-    if COPY_THREADS < 2 or sum(dst.nbytes for dst, _ in jobs) < 2 * COPY_SPLIT:
+    total = sum(dst.nbytes for dst, _ in jobs)
+    if COPY_THREADS < 2 or total < 2 * COPY_SPLIT:
         for dst, src in jobs:
             copy(dst, src)
         return
-    parts = []
+    tasks: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(COPY_THREADS)]
+    load = [0] * COPY_THREADS
     for dst, src in jobs:  # small streams too: they copy beside the large ones
-        pieces = max(1, min(COPY_THREADS, dst.nbytes // COPY_SPLIT, len(dst)))
-        cuts = np.linspace(0, len(dst), pieces + 1).astype(int)
-        parts += [(dst[a:b], src[a:b]) for a, b in itertools.pairwise(cuts)]
+        n = len(dst)
+        pieces = max(1, min(COPY_THREADS, dst.nbytes // COPY_SPLIT, n))
+        for i in range(pieces):
+            a, b = n * i // pieces, n * (i + 1) // pieces
+            least = load.index(min(load))
+            tasks[least].append((dst[a:b], src[a:b]))
+            load[least] += dst[a:b].nbytes
     if _copy_pool is None:
         _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
-    for done in [_copy_pool.submit(copy, d, s_) for d, s_ in parts]:
+    for done in [_copy_pool.submit(_copy_parts, copy, t) for t in tasks if t]:
         done.result()
+
+
+def _copy_parts(copy: Any, parts: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    for dst, src in parts:
+        copy(dst, src)
 
 
 def _copy(dst: np.ndarray, src: np.ndarray) -> None:

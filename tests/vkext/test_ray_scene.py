@@ -291,11 +291,12 @@ def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
     t_max = np.full(len(o), 50.0)
     with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
         whole, whole_arrays = scene.cast(o, d), scene.cast(o, d, t_max=t_max)
-        parts = []
+        parts, tasks = [], []
 
         class Counting(ThreadPoolExecutor):
-            def submit(self, fn, *args):
-                parts.append(args[0].nbytes)
+            def submit(self, fn, *args):  # fn(copy, parts): a task copies a list of parts
+                tasks.append(len(args[1]))
+                parts.extend(dst.nbytes for dst, _ in args[1])
                 return super().submit(fn, *args)
 
         pool = Counting(3)
@@ -304,10 +305,11 @@ def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
         monkeypatch.setattr(rc, "COPY_SPLIT", 1024)
         try:
             _same(scene.cast(o, d), whole)
-            # rays: 2 streams, hits: 3 (no instance), 3 parts each, of uneven sizes
-            assert len(parts) == 5 * 3 and len(set(parts)) > 1
+            # rays: 2 streams, hits: 3 (no instance), 3 parts each, of uneven sizes, in 3
+            # tasks per copy (one batch: one copy in, one out)
+            assert len(parts) == 5 * 3 and len(set(parts)) > 1 and len(tasks) == 2 * 3
             _same(scene.cast(o, d, t_max=t_max), whole_arrays)
-            assert len(parts) == 5 * 3 + 7 * 3
+            assert len(parts) == 5 * 3 + 7 * 3 and len(tasks) == 4 * 3
         finally:
             pool.shutdown()
 
