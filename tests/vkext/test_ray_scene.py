@@ -516,3 +516,20 @@ def test_a_cast_like_the_last_records_nothing(vk_device):
         assert caster.recorded == recorded + 8
         _same(scene.cast(o[:150], d[:150]), {k: a[:150] for k, a in first.items()})
         assert caster.recorded == recorded + 8 + 1  # batch 1 of 2 has fewer rays
+
+
+@pytest.mark.parametrize("placement", ["staged", "mapped"])
+def test_mapped_batches_copy_nothing(vk_device, monkeypatch, placement):
+    """A mapped batch records no copy (the trace reads and writes the host's memory); a
+    staged one records one copy out per batch (the control that the count sees them)."""
+    from vkext import raycast as rc
+
+    copies = []
+    copy_to_host = rc.copy_to_host
+    monkeypatch.setattr(rc, "copy_to_host", lambda *a, **k: (copies.append(1),
+                                                              copy_to_host(*a, **k)))
+    _placed(monkeypatch, placement)
+    o, d = _rays()
+    with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=97) as scene:
+        assert np.isfinite(scene.cast(o, d)["t"]).all()
+    assert len(copies) == (4 if placement == "staged" else 0)
