@@ -18,7 +18,7 @@ Per scene (the embedded courtyard, and the fetched ``dragon``/``city`` where pre
    CPU cores (one process per core, each with its own BVH, hits into shared memory), all in
    the same run; hit-or-miss agreement with Embree beside them. Each ray placement
    (``staged``: copies on the GPU; ``mapped``: the trace reads and writes host-visible
-   memory) casts into new arrays, into reused ``out=`` arrays, and in one submit, and a
+   memory; ``rays mapped`` or ``hits mapped``: one stream so) casts into new arrays, into reused ``out=`` arrays, and in one submit, and a
    second table says where each cast's wall time went (``Raycaster.last``: the host's
    upload, submit, wait and readback, the rest, and the GPU's copies and trace).
 4. **Shadows in the frame**: ``configs/rt_shadows.toml`` with the shadow map, ray-query and
@@ -369,7 +369,8 @@ def embree_one_thread(v, f, o, d, repeats):
 # then the GPU's (timestamps); "other" is the wall time outside them (checks, result arrays)
 HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
 GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
-PLACEMENTS = ("staged", "mapped")
+# RFW_RAYCAST_MAPPED per placement (vkext.raycast.mapped_streams)
+PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits"}
 
 
 def _casts(rs, o, d, repeats, out=None):
@@ -404,7 +405,8 @@ def _one_submit(rs, o, d, repeats, out):
 
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
     """Per method and ray placement (staged through copies, or mapped: the trace reads and
-    writes host-visible memory; RFW_RAYCAST_MAPPED picks it): RayScene build, then casts
+    writes host-visible memory, for both streams or one; RFW_RAYCAST_MAPPED picks it):
+    RayScene build, then casts
     (wall: what the caller waits for, and its parts; GPU: the trace alone), casts into
     reused ``out=`` arrays, and the one-shot rfw.raycast's wall; hit-or-miss agreement with
     Embree's ``ref_t``. Every placement's hits must equal the first one's bit for bit."""
@@ -415,7 +417,7 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
     for method, placement in itertools.product(METHODS, PLACEMENTS):
         t0 = time.perf_counter()
         saved = os.environ.get("RFW_RAYCAST_MAPPED")
-        os.environ["RFW_RAYCAST_MAPPED"] = "1" if placement == "mapped" else "0"
+        os.environ["RFW_RAYCAST_MAPPED"] = PLACEMENTS[placement]
         try:
             rs = rfw.RayScene.from_scene(scene, device=device, method=method)
         except RfwError as e:  # the device lacks the method: say so

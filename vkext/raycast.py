@@ -22,19 +22,19 @@ naming the argument and the first bad row.
 Rays go through in batches of at most ``batch`` rays (a large cast in at least
 :data:`OVERLAP_PARTS`), :data:`SLOTS` in flight, so the host fills one batch's rays and
 reads another's hits while the GPU works; memory stays bounded for any ray count. Where
-the buffers live (:func:`mapped_streams`): on a discrete GPU, per batch one submit copies
-the rays from a staging buffer to device-local memory, traces, and copies the hits back
-(about 160 bytes a ray of the batch, staging included); where memory is device-local and
-host-cached at once (lavapipe, integrated GPUs) the trace reads and writes mapped buffers,
-one pair per slot, and nothing is copied. Timestamps around each copy and each trace give
+the buffers live (:func:`mapped_streams`, per stream): on a discrete GPU, per batch one
+submit copies the rays from a staging buffer to device-local memory, traces, and copies the
+hits back (about 160 bytes a ray of the batch, staging included); where memory is
+device-local and host-cached at once (lavapipe, integrated GPUs) the trace reads and writes
+mapped buffers, one pair per slot, and nothing is copied. Timestamps around each copy and each trace give
 ``last``'s GPU parts, read once after the last batch; ``last`` also has the host's.
 
 A batch is a tiny frame graph (:func:`batch_graph`: copy the rays in, trace, copy the hits
 out), compiled once; its barriers are recorded by ``vkext.accel.plan.PlanRecorder``, as the
 acceleration-structure builds record theirs. Both buffers persist from batch to batch, so
 the plan also orders a batch's copy of the rays after the last batch's trace read them, and
-its trace after the last batch's hits were copied out. A mapped batch has no copies: two
-barriers order its trace after earlier work and its hits before the host reads them.
+its trace after the last batch's hits were copied out. A mapped stream skips its copy; two
+more barriers order the trace after earlier work and mapped hits before the host reads them.
 """
 
 from __future__ import annotations
@@ -223,18 +223,26 @@ def _type_bits(device: VkDevice, names: list[str]) -> int:
                if props & need == need)
 
 
-def mapped_streams(device: VkDevice) -> bool:
-    """Whether casts on ``device`` map rays and hits (:class:`RayBuffers`) rather than
-    stage them: ``RFW_RAYCAST_MAPPED=1`` or ``0`` says so; unset (or ``auto``), where
-    memory is device-local, host-visible and host-cached at once (unified memory: no copy
-    is worth making). A discrete GPU stages, its host copies overlapping the traces."""
+# RFW_RAYCAST_MAPPED: which streams the trace reads and writes in mapped memory
+PLACEMENTS = {"0": (False, False), "1": (True, True), "rays": (True, False),
+              "hits": (False, True)}
+
+
+def mapped_streams(device: VkDevice) -> tuple[bool, bool]:
+    """Whether casts on ``device`` map (rays, hits) rather than stage them (see
+    :class:`RayBuffers`). ``RFW_RAYCAST_MAPPED`` says so: ``0`` (neither), ``1`` (both),
+    ``rays`` or ``hits``; unset (or ``auto``) both where memory is device-local,
+    host-visible and host-cached at once (unified memory: no copy is worth making), else
+    neither: a discrete GPU stages, its host copies overlapping the traces."""
     value = os.environ.get("RFW_RAYCAST_MAPPED", "auto")
-    if value not in ("0", "1", "auto"):
-        raise RfwError(f"RFW_RAYCAST_MAPPED is 0, 1 or auto, not {value!r}",
-                       element="vkext.raycast")
+    if value != "auto" and value not in PLACEMENTS:
+        raise RfwError(f"RFW_RAYCAST_MAPPED is {', '.join(PLACEMENTS)} or auto, not "
+                       f"{value!r}", element="vkext.raycast")
     if value != "auto":
-        return value == "1"
-    return bool(_type_bits(device, [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT, HOST_CACHED]))
+        return PLACEMENTS[value]
+    unified = bool(_type_bits(device, [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT,
+                                       HOST_CACHED]))
+    return unified, unified
 
 
 def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,
@@ -287,15 +295,16 @@ def _check_traced(t: np.ndarray, primitive: np.ndarray) -> None:
 
 
 class RayBuffers:
-    """The rays and hits of one batch, placed one of two ways (``mapped``, see
-    :func:`mapped_streams`):
+    """The rays and hits of one batch, each stream placed one of two ways (``mapped``:
+    (rays, hits), by default :func:`mapped_streams`):
 
-    - staged: device-local buffers ``<label>.rays`` and ``<label>.hits`` that the trace
-      reads and writes, and :data:`SLOTS` pairs of staging buffers (one per batch in flight)
-      the host fills and reads, copied on the GPU;
-    - mapped: :data:`SLOTS` pairs of host-visible buffers that the trace itself reads and
-      writes (no copies): on unified memory (lavapipe, integrated GPUs) the host then works
-      at memory speed.
+    - staged: a device-local buffer (``<label>.rays``, ``<label>.hits``) that the trace
+      reads or writes, and :data:`SLOTS` staging buffers (one per batch in flight) the host
+      fills or reads, copied on the GPU;
+    - mapped: :data:`SLOTS` host-visible buffers that the trace itself reads or writes (no
+      copy): on unified memory (lavapipe, integrated GPUs) the host then works at memory
+      speed; on a discrete GPU the rays go to device-local host-visible memory (a BAR) and
+      the hits to host-cached memory, across the bus.
 
     ``up[slot]`` and ``down[slot]`` are what the host writes and reads either way, and
     ``sets[slot]`` the descriptor set binding the slot's buffers with a TLAS.
@@ -303,9 +312,10 @@ class RayBuffers:
     were made) and never shrinks them."""
 
     def __init__(self, caster: Raycaster, tlas: Any, *, label: str = "raycast",
-                 mapped: bool | None = None):
+                 mapped: tuple[bool, bool] | None = None):
         self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
-        self.mapped = mapped_streams(self.device) if mapped is None else bool(mapped)
+        self.mapped_rays, self.mapped_hits = \
+            mapped_streams(self.device) if mapped is None else mapped
         self.capacity = self.allocations = 0
         self.generation = 0  # new buffers, new number: commands recorded for old ones expire
         self.up_cached = True  # whether the host writes rays into host-cached memory
@@ -320,10 +330,7 @@ class RayBuffers:
             return
         self._free()
         try:
-            if self.mapped:
-                self._make_mapped(rays)
-            else:
-                self._make_staged(rays)
+            self._make(rays)
         except BaseException:
             self._free()
             raise
@@ -332,30 +339,40 @@ class RayBuffers:
         self.generation = next(_generations)
         self.up_cached = bool(self.up[0].memory.properties & flags_of([HOST_CACHED]))
 
-    def _make_staged(self, rays: int) -> None:
+    def _make(self, rays: int) -> None:
         dev, label = self.device, self.label
-        self.rays = self._keep(Buffer(dev, rays * RAY_WORDS * 4, ("storage", "transfer_dst"),
-                                      label=f"{label}.rays"))
-        self.rays.allocate()
-        self.hits = self._keep(Buffer(dev, rays * HIT_WORDS * 4, ("storage", "transfer_src"),
-                                      label=f"{label}.hits"))
-        self.hits.allocate()
+        size = {"rays": rays * RAY_WORDS * 4, "hits": rays * HIT_WORDS * 4}
+        if not self.mapped_rays:
+            self.rays = self._keep(Buffer(dev, size["rays"], ("storage", "transfer_dst"),
+                                          label=f"{label}.rays"))
+            self.rays.allocate()
+        if not self.mapped_hits:
+            self.hits = self._keep(Buffer(dev, size["hits"], ("storage", "transfer_src"),
+                                          label=f"{label}.hits"))
+            self.hits.allocate()
         for slot in range(SLOTS):
-            # host-cached where there is such memory (readback=True prefers it): a
-            # converting copy writes partial lines, slow in write-combined memory
-            self.up.append(self._keep(staging_buffer(
-                dev, self.rays.bytes, readback=True, label=f"{label}:rays upload {slot}")))
-            self.down.append(self._keep(staging_buffer(
-                dev, self.hits.bytes, readback=True, label=f"{label}:hits readback {slot}")))
-        self.sets = [self._binding_set(self.rays, self.hits, "")] * SLOTS
+            # staging is host-cached where there is such memory (readback=True prefers it):
+            # a converting copy writes partial lines, slow in write-combined memory
+            self.up.append(
+                self._mapped(size["rays"], readback=False, name=f"rays {slot}")
+                if self.mapped_rays else self._keep(staging_buffer(
+                    dev, size["rays"], readback=True, label=f"{label}:rays upload {slot}")))
+            self.down.append(
+                self._mapped(size["hits"], readback=True, name=f"hits {slot}")
+                if self.mapped_hits else self._keep(staging_buffer(
+                    dev, size["hits"], readback=True, label=f"{label}:hits readback {slot}")))
+            if slot == 0 or self.mapped_rays or self.mapped_hits:
+                self.sets.append(self._binding_set(
+                    self.up[slot] if self.mapped_rays else self.rays,
+                    self.down[slot] if self.mapped_hits else self.hits, f" {slot}"))
+            else:  # both staged: the slots share the device buffers and their set
+                self.sets.append(self.sets[0])
 
-    def _make_mapped(self, rays: int) -> None:
-        for slot in range(SLOTS):
-            up = self._mapped(rays * RAY_WORDS * 4, readback=False, name=f"rays {slot}")
-            down = self._mapped(rays * HIT_WORDS * 4, readback=True, name=f"hits {slot}")
-            self.up.append(up)
-            self.down.append(down)
-            self.sets.append(self._binding_set(up, down, f" {slot}"))
+    @property
+    def placement(self) -> str:
+        """``staged``, ``mapped`` (both streams) or which one is mapped."""
+        return {(False, False): "staged", (True, True): "mapped", (True, False): "rays mapped",
+                (False, True): "hits mapped"}[(self.mapped_rays, self.mapped_hits)]
 
     def _mapped(self, size: int, *, readback: bool, name: str) -> Buffer:
         """A storage buffer in host-visible memory, device-local where it can be."""
@@ -631,25 +648,25 @@ class Raycaster:
         # timestamps between the passes time the copies and the trace apart
         if self.timer is not None:
             vk.vkCmdResetQueryPool(cmd, self.timer.handle, first, STAMPS)
-        mapped = buffers.mapped
-        if mapped:  # no copies: the last batch's accesses, then the trace (stamps 0, 1 meet)
-            barrier(cmd, memory_barriers=[(EARLIER_WRITES, self._trace_state())])
-        else:
-            plan.enter(cmd, "rays")
+        # a mapped stream skips its copy (its stamps meet) and its buffer is the slot's own:
+        # the trace waits for every earlier write, and the host reads mapped hits
+        plan.enter(cmd, "rays")
         self._stamp(cmd, first)
-        if not mapped:
+        if not buffers.mapped_rays:
             copy = ffi.new("VkBufferCopy*")
             copy.size = size
             lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
-            plan.enter(cmd, "trace")
+        plan.enter(cmd, "trace")
+        if buffers.mapped_rays or buffers.mapped_hits:
+            barrier(cmd, memory_barriers=[(EARLIER_WRITES, self._trace_state())])
         self._stamp(cmd, first + 1)
         self._record(cmd, buffers.sets[slot], sbt, k, per_ray,
                      0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
         self._stamp(cmd, first + 2)
-        if mapped:  # the hits, written where the host reads them
+        plan.enter(cmd, "hits")
+        if buffers.mapped_hits:
             barrier(cmd, memory_barriers=[(self._trace_state(), HOST_READ)])
         else:
-            plan.enter(cmd, "hits")
             copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
         self._stamp(cmd, first + 3)
 

@@ -345,11 +345,14 @@ def test_parallel_copy_converts_any_layout(cached):
         assert not np.array_equal(dst, src.astype(np.float16))  # control: rounding shows
 
 
+PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits"}
+
+
 def _placed(monkeypatch, placement: str) -> None:
-    monkeypatch.setenv("RFW_RAYCAST_MAPPED", {"staged": "0", "mapped": "1"}[placement])
+    monkeypatch.setenv("RFW_RAYCAST_MAPPED", PLACEMENTS[placement])
 
 
-@pytest.mark.parametrize("placement", ["staged", "mapped"])
+@pytest.mark.parametrize("placement", list(PLACEMENTS))
 @pytest.mark.parametrize("method", METHODS)
 def test_repeated_casts_of_changing_sizes(vk_device, monkeypatch, counts, method, placement):
     """One scene casts 300, 3000, 40, 3000, 12000 and 300 rays (batch 4096: the largest in
@@ -364,7 +367,7 @@ def test_repeated_casts_of_changing_sizes(vk_device, monkeypatch, counts, method
     ref = rfw.raycast(v, mesh.faces, o, d, device=vk_device, method=method)
     _placed(monkeypatch, placement)
     with rfw.RayScene(v, mesh.faces, device=vk_device, method=method, batch=4096) as scene:
-        assert scene._scene.buffers.mapped is (placement == "mapped")
+        assert scene._scene.buffers.placement == placement
         made = []
         for n in (300, 3000, 40, 3000, 12000, 300):
             got = scene.cast(o[:n], d[:n])
@@ -378,19 +381,20 @@ def test_repeated_casts_of_changing_sizes(vk_device, monkeypatch, counts, method
 
 def test_staged_and_mapped_give_the_same_hits(vk_device, monkeypatch):
     """On the courtyard (every instance), casts through copies and through mapped memory
-    agree bit for bit; per-ray intervals go through both too."""
+    (both streams or one) agree bit for bit; per-ray intervals go through all too."""
     scene = default_scene()
     v, _, _ = flatten(scene)
     o, d = _rays_around(v, 7000, seed=31)
     t_max = np.random.default_rng(3).uniform(1.0, 40.0, len(o))
     got = {}
-    for placement in ("staged", "mapped"):
+    for placement in PLACEMENTS:
         _placed(monkeypatch, placement)
         with rfw.RayScene.from_scene(scene, device=vk_device, batch=3000) as rs:
             got[placement] = (rs.cast(o, d), rs.cast(o, d, t_max=t_max))
             assert rs.last["batches"] == 3
-    for a, b in zip(got["staged"], got["mapped"], strict=True):
-        _same(a, b)
+    for placement in PLACEMENTS:
+        for a, b in zip(got["staged"], got[placement], strict=True):
+            _same(a, b)
     assert not np.array_equal(got["staged"][0]["t"], got["staged"][1]["t"])  # t_max acts
 
 
@@ -475,8 +479,8 @@ def test_bad_out_is_one_line(vk_device, case):
 
 def test_a_bad_placement_setting_is_one_line(vk_device, monkeypatch):
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "yes")
-    with pytest.raises(RfwError, match=r"^vkext\.raycast: RFW_RAYCAST_MAPPED is 0, 1 or "
-                                        r"auto, not 'yes'$"):
+    with pytest.raises(RfwError, match=r"^vkext\.raycast: RFW_RAYCAST_MAPPED is 0, 1, rays, "
+                                        r"hits or auto, not 'yes'$"):
         rfw.RayScene(_TRI, _FACES, device=vk_device)
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "auto")  # control: the documented values pass
     with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
@@ -518,10 +522,11 @@ def test_a_cast_like_the_last_records_nothing(vk_device):
         assert caster.recorded == recorded + 8 + 1  # batch 1 of 2 has fewer rays
 
 
-@pytest.mark.parametrize("placement", ["staged", "mapped"])
+@pytest.mark.parametrize("placement", list(PLACEMENTS))
 def test_mapped_batches_copy_nothing(vk_device, monkeypatch, placement):
-    """A mapped batch records no copy (the trace reads and writes the host's memory); a
-    staged one records one copy out per batch (the control that the count sees them)."""
+    """Mapped hits are not copied out (the trace writes the host's memory), mapped rays
+    have no device buffer to be copied into; staged hits are copied out once per batch
+    (the control that the count sees them)."""
     from vkext import raycast as rc
 
     copies = []
@@ -532,4 +537,6 @@ def test_mapped_batches_copy_nothing(vk_device, monkeypatch, placement):
     o, d = _rays()
     with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=97) as scene:
         assert np.isfinite(scene.cast(o, d)["t"]).all()
-    assert len(copies) == (4 if placement == "staged" else 0)
+        buffers = scene._scene.buffers
+        assert (buffers.rays is None) is (placement in ("mapped", "rays mapped"))
+    assert len(copies) == (0 if placement in ("mapped", "hits mapped") else 4)
