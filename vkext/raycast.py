@@ -506,8 +506,8 @@ class Raycaster:
         :class:`RfwError` naming the argument and the first such row, after the cast.
         ``last`` then holds the ray and batch counts, ``wall_ms`` (the host's time for
         everything, copies and waits included) and its parts summed over the batches
-        (``upload_ms``: rays into staging memory; ``submit_ms``: recording and submitting;
-        ``wait_ms``: waiting for the GPU; ``readback_ms``: hits out of staging memory). With
+        (``upload_ms``: rays into staging or mapped memory; ``submit_ms``: recording and
+        submitting; ``wait_ms``: waiting for the GPU; ``readback_ms``: hits out of it). With
         timestamps also the GPU's parts: ``gpu_upload_ms`` and ``gpu_readback_ms`` (the
         copies), ``gpu_ms`` (the traces alone) and its ``mrays_per_s``."""
         if batch < 1:
