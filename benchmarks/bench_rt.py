@@ -580,14 +580,18 @@ def main(argv=None) -> int:
     dirs = args.scene_dir or [ROOT / ".scenes", default_cache()]
     scenes = find_scenes([s for s in args.scenes.split(",") if s], dirs)
 
+    from rfw.bench.runner import environment
     from vkext import VkDevice
 
+    env = environment()  # the commit (RFW_COMMIT on a GPU machine) and the host's CPU
     device = VkDevice()
     notes: set[str] = set()
     lines = [f"# Ray tracing on {device.name} ({device.driver_name})", "",
              f"{size[0]}x{size[1]} primary rays, medians of {args.repeats}; "
-             "GPU times from timestamps (trace only), CPU peers on the host clock.", ""]
-    record = {"device": device.describe(), "size": size, "scenes": {}}
+             "GPU times from timestamps (trace only), CPU peers on the host clock.", "",
+             f"rfw {env['rfw_commit']} (from {env['rfw_commit_source']}); driver "
+             f"{device.driver}; host {env['cpu']}, {env['cpus']} CPUs.", ""]
+    record = {"device": device.describe(), "environment": env, "size": size, "scenes": {}}
     try:
         for name, scene in scenes.items():
             v, f = flatten(scene)
