@@ -52,7 +52,12 @@ struct VisInstance {
     uvec4 mesh;  // x: mesh, y: 1 where the transform mirrors (the tangent's w flips)
 };
 
+#ifdef ATOMIC
+// visbuffer.py's write = "atomic": per pixel (depth bits << 32 | ~id)
+layout(set = 0, binding = 0, std430) readonly buffer Ids { uvec2 v[]; } ids;
+#else
 layout(set = 0, binding = 0) uniform utexture2D t_ids;
+#endif
 layout(set = 0, binding = 1) uniform texture2D t_depth;
 layout(set = 0, binding = 2, std430) readonly buffer Meshes { VisMesh m[]; } meshes;
 layout(set = 0, binding = 3, std430) readonly buffer Instances { VisInstance i[]; } instances;
@@ -120,7 +125,11 @@ void main() {
         write_background(px);
         return;
     }
+#ifdef ATOMIC
+    uint id = ~ids.v[px.y * isize.x + px.x].x;  // the low word (little-endian) holds ~id
+#else
     uint id = texelFetch(t_ids, px, 0).r;
+#endif
     // visbuffer.py's triangle_bits: the instance in the high bits, the triangle below
     uvec2 ids = uvec2(id >> TRIANGLE_BITS, id & ((1u << TRIANGLE_BITS) - 1u));
     VisInstance inst = instances.i[ids.x];

@@ -2,8 +2,10 @@
 
 import numpy as np
 
-from rfw import ComputePass, Tex2D, register_pass
+from rfw import ComputePass, Settings, Tex2D, register_pass
 from rfw.backends.scene_data import instance_blocks, material_bytes
+from rfw.graph import Buffer
+from rfw.passes import SettingsError
 
 from ..visbuffer.visbuffer import triangle_bits
 
@@ -37,11 +39,25 @@ class VisResolvePass(ComputePass):
         "depth": Tex2D(desc="scene depth: 1 is background"),
     }
     outputs = {
-        "albedo": Tex2D("rgba16float", size_of="ids", desc="base color, linear (alpha: coverage)"),
-        "normal": Tex2D("rgba16float", size_of="ids", desc="world-space normal"),
-        "material": Tex2D("rgba8unorm", size_of="ids", desc="occlusion, roughness, metallic"),
-        "emissive": Tex2D("rgba16float", size_of="ids", desc="emitted radiance"),
+        "albedo": Tex2D("rgba16float", size_of="depth", desc="base color, linear (alpha: coverage)"),
+        "normal": Tex2D("rgba16float", size_of="depth", desc="world-space normal"),
+        "material": Tex2D("rgba8unorm", size_of="depth", desc="occlusion, roughness, metallic"),
+        "emissive": Tex2D("rgba16float", size_of="depth", desc="emitted radiance"),
     }
+
+    class Params(Settings):
+        ids: str = "image"  # image (visbuffer write = attachment) | buffer (write = atomic)
+
+    def declare(self):
+        if self.params.ids not in ("image", "buffer"):
+            raise SettingsError(f"pass '{self.name}': setting 'ids' must be image or buffer, "
+                                f"got {self.params.ids!r}")
+        if self.params.ids == "image":
+            return dict(self.inputs), dict(self.outputs)
+        # the atomic visbuffer's words
+        return {**self.inputs, "ids": Buffer(desc="per pixel depth bits << 32 | ~id "
+                                                  "(visbuffer write = atomic)")}, \
+            dict(self.outputs)
 
     def setup(self, ex) -> None:
         """The scene's mesh, instance and material tables (host-visible storage buffers),
@@ -58,8 +74,11 @@ class VisResolvePass(ComputePass):
         self.tables = {**tables, "textures": textures, "samplers": samplers}
 
     def record(self, ctx) -> None:
-        ctx.dispatch(threads=ctx.extent("albedo"), defines=self.defines,
-                     t_ids=ctx.sampled("ids"), t_depth=ctx.sampled("depth"),
+        ids = {"t_ids": ctx.sampled("ids")} if self.params.ids == "image" else \
+            {"ids": ctx.buffer("ids")}
+        defines = self.defines if self.params.ids == "image" else {**self.defines, "ATOMIC": 1}
+        ctx.dispatch(threads=ctx.extent("albedo"), defines=defines, **ids,
+                     t_depth=ctx.sampled("depth"),
                      o_albedo=ctx.storage("albedo"), o_normal=ctx.storage("normal"),
                      o_material=ctx.storage("material"), o_emissive=ctx.storage("emissive"),
                      **self.tables)

@@ -54,14 +54,17 @@ FINAL = Bounds(flip_mean=0.02, over2_fraction=0.015, over1_fraction=0.08, mean_a
 
 
 def gbuffer(device, scene, *sets: str) -> dict[str, np.ndarray]:
-    """The G-buffer (by output name) and depth of deferred_vis with ``sets``."""
+    """The G-buffer (by output name) and depth of deferred_vis with ``sets``; under
+    ``"resources"`` the names of the graph's resources."""
     cfg = apply_overrides(load_config(CONFIG), [f"size={SIZE[0]}x{SIZE[1]}", *sets])
     raster = "geometry=raster" in sets
     source = {n: f"gbuffer.{n}" if raster else f"resolve.{n}" for n in NAMES}
     source["depth"] = "gbuffer.depth" if raster else "vis.depth"
     result = render(replace(cfg, outputs=list(source.values())), scene=scene,
                     device=device, backend="vk")
-    return {n: np.asarray(result.images[r]) for n, r in source.items()}
+    out = {n: np.asarray(result.images[r]) for n, r in source.items()}
+    out["resources"] = {r.name for r in result.executor.plan.resources}
+    return out
 
 
 def srgb_levels(linear: np.ndarray) -> np.ndarray:
@@ -181,6 +184,19 @@ def test_comparison_rejects_an_unmirrored_tangent_frame(vk_device, cutout_raster
     assert why and all(w.startswith("normal") for w in why), why
 
 
+@pytest.mark.parametrize("scene", ["courtyard", "cutout"])
+def test_atomic_write_gives_the_same_gbuffer(vk_device, courtyard, scene):
+    # vis_write=atomic: no color attachment, (depth, ~id) kept by 64-bit atomic min in a
+    # buffer vis_clear filled; the same surface wins every pixel, ties included
+    sc = courtyard if scene == "courtyard" else cutout_scene()
+    attachment = gbuffer(vk_device, sc)
+    atomic = gbuffer(vk_device, sc, "vis_write=atomic")
+    assert "vis.ids" in attachment["resources"] and "clear.ids" not in attachment["resources"]
+    assert "clear.ids" in atomic["resources"] and "vis.ids" not in atomic["resources"]
+    for name in (*NAMES, "depth"):
+        assert np.array_equal(atomic[name], attachment[name]), name
+
+
 def rfw(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=ROOT,
                           capture_output=True, text=True, check=False, env=dict(os.environ))
@@ -232,3 +248,20 @@ def test_ids_hold_instance_and_triangle_in_32_bits():
     assert triangle_bits(scene(1 << 16, 1 << 16)) == 16  # exactly full
     with pytest.raises(RfwError, match="do not fit the visibility buffer's 32-bit ids"):
         triangle_bits(scene((1 << 16) + 1, 1 << 16))  # one more instance: 17 + 16 bits
+
+
+@pytest.mark.parametrize("sets, message", [
+    (("vis_write=atomic", "clear.max_pixels=100"),
+     "pass 'clear': 64x36 is more than the visibility buffer's max_pixels (100)"),
+    (("vis.write=bogus",), "pass 'vis': setting 'write' must be one of attachment, atomic"),
+    (("resolve.ids=bogus",), "pass 'resolve': setting 'ids' must be image or buffer"),
+])
+def test_bad_settings_fail_in_one_line(tmp_path, sets, message):
+    args = ["run", str(CONFIG), "--backend", "vk", "--size", "64x36", "--frames", "1",
+            "--out", str(tmp_path / "out")]
+    for s in sets:
+        args += ["--set", s]
+    done = rfw(*args)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
+    assert lines[0].startswith("rfw: error: ") and message in lines[0], lines[0]

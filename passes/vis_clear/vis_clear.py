@@ -1,0 +1,43 @@
+"""Visibility-buffer clear: the 64-bit depth-and-id words the atomic visbuffer writes."""
+
+from typing import Annotated
+
+from rfw import ComputePass, Settings, register_pass
+from rfw.graph import Buffer
+from rfw.passes import Range, SettingsError
+
+WORD = 8  # bytes of one pixel's word: depth bits high, the id's complement low
+
+
+@register_pass("vis_clear")
+class VisClearPass(ComputePass):
+    """Fills ``ids`` with all ones (the largest word: no surface yet) for a ``visbuffer``
+    with ``write = "atomic"``, which keeps the smallest (depth, complemented id) per pixel
+    with 64-bit atomics instead of writing a color attachment. The buffer holds
+    ``max_pixels`` words (a larger output fails naming the setting); a compute shader fills
+    it at memory speed where raster writes are slow (the H200's).
+    """
+
+    shader = "vis_clear.comp.glsl"
+    backend = "vk"
+
+    class Params(Settings):
+        max_pixels: Annotated[int, Range(1, 1 << 26)] = 3840 * 2160  # the largest output
+
+    def declare(self):
+        return {}, {"ids": Buffer(WORD * self.params.max_pixels, usage=("storage",),
+                                  desc="per pixel: depth bits << 32 | ~id, all ones: none")}
+
+    def record(self, ctx) -> None:
+        # the output's pixels: the size the scene's camera was set for
+        size = ctx.scene.size
+        check_pixels(self.name, self.params.max_pixels, size)
+        ctx.dispatch(threads=(size[0] * size[1],), ids=ctx.buffer("ids"))
+
+
+def check_pixels(pass_name: str, max_pixels: int, size: tuple[int, int]) -> None:
+    """A SettingsError unless ``size`` fits ``max_pixels`` words."""
+    if size[0] * size[1] > max_pixels:
+        raise SettingsError(f"pass '{pass_name}': {size[0]}x{size[1]} is more than the "
+                            f"visibility buffer's max_pixels ({max_pixels:,}): raise the "
+                            "vis_clear pass's setting 'max_pixels'")
