@@ -1059,7 +1059,9 @@ class Executor(FrameExecutor):
             encoder.copy_buffer_to_buffer(self._fence_buffer(), 0, slot.readback, 0, 16)
         queue = self.device.device.queue
         queue.submit([encoder.finish()])
-        slot.mapping = slot.readback.map_async("READ", 0, max(16, 8 * n))
+        # wgpu-py's "READ" first submits an empty encoder in case the buffer was never
+        # written (wgpu-native issue 305); the copy above wrote it in this very submit
+        slot.mapping = slot.readback.map_async("READ_NOSYNC", 0, max(16, 8 * n))
         self._next_query = 0
         self._query_owner = []
         return True

@@ -247,7 +247,9 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
     doc.p("Medians over all frames of all repeats; `95% CI` is a bootstrap interval of the "
           "median that resamples runs, then frames in each run (2000 resamples, seeded); "
           "`p5-p95` is the spread of single frames. GPU ms: the sum of the passes' timestamp "
-          "times; wall ms: one frame's record, submit and wait, measured on the host.")
+          "times; wall ms: one frame's record and submit, and the wait for the frame that last "
+          "used its slot (frames in flight: `frames_in_flight`), measured on the host; the "
+          "last frame's wait for every frame still in flight counts too.")
     rows = []
     for v in rfw:
         if not v.ok:
@@ -456,7 +458,8 @@ def _peers(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
     doc.p("The same scene (all instances baked into one mesh), camera and resolution, each "
           "peer in its own process, interleaved with rfw's runs. Ratio = rfw ÷ peer (below 1: "
           "rfw is faster). Where a peer has GPU timer queries the GPU ratio uses rfw's "
-          "timestamp total; wall ratios use rfw's frame wall time (record, submit, wait).")
+          "timestamp total; wall ratios use rfw's frame wall time (record, submit and the "
+          "wait for its slot).")
     done = [v for v in rfw if v.ok]
     raster = [p for p in peers if _kind(p) == "raster"]
     cast = [p for p in peers if _kind(p) == "raycast"]
@@ -578,7 +581,8 @@ def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
         "runs but the shader cache on disk.",
         "GPU ms are timestamp queries around each pass (wgpu timestamp queries; "
         "`vkCmdWriteTimestamp2` on vk); CPU record ms is the host time of the pass's "
-        "`record()`; wall ms is a whole frame, submit and wait included.",
+        "`record()`; wall ms is a whole frame, submit and the wait for its frame-in-flight "
+        "slot included (the last frame also waits for the rest).",
         "Statistics: median, p5 and p95 over single frames; the 95% CI of the median is a "
         "two-level bootstrap (runs, then frames; 2000 resamples, fixed seed).",
         "Results: `results.jsonl` (one line per run, every frame's numbers); re-run the report "

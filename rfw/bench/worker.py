@@ -24,7 +24,8 @@ from ..fileio import atomic_write
 from .runner import gpu_clocks
 
 # timings.json keys copied into the record as they are, where a run has them
-EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light")
+EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light",
+              "frames_in_flight")
 
 
 class FrameClock:
