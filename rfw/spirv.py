@@ -312,6 +312,45 @@ def check_module(code: bytes) -> None:
                                  "end (truncated?)")
 
 
+def readonly_blocks_marked(code: bytes) -> bytes:
+    """``code`` with every storage-buffer variable whose block members are all NonWritable
+    (GLSL ``readonly buffer``) decorated NonWritable itself. glslang marks the members only;
+    naga takes a StorageBuffer-class variable's access from the variable's decorations, so
+    without this it reads the block as read-write, and a read-only-storage layout (the only
+    kind a vertex stage may bind) fails to match. A no-op for modules without such blocks."""
+    words = list(struct.unpack(f"<{len(code) // 4}I", code))
+    readonly: dict[int, set[int]] = {}  # struct -> members decorated NonWritable
+    members: dict[int, int] = {}  # struct -> member count
+    pointers: dict[int, int] = {}  # pointer type -> pointee
+    marked: set[int] = set()  # ids already NonWritable
+    variables: list[tuple[int, int]] = []  # (pointer type, variable) of StorageBuffer class
+    last_annotation = 0
+    i = 5
+    while i < len(words):
+        count, op = words[i] >> 16, words[i] & 0xFFFF
+        args = words[i + 1:i + count]
+        if op == _OP_MEMBER_DECORATE and args[2] == _DEC_NON_WRITABLE:
+            readonly.setdefault(args[0], set()).add(args[1])
+        elif op == _OP_DECORATE and args[1] == _DEC_NON_WRITABLE:
+            marked.add(args[0])
+        elif op == _OP_TYPE_STRUCT:
+            members[args[0]] = count - 2
+        elif op == _OP_TYPE_POINTER:
+            pointers[args[0]] = args[2]
+        elif op == _OP_VARIABLE and args[2] == _SC_STORAGE_BUFFER:
+            variables.append((args[0], args[1]))
+        if op in (_OP_DECORATE, _OP_MEMBER_DECORATE):
+            last_annotation = i + count
+        i += count
+    add = [v for ptr, v in variables if v not in marked and
+           0 < members.get(pointers.get(ptr, -1), 0) == len(readonly.get(pointers[ptr], ()))]
+    if not add or not last_annotation:
+        return code
+    extra = [w for v in add for w in ((3 << 16) | _OP_DECORATE, v, _DEC_NON_WRITABLE)]
+    words[last_annotation:last_annotation] = extra
+    return struct.pack(f"<{len(words)}I", *words)
+
+
 def _string(words: list[int]) -> str:
     raw = b"".join(struct.pack("<I", w) for w in words)
     return raw.split(b"\0", 1)[0].decode("utf-8", "replace")

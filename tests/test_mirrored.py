@@ -134,8 +134,9 @@ def _unfixed_winding(monkeypatch) -> None:
     import vkext.meshlet
     import vkext.scene
 
-    for module in (gpu_scene, vkext.scene, vkext.meshlet):
-        monkeypatch.setattr(module, "is_mirrored", lambda transform: False)
+    for module in (gpu_scene, vkext.scene):
+        monkeypatch.setattr(module, "mirrored_mask", lambda models: np.zeros(len(models), bool))
+    monkeypatch.setattr(vkext.meshlet, "is_mirrored", lambda transform: False)
 
 
 def _unfixed_tangents(monkeypatch) -> None:

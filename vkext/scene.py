@@ -3,8 +3,10 @@
 Vertex and index buffers, mipmapped textures (with 1x1 white and flat-normal defaults), one
 sampler per texture, and the descriptor sets the GLSL twins declare: set 1 camera + lights
 (one set for the main camera, one for the sun), set 2 per material (uniform, five texture
-views, sampler), set 3 per instance. Bytes come from :mod:`rfw.backends.scene_data`, so both
-backends upload the same scene. Persistent memory comes from a :class:`BlockAllocator`.
+views, sampler), set 3 one for the whole scene (every instance's matrices in one storage
+buffer, which a draw indexes through its ``firstInstance``; built in one batched numpy step).
+Bytes come from :mod:`rfw.backends.scene_data`, so both backends upload the same scene.
+Persistent memory comes from a :class:`BlockAllocator`.
 
 Also holds the small wrappers the executor shares: samplers, descriptor set layouts, pools
 and descriptor writes. Every wrapper registers with the device, so ``live_objects()`` counts
@@ -20,17 +22,19 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.scene_data import (
+    INSTANCE_BYTES,
     SCENE_GROUPS,
-    instance_bytes,
+    instance_blocks,
     lights_bytes,
     main_camera_bytes,
     material_bytes,
     mip_chain,
     mirrored_arrays,
+    mirrored_mask,
     sun_camera_bytes,
 )
 from rfw.graph.sync import State
-from rfw.scene.model import Camera, Scene, is_mirrored
+from rfw.scene.model import Camera, Scene, SceneError
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
@@ -70,7 +74,8 @@ COMPARE = {"never": "VK_COMPARE_OP_NEVER", "less": "VK_COMPARE_OP_LESS",
 # who reads the scene's buffers and textures: the upload makes its copies visible to them
 _SCENE_READ = State(None, frozenset({"VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "VERTEX_SHADER",
                                      "FRAGMENT_SHADER", "COMPUTE_SHADER"}),
-                    frozenset({"VERTEX_ATTRIBUTE_READ", "INDEX_READ", "UNIFORM_READ"}))
+                    frozenset({"VERTEX_ATTRIBUTE_READ", "INDEX_READ", "UNIFORM_READ",
+                               "SHADER_STORAGE_READ"}))
 _SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                  frozenset({"SHADER_SAMPLED_READ"}))
 
@@ -237,6 +242,33 @@ def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
 # the scene
 
 
+def check_instance_limits(scene: Scene, limits: dict[str, Any]) -> int:
+    """The bytes of ``scene``'s instance buffer, or a SceneError naming the scene when one
+    storage descriptor cannot reach every row (``maxStorageBufferRange``)."""
+    size = max(1, len(scene.instances)) * INSTANCE_BYTES
+    limit = int(limits.get("maxStorageBufferRange", size))
+    if size > limit:
+        raise SceneError(f"{len(scene.instances):,} instances need {size:,} bytes of instance "
+                         f"data, over this device's maxStorageBufferRange ({limit:,}): at most "
+                         f"{limit // INSTANCE_BYTES:,} fit", file=scene.name, element="instances")
+    return size
+
+
+class _SameSet:
+    """A read-only sequence of ``count`` copies of one descriptor set pointer."""
+
+    def __init__(self, handle: Any, count: int):
+        self.handle, self.count = handle, count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, k: int) -> Any:
+        if not -self.count <= k < self.count:
+            raise IndexError(k)
+        return self.handle
+
+
 class _Upload:
     """Everything the scene uploads, through one staging buffer and one submit."""
 
@@ -358,22 +390,23 @@ class VkScene:
             offsets = ffi.new("VkDeviceSize[4]", [offs[j] for _, offs in vertex])
             self.meshes.append(_MeshBuffers(vb, offsets, index[0].handle, len(m.indices),
                                             index[1][j]))
+        # every instance's transform, stacked once for the batched maths below
+        self._transforms = np.asarray([i.transform for i in scene.instances],
+                                      np.float64).reshape(-1, 4, 4)
         self._mirrored_meshes(up)
 
-        # static uniforms: materials then instances, each at an aligned offset
-        mats = [material_bytes(m) for m in scene.materials]
-        insts = [instance_bytes(i.transform) for i in scene.instances]
+        # static uniforms: the materials, each at an aligned offset
         blob = bytearray()
-        self._material_ranges, self._instance_ranges = [], []
-        for data, out in [(d, self._material_ranges) for d in mats] + \
-                         [(d, self._instance_ranges) for d in insts]:
+        self._material_ranges = []
+        for data in (material_bytes(m) for m in scene.materials):
             blob += b"\0" * (-len(blob) % align)
-            out.append((len(blob), len(data)))
+            self._material_ranges.append((len(blob), len(data)))
             blob += data
         self.static_uniforms = self.allocator.create_buffer(
             max(16, len(blob)), ("uniform", "transfer_dst"), label="scene:uniforms")
         if blob:
             up.buffer(self.static_uniforms, np.frombuffer(bytes(blob), np.uint8))
+        self._instances(up)
 
         # camera (main, sun) and lights: host-visible, written by set_viewport
         lights, self.sun_matrix, self.default_light = lights_bytes(scene)
@@ -407,11 +440,19 @@ class VkScene:
 
         self._descriptor_sets()
 
+    def _instances(self, up: _Upload) -> None:
+        # every instance's row (scene_data.instance_blocks) in one storage buffer
+        self.instances_size = check_instance_limits(self.scene, self.device.limits)
+        self.instance_buffer = self.allocator.create_buffer(
+            self.instances_size, ("storage", "transfer_dst"), label="scene:instances")
+        if self.scene.instances:
+            up.buffer(self.instance_buffer, instance_blocks(self._transforms))
+
     def _mirrored_meshes(self, up: _Upload) -> None:
         # a mirrored instance draws with two corners swapped and the tangent sign flipped
         # (scene_data.mirrored_arrays): counter-clockwise front faces again, same pipelines
         scene = self.scene
-        self.mirrored = [is_mirrored(i.transform) for i in scene.instances]
+        self.mirrored = mirrored_mask(self._transforms).tolist()
         self.mirrored_meshes: dict[int, _MeshBuffers] = {}
         ks = sorted({i.mesh for i, m in zip(scene.instances, self.mirrored, strict=True) if m})
         if not ks:
@@ -456,18 +497,18 @@ class VkScene:
     def _descriptor_sets(self) -> None:
         dev, scene = self.device, self.scene
         self.layouts = {i: self._own(scene_set_layout(dev, i)) for i in SCENE_GROUPS}
-        n_mat, n_inst = len(scene.materials), len(scene.instances)
+        n_mat = len(scene.materials)
         self.pool = self._own(DescriptorPool(
-            dev, 2 + n_mat + n_inst, {"uniform_buffer": 4 + n_mat + n_inst,
-                                      "sampled_image": 5 * n_mat, "sampler": n_mat},
+            dev, 3 + n_mat, {"uniform_buffer": 4 + n_mat, "storage_buffer": 1,
+                             "sampled_image": 5 * n_mat, "sampler": n_mat},
             label="scene:descriptors"))
         layouts = [self.layouts[1].handle] * 2 + [self.layouts[2].handle] * n_mat + \
-            [self.layouts[3].handle] * n_inst
+            [self.layouts[3].handle]
         self._sets = self.pool.allocate(layouts)  # keeps the VkDescriptorSet[] alive
         self.camera_sets = {"main": ffi.addressof(self._sets, 0),
                             "sun": ffi.addressof(self._sets, 1)}
         self.material_sets = [ffi.addressof(self._sets, 2 + k) for k in range(n_mat)]
-        self.instance_sets = [ffi.addressof(self._sets, 2 + n_mat + k) for k in range(n_inst)]
+        self.instance_set = ffi.addressof(self._sets, 2 + n_mat)
 
         dyn, static = self.dynamic_uniforms.handle, self.static_uniforms.handle
         writes: list[tuple[Any, int, str, tuple]] = []
@@ -495,9 +536,8 @@ class VkScene:
                 (s, 5, "sampled_image", (tex(m.emissive_texture, self.white_srgb), read_only)),
                 (s, 6, "sampler", (sampler.handle,)),
             ]
-        for k in range(n_inst):
-            off, n = self._instance_ranges[k]
-            writes.append((self.instance_sets[k][0], 0, "uniform_buffer", (static, off, n)))
+        writes.append((self.instance_set[0], 0, "storage_buffer",
+                       (self.instance_buffer.handle, 0, self.instances_size)))
         update_descriptors(dev, writes)
 
     # per frame -----------------------------------------------------------------------------
@@ -518,6 +558,17 @@ class VkScene:
     def lights_range(self) -> BufferRange:
         return BufferRange(self.dynamic_uniforms.handle, self._lights_offset, LIGHTS_BYTES)
 
+    @property
+    def instances_range(self) -> BufferRange:
+        """Every instance's row (``mesh.glsl``'s ``scene_instances``), as set 3 binds it."""
+        return BufferRange(self.instance_buffer.handle, 0, self.instances_size)
+
+    @property
+    def instance_sets(self) -> _SameSet:
+        """Set 3 by instance, for callers that bind one per draw: every instance shares the
+        scene's one set (the draw's ``firstInstance`` picks the row)."""
+        return _SameSet(self.instance_set, len(self.scene.instances))
+
     def accel(self, **options: Any) -> Any:
         """The scene's :class:`vkext.accel.SceneAccel` built with ``options`` (``prefer``,
         ``allow_update``, ``compact``): made on first use, kept and destroyed with the
@@ -536,10 +587,12 @@ class VkScene:
     def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
              alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
         """Record every instance whose material's alpha mode is in ``alpha`` with a bound
-        graphics pipeline whose layout (``layout``) uses the scene's sets 1 to 3."""
+        graphics pipeline whose layout (``layout``) uses the scene's sets 1 to 3; each
+        draw's ``firstInstance`` is the instance's index (its row in set 3)."""
         point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
         lib.vkCmdBindDescriptorSets(cmd, point, layout, 1, 1, self.camera_sets[camera], 0,
                                     ffi.NULL)
+        lib.vkCmdBindDescriptorSets(cmd, point, layout, 3, 1, self.instance_set, 0, ffi.NULL)
         index_type = const("VK_INDEX_TYPE_UINT32")
         draws = 0
         last_mesh = last_material = None
@@ -555,8 +608,6 @@ class VkScene:
                 lib.vkCmdBindDescriptorSets(cmd, point, layout, 2, 1,
                                             self.material_sets[mesh.material], 0, ffi.NULL)
                 last_material = mesh.material
-            lib.vkCmdBindDescriptorSets(cmd, point, layout, 3, 1, self.instance_sets[k], 0,
-                                        ffi.NULL)
             if (inst.mesh, mirrored) != last_mesh:
                 lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
                 lib.vkCmdBindIndexBuffer(cmd, buffers.index, buffers.index_offset, index_type)

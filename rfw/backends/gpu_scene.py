@@ -1,6 +1,9 @@
 """A ``Scene`` on the GPU: vertex and index buffers, materials, instances, camera, lights.
 
 Layouts follow ``shaders/common/scene.glsl`` (group 1) and ``mesh.glsl`` (groups 2 and 3).
+Every instance's matrices sit in one read-only storage buffer (group 3), which a draw
+indexes through its first instance: one bind group for the whole scene, nothing bound per
+instance, and the buffer's size checked against the device's limits before it is made.
 """
 
 from __future__ import annotations
@@ -10,9 +13,10 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Scene, is_mirrored
+from ..scene.model import Camera, Scene, SceneError
 from ..units import align_up
 from .scene_data import (
+    INSTANCE_BYTES,
     SCENE_GROUPS,
     instance_blocks,
     lights_bytes,
@@ -20,33 +24,42 @@ from .scene_data import (
     material_bytes,
     mip_chain,
     mirrored_arrays,
+    mirrored_mask,
     sun_camera_bytes,
 )
 
-# wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these three)
+# wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these four;
+# storage is read-only, the only kind a vertex shader may bind)
 _ENTRIES: dict[str, tuple[str, dict[str, str]]] = {
     "uniform_buffer": ("buffer", {"type": "uniform"}),
+    "storage_buffer": ("buffer", {"type": "read-only-storage"}),
     "sampled_image": ("texture", {"sample_type": "float", "view_dimension": "2d"}),
     "sampler": ("sampler", {"type": "filtering"}),
 }
 
 
-INSTANCE_BYTES = 128  # mesh.glsl's InstanceBlock: model and normal matrices
-# the scene's bindings moved by a dynamic offset per draw: every instance in one buffer
-DYNAMIC = {(3, 0)}
-
-
 def scene_layout_entries(group: int) -> list[dict]:
-    """Bind group layout entries of a scene group, visible to every stage that may read it
-    (the instance block with a dynamic offset: one bind group serves every instance)."""
+    """Bind group layout entries of a scene group, visible to every stage that may read it."""
     stages = wgpu.ShaderStage.VERTEX | wgpu.ShaderStage.FRAGMENT | wgpu.ShaderStage.COMPUTE
     out = []
     for _, binding, kind in SCENE_GROUPS[group]:
         key, layout = _ENTRIES[kind]
-        entry = dict(layout) | ({"has_dynamic_offset": True} if (group, binding) in DYNAMIC
-                                else {})
-        out.append({"binding": binding, "visibility": stages, key: entry})
+        out.append({"binding": binding, "visibility": stages, key: dict(layout)})
     return out
+
+
+def check_instance_limits(scene: Scene, limits: dict[str, int]) -> int:
+    """The bytes of ``scene``'s instance buffer, or a SceneError naming the scene when the
+    device cannot bind that much as one storage buffer (wgpu-native would abort)."""
+    size = max(1, len(scene.instances)) * INSTANCE_BYTES
+    for key in ("max-storage-buffer-binding-size", "max-buffer-size"):
+        limit = int(limits.get(key, size))
+        if size > limit:
+            fit = limit // INSTANCE_BYTES
+            raise SceneError(f"{len(scene.instances):,} instances need {size:,} bytes of "
+                             f"instance data, over this device's {key} ({limit:,}): at "
+                             f"most {fit:,} fit", file=scene.name, element="instances")
+    return size
 
 
 class GpuScene:
@@ -59,9 +72,8 @@ class GpuScene:
         self._upload_meshes()
         self._upload_textures()
         self.material_data = [material_bytes(m) for m in scene.materials]
-        self.instance_stride = align_up(
-            INSTANCE_BYTES, device.limits["min-uniform-buffer-offset-alignment"])
         self.instance_buffer = self._instances()
+        self._instance_uniforms: Any = None  # made for a WGSL program's own group 3 only
         self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
         self.sun_camera_buffer = self._uniform(b"\0" * 352, "scene.sun_camera")
         self.lights_buffer = self._uniform(self._lights_bytes(), "scene.lights")
@@ -91,16 +103,16 @@ class GpuScene:
         return buf
 
     def _instances(self) -> Any:
-        # one buffer, one aligned block per instance: written once, bound once per draw list
-        rows = np.zeros((max(1, len(self.scene.instances)), self.instance_stride), np.uint8)
+        # one storage buffer, one 128-byte row per instance: written once, bound once
+        check_instance_limits(self.scene, self.device.limits)
+        rows = np.zeros((max(1, len(self.scene.instances)), INSTANCE_BYTES // 4), np.float32)
         if self.scene.instances:
-            blocks = instance_blocks([i.transform for i in self.scene.instances])
-            rows[:len(blocks), :INSTANCE_BYTES] = blocks.view(np.uint8)
-        return self._buffer(rows, wgpu.BufferUsage.UNIFORM, "scene.instances")
+            rows[:] = instance_blocks([i.transform for i in self.scene.instances])
+        return self._buffer(rows, wgpu.BufferUsage.STORAGE, "scene.instances")
 
     def _upload_meshes(self) -> None:
         v = wgpu.BufferUsage.VERTEX
-        self.mirrored = [is_mirrored(i.transform) for i in self.scene.instances]
+        self.mirrored = mirrored_mask([i.transform for i in self.scene.instances]).tolist()
         used_mirrored = {i.mesh for i, m in zip(self.scene.instances, self.mirrored, strict=True)
                          if m}
         self.meshes = []
@@ -190,16 +202,32 @@ class GpuScene:
         return self._bind_cache[key]
 
     def _instance_group(self, layout: Any, k: int | None) -> Any:
-        """Instance ``k``'s block, or (``k`` None) the group of a dynamic-offset layout
-        that every instance shares."""
+        """(``k`` None) the group over every instance's row, or instance ``k``'s block as
+        a uniform of its own (a WGSL program that declares one: a copy of the rows at the
+        device's uniform offset alignment, made on first use)."""
         key = ("instance", id(layout), k)
         if key not in self._bind_cache:
-            offset = 0 if k is None else k * self.instance_stride
+            if k is None:
+                resource = {"buffer": self.instance_buffer}
+            else:
+                stride = self._uniform_rows()
+                resource = {"buffer": self._instance_uniforms, "offset": k * stride,
+                            "size": INSTANCE_BYTES}
             self._bind_cache[key] = self.device.create_bind_group(
-                layout=layout, entries=[{"binding": 0, "resource": {
-                    "buffer": self.instance_buffer, "offset": offset, "size": INSTANCE_BYTES}}],
+                layout=layout, entries=[{"binding": 0, "resource": resource}],
                 label="scene.instances" if k is None else f"instance{k}")
         return self._bind_cache[key]
+
+    def _uniform_rows(self) -> int:
+        stride = align_up(INSTANCE_BYTES, self.device.limits["min-uniform-buffer-offset-alignment"])
+        if self._instance_uniforms is None:
+            rows = np.zeros((max(1, len(self.scene.instances)), stride), np.uint8)
+            if self.scene.instances:
+                blocks = instance_blocks([i.transform for i in self.scene.instances])
+                rows[:, :INSTANCE_BYTES] = blocks.view(np.uint8)
+            self._instance_uniforms = self._buffer(rows, wgpu.BufferUsage.UNIFORM,
+                                                   "scene.instances:uniform")
+        return stride
 
     def _scene_group(self, layout: Any, camera: str) -> Any:
         key = ("scene", id(layout), camera)
@@ -215,32 +243,40 @@ class GpuScene:
              group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
              dynamic: bool = True) -> int:
         """Draw every instance whose material's alpha mode is in ``alpha`` (into a render
-        pass or a render bundle); returns draws. ``dynamic``: the program's group 3 is the
-        scene's layout (``scene_layout_entries``), whose instance block takes an offset;
-        else (a WGSL program's own layout) each instance gets a bind group of its own."""
+        pass or a render bundle); returns draws. Each draw's first instance is the
+        instance's index, which the shader reads its row by (``gl_InstanceIndex``).
+        ``dynamic``: the program's group 3 is the scene's layout (``scene_layout_entries``);
+        else (a WGSL program's own layout) a uniform instance block gets a group per
+        instance, a storage one the shared group."""
         rp.set_pipeline(pipeline)
         if group0 is not None:
             rp.set_bind_group(0, group0)
         rp.set_bind_group(1, self._scene_group(prog.layouts[1], camera))
-        shared = self._instance_group(prog.layouts[3], None) if dynamic else None
+        shared = dynamic or _binds_storage(prog, 3)
+        if shared:
+            rp.set_bind_group(3, self._instance_group(prog.layouts[3], None))
         draws = 0
+        last_material = last_mesh = None
         for k, inst in enumerate(self.scene.instances):
             mesh = self.scene.meshes[inst.mesh]
             mat = self.scene.materials[mesh.material]
             if mat.alpha_mode not in alpha:
                 continue
             # a mirrored instance draws its mesh with the winding (and tangent sign) reversed
-            buffers, index, count = self.mirrored_meshes[inst.mesh] if self.mirrored[k] \
+            mirrored = self.mirrored[k]
+            buffers, index, count = self.mirrored_meshes[inst.mesh] if mirrored \
                 else self.meshes[inst.mesh]
-            rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
-            if shared is not None:
-                rp.set_bind_group(3, shared, [k * self.instance_stride])
-            else:
+            if mesh.material != last_material:
+                rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
+                last_material = mesh.material
+            if not shared:
                 rp.set_bind_group(3, self._instance_group(prog.layouts[3], k))
-            for slot, buf in enumerate(buffers):
-                rp.set_vertex_buffer(slot, buf)
-            rp.set_index_buffer(index, "uint32")
-            rp.draw_indexed(count)
+            if (inst.mesh, mirrored) != last_mesh:
+                for slot, buf in enumerate(buffers):
+                    rp.set_vertex_buffer(slot, buf)
+                rp.set_index_buffer(index, "uint32")
+                last_mesh = (inst.mesh, mirrored)
+            rp.draw_indexed(count, 1, 0, 0, k)
             draws += 1
         return draws
 
@@ -252,6 +288,13 @@ class GpuScene:
         self._buffers.clear()
         self._textures.clear()
         self._bind_cache.clear()
+
+
+def _binds_storage(prog: Any, group: int) -> bool:
+    # a program's own layout: is its binding 0 of ``group`` a storage buffer?
+    return any(b.group == group and b.binding == 0 and
+               b.entry.get("buffer", {}).get("type", "uniform") != "uniform"
+               for b in prog.bindings.values())
 
 
 VERTEX_BUFFERS = [

@@ -22,8 +22,9 @@ SCENE_GROUPS: dict[int, tuple[tuple[str, int, str], ...]] = {
         ("metal_rough_tex", 2, "sampled_image"), ("normal_tex", 3, "sampled_image"),
         ("occlusion_tex", 4, "sampled_image"), ("emissive_tex", 5, "sampled_image"),
         ("material_sampler", 6, "sampler")),
-    3: (("instance", 0, "uniform_buffer"),),
+    3: (("scene_instances", 0, "storage_buffer"),),
 }
+INSTANCE_BYTES = 128  # mesh.glsl's InstanceData (model and normal matrices), std430 stride
 MAX_LIGHTS = 16
 DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
                     name="rfw default sun")
@@ -86,6 +87,12 @@ def instance_blocks(models: Any) -> np.ndarray:
     # which are inv(model)'s rows
     return np.concatenate([m.transpose(0, 2, 1).reshape(-1, 16),
                            np.linalg.inv(m).reshape(-1, 16)], axis=1).astype(np.float32)
+
+
+def mirrored_mask(models: Any) -> np.ndarray:
+    """``is_mirrored`` of every model at once (one batched determinant): bool per model."""
+    m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    return np.linalg.det(m[:, :3, :3]) < 0.0
 
 
 def mirrored_arrays(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,15 @@ from ..graph.formats import format_info
 from ..passes import Pass, Settings
 from ..shaders import BindingInfo, ShaderError, Source, explain, preprocess, program_files
 from ..shaders import reflect as reflect_wgsl
-from ..spirv import DescriptorInfo, ShaderCompileError, Spirv, check_bindings, compile_glsl, reflect
+from ..spirv import (
+    DescriptorInfo,
+    ShaderCompileError,
+    Spirv,
+    check_bindings,
+    compile_glsl,
+    readonly_blocks_marked,
+    reflect,
+)
 from ..units import align_up
 from .base import FrameExecutor, SlotContext
 from .gpu_scene import VERTEX_BUFFERS, scene_layout_entries
@@ -286,7 +294,8 @@ class ShaderCache:
             refl = reflect(spv.code)
             for d in refl.descriptors.values():  # before naga gives its own, vaguer error
                 _check_portable(d, path, who)
-            stages[spv.stage] = (self._module(path, spv.code), refl.entry)
+            stages[spv.stage] = (self._module(path, readonly_blocks_marked(spv.code)),
+                                 refl.entry)
             if spv.stage == "comp":
                 workgroup = refl.local_size
             for d in refl.descriptors.values():

@@ -1,4 +1,4 @@
-// scene geometry: vertex layout, material (set 2) and instance (set 3)
+// scene geometry: vertex layout, material (set 2) and instances (set 3)
 //
 // a vertex shader defines MESH_VERTEX_INPUT before including this file to declare the
 // vertex attributes (WGSL's VertexIn): one buffer per attribute, see gpu_scene.VERTEX_BUFFERS
@@ -27,10 +27,23 @@ layout(set = 2, binding = 4) uniform texture2D occlusion_tex;
 layout(set = 2, binding = 5) uniform texture2D emissive_tex;
 layout(set = 2, binding = 6) uniform sampler material_sampler;
 
-layout(set = 3, binding = 0, std140) uniform InstanceBlock {
-    layout(offset = 0) mat4 model;
-    layout(offset = 64) mat4 normal;       // inverse transpose of the model matrix
-} instance;                                // 128 bytes
+// every instance's matrices in one storage buffer, indexed by the draw's instance: a scene
+// draw's firstInstance is the instance's index (one set for the whole scene, however many
+// instances; scene_data.instance_blocks writes the rows)
+struct InstanceData {
+    mat4 model;
+    mat4 normal;                           // inverse transpose of the model matrix
+};                                         // 128 bytes, std430 array stride 128
+
+layout(set = 3, binding = 0, std430) readonly buffer InstanceBlock {
+    InstanceData items[];
+} scene_instances;
+
+#ifdef MESH_VERTEX_INPUT
+// the drawn instance's block, as `instance.model` and `instance.normal` (vertex stage: a
+// fragment shader gets what it needs through its inputs)
+#define instance (scene_instances.items[gl_InstanceIndex])
+#endif
 
 #ifndef MESH_VERTEX_INPUT
 // implicit-lod sampling of the bound material: fragment stage only (WGSL leaves it out of
