@@ -505,6 +505,31 @@ class PassTiming:
     cpu_ms: list[float] = field(default_factory=list)
 
 
+def _sites(executor: Any) -> dict[tuple, tuple]:
+    """Per call site (pass, n-th dispatch or scene draw): the last call and what it found
+    (kept with the executor)."""
+    sites = executor.__dict__.get("_rfw_call_sites")
+    if sites is None:
+        sites = executor.__dict__["_rfw_call_sites"] = {}
+    return sites
+
+
+def _defines_key(defines: dict[str, object] | None) -> tuple:
+    return tuple(sorted(defines.items())) if defines else ()
+
+
+def _same_call(hit: tuple | None, call: tuple, bindings: dict[str, Any]) -> tuple | None:
+    """``hit`` when it was found for ``call`` with the same bindings: the same names and
+    the very same objects (values given as data, settings or bytes, may differ: they are
+    written each frame)."""
+    if hit is None or hit[0] != call or hit[1] != tuple(bindings):
+        return None
+    for old, new in zip(hit[2], bindings.values(), strict=True):
+        if old is not new and not isinstance(new, Settings | bytes | np.ndarray):
+            return None
+    return hit
+
+
 class PassContext(SlotContext):
     """What ``Pass.record`` sees: its resources by slot name and ways to record work."""
 
@@ -536,6 +561,11 @@ class PassContext(SlotContext):
 
     _step = -1  # the declared step (Pass.steps) the pass is in
     _bundles = 0  # scene draws recorded by this pass so far in this frame
+
+    def replay(self, *key: Any) -> bool:
+        """Always False: WebGPU replays render bundles only, and scene draws use them
+        (``draw_scene``); a pass's other commands are recorded every frame."""
+        return False
 
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps: wgpu orders a pass's work
@@ -620,10 +650,74 @@ class PassContext(SlotContext):
         raise ShaderError(f"pass '{self.pass_.name}': binding '{b.name}' ({b.where}) is a "
                           f"{want}, but '{name}' is {have}{hint}")
 
+    _dispatches = 0  # dispatches recorded by this pass so far in this frame
+
     def dispatch(self, *, threads: tuple[int, ...], shader: str | None = None,
                  entry: str = "main", defines: dict[str, object] | None = None,
                  **bindings: Any) -> None:
-        """Run a compute shader over ``threads`` (rounded up to whole workgroups)."""
+        """Run a compute shader over ``threads`` (rounded up to whole workgroups).
+
+        Per call site (the pass's n-th dispatch) the program, pipeline and bind groups are
+        kept with what they were found for: a frame that binds the same objects with the
+        same shader, defines and threads looks none of them up again (uniform values are
+        still written, where their bytes changed)."""
+        site = (self.pass_.name, self._dispatches)
+        self._dispatches += 1
+        call = (shader, entry, _defines_key(defines), tuple(threads), self.scene)
+        sites = _sites(self.executor)
+        hit = self._site_hit(sites.get(site), call, bindings)
+        if hit is not None:
+            prog, pipe, bgs, groups = hit[3]
+        else:
+            prog, pipe, bgs, groups = self._dispatch_state(threads, shader, entry, defines,
+                                                           bindings)
+            sites[site] = (call, tuple(bindings), tuple(bindings.values()),
+                           (prog, pipe, bgs, groups), self._uniform_slots(prog, bindings),
+                           time.monotonic())
+        cp = self.encoder.begin_compute_pass(label=self.pass_.name,
+                                             timestamp_writes=self._timestamps())
+        cp.set_pipeline(pipe)
+        for g, bg in enumerate(bgs):
+            cp.set_bind_group(g, bg)
+        cp.dispatch_workgroups(*groups)
+        cp.end()
+
+    def _uniform_slots(self, prog: Program, bindings: dict[str, Any]) -> list[tuple]:
+        """The bindings given as data (settings, bytes) with the buffers they went into."""
+        ex, out = self.executor, []
+        for name, value in bindings.items():
+            if isinstance(value, Settings | bytes | np.ndarray):
+                b = prog.bindings[name]
+                out.append((name, b, ex.as_resource(value, b, self.pass_)["buffer"]))
+        return out
+
+    def _site_hit(self, hit: tuple | None, call: tuple, bindings: dict[str, Any]
+                  ) -> tuple | None:
+        """``hit`` (a call site's last call and what it found) when it holds for this
+        call: the same call and bound objects, its program still the cache's and looked up
+        less than ``RECHECK_S`` ago (hot reload), and this frame's uniform values fit their
+        buffers (they are written here)."""
+        hit = _same_call(hit, call, bindings)
+        if hit is None or time.monotonic() - hit[5] >= RECHECK_S:
+            return None
+        prog = hit[3][0]
+        if self.executor.shaders.programs.get(prog.key) is not prog:
+            return None
+        return hit if self._uniforms_fit(hit, bindings) else None
+
+    def _uniforms_fit(self, hit: tuple, bindings: dict[str, Any]) -> bool:
+        """Write this frame's uniform values; False where one needed a new buffer (its
+        bind group is made again)."""
+        ex = self.executor
+        for name, b, buf in hit[4]:
+            if ex.as_resource(bindings[name], b, self.pass_)["buffer"] is not buf:
+                return False
+        return True
+
+    def _dispatch_state(self, threads: tuple[int, ...], shader: str | None, entry: str,
+                        defines: dict[str, object] | None, bindings: dict[str, Any]
+                        ) -> tuple[Program, Any, list[Any], tuple[int, ...]]:
+        """The program, pipeline, bind groups and workgroups of a dispatch."""
         formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
         prog = self.program("compute", shader=shader, defines=defines,
                             formats={k: v for k, v in formats.items() if v})
@@ -638,14 +732,9 @@ class PassContext(SlotContext):
             pipe = prog.pipelines[entry] = self.device.create_compute_pipeline(
                 layout=prog.pipeline_layout, compute={"module": module, "entry_point": entry},
                 label=f"{self.pass_.name}:{entry}")
-        cp = self.encoder.begin_compute_pass(label=self.pass_.name,
-                                             timestamp_writes=self._timestamps())
-        cp.set_pipeline(pipe)
-        for g, bg in enumerate(bgs):
-            cp.set_bind_group(g, bg)
         t = (*threads, 1, 1)[:3]
-        cp.dispatch_workgroups(*(max(1, math.ceil(t[i] / prog.workgroup[i])) for i in range(3)))
-        cp.end()
+        return prog, pipe, bgs, tuple(max(1, math.ceil(t[i] / prog.workgroup[i]))
+                                      for i in range(3))
 
     def draw_scene(self, *, color: list[tuple[str, Any]] = (), depth: tuple[str, Any] | None = None,
                    shader: str | None = None, defines: dict[str, object] | None = None,
@@ -654,9 +743,46 @@ class PassContext(SlotContext):
                    blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
                    **bindings: Any) -> int:
         """Draw the scene's instances into ``color`` targets (and ``depth``) with the pass's
-        ``vs_main``/``fs_main``; group 0 takes ``bindings``. Returns the number of draws."""
+        ``vs_main``/``fs_main``; group 0 takes ``bindings``. Returns the number of draws.
+
+        The draws are recorded once into a render bundle and replayed; per call site (the
+        pass's n-th scene draw) the program, pipeline and group 0 are kept with what they
+        were found for, so a frame that draws as the last one did looks none of them up."""
         if self.scene is None:
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
+        site = (self.pass_.name, "scene", self._bundles)
+        call = (tuple(color), depth, shader, _defines_key(defines), depth_compare,
+                depth_write, cull, camera, repr(blend), tuple(alpha), self.scene)
+        sites = _sites(self.executor)
+        hit = self._site_hit(sites.get(site), call, bindings)
+        if hit is not None:
+            prog, pipe, group0, targets, dfmt = hit[3]
+        else:
+            prog, pipe, group0, targets, dfmt = self._scene_state(
+                color, depth, shader, defines, depth_compare, depth_write, cull, blend, bindings)
+            sites[site] = (call, tuple(bindings), tuple(bindings.values()),
+                           (prog, pipe, group0, targets, dfmt),
+                           self._uniform_slots(prog, bindings), time.monotonic())
+        read_only = depth is not None and not depth_write
+        # the draws are recorded once into a bundle and replayed while nothing they name
+        # changes: per-frame data (camera, lights, settings) reaches them through buffers
+        key = (pipe, group0, self.scene, camera, tuple(alpha), targets, dfmt, read_only)
+        bundle, n = self.executor.bundle(
+            (self.pass_.name, self._bundles), key, lambda enc: self.scene.draw(
+                enc, prog, pipe, camera=camera, group0=group0, alpha=alpha,
+                dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3)),
+            color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
+        self._bundles += 1
+        rp = self.render_pass(color=color, depth=depth, depth_read_only=read_only)
+        rp.execute_bundles([bundle])
+        rp.end()
+        return n
+
+    def _scene_state(self, color: list[tuple[str, Any]], depth: tuple[str, Any] | None,
+                     shader: str | None, defines: dict[str, object] | None,
+                     depth_compare: str, depth_write: bool, cull: str, blend: dict | None,
+                     bindings: dict[str, Any]) -> tuple:
+        """The program, pipeline, group 0 and target formats of a scene draw."""
         formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
         prog = self.program("render", shader=shader, defines=defines,
                             formats={k: v for k, v in formats.items() if v})
@@ -692,20 +818,7 @@ class PassContext(SlotContext):
                            "front_face": "ccw"},
                 depth_stencil=ds, fragment=frag, label=f"{self.pass_.name}:scene")
         group0 = self.bind(prog, bindings, groups=(0,))[0]
-        read_only = depth is not None and not depth_write
-        # the draws are recorded once into a bundle and replayed while nothing they name
-        # changes: per-frame data (camera, lights, settings) reaches them through buffers
-        key = (pipe, group0, self.scene, camera, tuple(alpha), targets, dfmt, read_only)
-        bundle, n = self.executor.bundle(
-            (self.pass_.name, self._bundles), key, lambda enc: self.scene.draw(
-                enc, prog, pipe, camera=camera, group0=group0, alpha=alpha,
-                dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3)),
-            color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
-        self._bundles += 1
-        rp = self.render_pass(color=color, depth=depth, depth_read_only=read_only)
-        rp.execute_bundles([bundle])
-        rp.end()
-        return n
+        return prog, pipe, group0, targets, dfmt
 
     def render_pass(self, *, color: list[tuple[str, Any]] = (), depth: tuple[str, Any] | None
                     = None, depth_read_only: bool = False) -> Any:
