@@ -1,8 +1,9 @@
-"""Scene load and upload time per backend (not a test).
+"""Scene load and upload time per backend, then one rendered frame (not a test).
 
     .venv/bin/python benchmarks/bench_scene_load.py [--scenes courtyard,stress,city]
         [--backends vk,wgpu] [--repeats 3] [--no-before] [--before-repeats 1]
-        [--scene-dir .scenes] [--out out/bench_scene_load.json]
+        [--render flat] [--render-size 320x180] [--scene-dir .scenes]
+        [--out out/bench_scene_load.json]
 
 Each case (scene, backend, allocator) runs in a fresh process, which makes one device and
 then, ``--repeats`` times: reads or generates the scene (``load``: ``rfw.scene.load_scene``,
@@ -10,6 +11,14 @@ as ``rfw run --scene`` does), picks its drawable instances and camera (``prepare
 uploads it through the backend plug-in (``upload``: ``Backend.scene``, waiting until the
 device has finished the copies), then destroys it. A small stress scene goes first, untimed,
 so imports and first-use costs stay out; the table prints medians, and min..max.
+
+Then the case renders the loaded scene once through ``rfw.render.render`` with the
+``--render`` config (default ``flat``: one draw per instance, nothing else) at
+``--render-size``: ``render ms`` is that call's wall time (upload, pipelines, recording every
+draw, one warm-up and one timed frame, readback), ``frame gpu ms`` the timed frame's GPU
+time, and ``covered`` the share of pixels off the background colour, so a frame that drew
+nothing shows. ``--render none`` skips it (an older commit without ``rfw.render`` skips it
+by itself).
 
 ``--before`` repeats the vk cases with ``vkext.blocks.BlockAllocator.default_strategy =
 "first-fit"``, the scan the block allocator used before it binned its free ranges (quadratic
@@ -22,17 +31,20 @@ it now; the whole change is measured at two commits instead, the script being st
         --scenes courtyard,city --scene-dir .scenes --out out/bench_scene_load_old.json
 
 Scenes: ``courtyard`` (built in), ``stress`` (100,000 cubes; ``stress:COUNT`` for another
-count) and ``city`` (Sionna RT's Munich, 2,367 meshes): ``<scene-dir>/city.glb`` if there,
-else the fetch cache (``rfw scenes fetch city``). A missing city is reported and skipped; any
-other path names a file. A case that crashes or fails is reported with its exit status and
-the last line it printed, and the others still run.
+count), and ``city`` (Sionna RT's Munich, 2,367 meshes) or any other name: ``<name>.glb`` in
+a ``--scene-dir`` (default ``.scenes``), else ``<name>.npz`` there (the compact form
+``bench_meshlets.py --export-scenes`` writes, read by its ``load_npz``: no uvs, int8
+normals, tangents recomputed, so its ``load`` differs from the GLB's while everything after
+is the same), else the fetch cache's GLB (``rfw scenes fetch city``). The ``source`` column
+says which. A missing scene is reported and skipped; any other path names a file. A case
+that crashes or fails is reported with its exit status and the last line it printed, and
+the others still run.
 
-On the GPU machine (no network), carry the city along, from a machine that has fetched it:
+On the GPU machine (no network), ``.scenes`` travels with ``city.npz`` and ``dragon.npz``
+(``benchmarks/device_prepare.sh``); from the repository root there:
 
-    mkdir -p .scenes && cp ~/.cache/rfw/scenes/city.glb .scenes/ && echo '*' > .scenes/.gitignore
-    # device run: carry .gl, .whl, .deb and .scenes, then
     source benchmarks/device_env.sh && python3 benchmarks/bench_scene_load.py \\
-        --out $OUT/bench_scene_load.json
+        --scenes courtyard,stress,city --out $OUT/bench_scene_load.json
 """
 
 from __future__ import annotations
@@ -50,6 +62,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # bench_meshlets.load_npz
 
 SCENES = ("courtyard", "stress", "city")
 BACKENDS = ("vk", "wgpu")
@@ -57,18 +70,33 @@ PHASES = ("load", "prepare", "upload")
 
 
 def scene_source(name: str, scene_dirs: list[Path]) -> str | None:
-    """What ``load_scene`` is given for ``name``: a built-in name, or the city's GLB (None
+    """What the worker loads for ``name``: a built-in name, a file given by path, or
+    ``<name>.glb`` then ``<name>.npz`` in ``scene_dirs``, then the fetch cache's GLB (None
     when it is nowhere here)."""
     if name in ("courtyard", "stress") or name.startswith("stress:"):
         return name
-    if name != "city":
+    if Path(name).suffix in (".glb", ".gltf", ".npz", ".obj", ".ply"):
         return name if Path(name).is_file() else None
     from rfw.scene.fetch import default_cache
 
-    for d in [*scene_dirs, default_cache()]:
-        if (d / "city.glb").is_file():
-            return str(d / "city.glb")
+    for path in [*(d / f"{name}{ext}" for d in scene_dirs for ext in (".glb", ".npz")),
+                 default_cache() / f"{name}.glb"]:
+        if path.is_file():
+            return str(path)
     return None
+
+
+def _load(source: str):
+    # the courtyard by its function: older commits know no scene names
+    from rfw.scene import default_scene, load_scene
+
+    if source == "courtyard":
+        return default_scene()
+    if source.endswith(".npz"):
+        from bench_meshlets import load_npz
+
+        return load_npz(Path(source))
+    return load_scene(source)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -112,9 +140,34 @@ def _allocator_stats(backend: str, gpu_scene) -> dict:
             "strategy": getattr(a, "strategy", "first-fit")}
 
 
-def run_case(source: str, backend_name: str, strategy: str, repeats: int) -> dict:
+def _render(config: str, size: str, scene, backend: str, device) -> dict:
+    """One ``rfw.render.render`` of ``scene`` (a warm-up frame and a timed one): its wall
+    time, the timed frame's GPU and record times, and the share of pixels drawn."""
+    import numpy as np
+
+    try:
+        from rfw.config import apply_overrides, load_config
+        from rfw.render import render
+    except ImportError:  # an older commit
+        return {"render_error": "this commit has no rfw.render"}
+    path = ROOT / "configs" / f"{config}.toml"
+    cfg = apply_overrides(load_config(path), [f"size={size}"])
+    t = time.perf_counter()
+    result = render(cfg, scene=scene, device=device, backend=backend, frames=1)
+    wall = (time.perf_counter() - t) * 1e3
+    image = np.asarray(next(iter(result.images.values())))
+    rgb = image.reshape(-1, image.shape[-1])[:, :3].astype(np.int64)
+    background = rgb[0]  # the top-left corner: sky in every built-in camera
+    passes = result.timings.get("passes", [])
+    return {"render_ms": wall, "render_config": config, "render_size": size,
+            "frame_gpu_ms": sum(p.get("gpu_ms") or 0.0 for p in passes),
+            "frame_cpu_ms": sum(p.get("cpu_ms") or 0.0 for p in passes),
+            "covered": float((np.abs(rgb - background).sum(axis=1) > 24).mean())}
+
+
+def run_case(source: str, backend_name: str, strategy: str, repeats: int,
+             render_config: str = "none", render_size: str = "320x180") -> dict:
     from rfw.backend import get_backend
-    from rfw.scene import default_scene, load_scene
 
     if backend_name == "vk":
         from vkext.blocks import BlockAllocator
@@ -130,8 +183,7 @@ def run_case(source: str, backend_name: str, strategy: str, repeats: int) -> dic
         backend.scene(device, warm, warm.default_camera(), (64, 64)).destroy()
         for _ in range(repeats):
             t0 = time.perf_counter()
-            # the courtyard by its function: older commits know no scene names
-            scene = default_scene() if source == "courtyard" else load_scene(source)
+            scene = _load(source)
             t1 = time.perf_counter()
             drawable = scene.drawable()
             camera = drawable.default_camera()
@@ -145,6 +197,8 @@ def run_case(source: str, backend_name: str, strategy: str, repeats: int) -> dic
                 times[p].append((b - a) * 1e3)
         out.update(meshes=len(scene.meshes), instances=len(scene.instances),
                    triangles=scene.triangle_count, ms=times)
+        if render_config != "none":
+            out.update(_render(render_config, render_size, drawable, backend_name, device))
     finally:
         backend.destroy_device(device)
     return out
@@ -163,9 +217,10 @@ def _exit_text(rc: int) -> str:
     return f"exit status {rc}"
 
 
-def spawn(source: str, backend: str, strategy: str, repeats: int, timeout: float) -> dict:
+def spawn(source: str, backend: str, strategy: str, repeats: int, timeout: float,
+          render: tuple[str, str] = ("none", "")) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", source, backend, strategy,
-           str(repeats)]
+           str(repeats), *render]
     t = time.perf_counter()
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
@@ -195,20 +250,33 @@ def summarize(row: dict) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    head = (f"{'scene':<14}{'backend':<8}{'allocator':<11}{'buffers':>8}{'load ms':>10}"
-            f"{'prepare':>10}{'upload ms':>11}{'total ms':>11}  range")
+    head = (f"{'scene':<14}{'source':<8}{'backend':<8}{'allocator':<11}{'buffers':>8}"
+            f"{'load ms':>10}{'prepare':>10}{'upload ms':>11}{'total ms':>11}  {'range':<13}"
+            f"{'render ms':>10}{'frame gpu ms':>13}{'covered':>8}")
     lines = [head, "-" * len(head)]
     for r in rows:
-        key = f"{r['scene']:<14}{r['backend']:<8}{r['allocator']:<11}"
+        key = f"{r['scene']:<14}{_kind(r.get('source', '')):<8}{r['backend']:<8}" \
+              f"{r['allocator']:<11}"
         if "error" in r:
             lines.append(f"{key}{'':>8}  FAILED: {r['error']}")
             continue
         s = r["summary"]
         bufs = r.get("blocks", {}).get("allocations", "")
-        lines.append(f"{key}{bufs!s:>8}{s['load_ms']:>10.1f}{s['prepare_ms']:>10.1f}"
-                     f"{s['upload_ms']:>11.1f}{s['total_ms']:>11.1f}  "
-                     f"{s['total_min_ms']:.0f}..{s['total_max_ms']:.0f}")
+        spread = f"{s['total_min_ms']:.0f}..{s['total_max_ms']:.0f}"
+        line = (f"{key}{bufs!s:>8}{s['load_ms']:>10.1f}{s['prepare_ms']:>10.1f}"
+                f"{s['upload_ms']:>11.1f}{s['total_ms']:>11.1f}  {spread:<13}")
+        if "render_ms" in r:
+            line += f"{r['render_ms']:>10.1f}{r['frame_gpu_ms']:>13.2f}{r['covered']:>8.2f}"
+        elif "render_error" in r:
+            line += f"  render: {r['render_error']}"
+        lines.append(line.rstrip())
     return "\n".join(lines)
+
+
+def _kind(source: str) -> str:
+    # where a scene came from: built in, a GLB, or the compact .npz
+    suffix = Path(source).suffix
+    return suffix[1:] if suffix else "builtin"
 
 
 def ratios(rows: list[dict]) -> dict[str, float]:
@@ -241,15 +309,19 @@ def main(argv: list[str] | None = None) -> int:
                     help="repeats of the first-fit cases (the city takes a minute each on "
                          "lavapipe)")
     ap.add_argument("--scene-dir", action="append", default=[],
-                    help="folders searched for city.glb first (default: .scenes)")
+                    help="folders searched for <scene>.glb, then <scene>.npz (default: "
+                         ".scenes)")
+    ap.add_argument("--render", default="flat",
+                    help="config (configs/NAME.toml) rendered once per case after the "
+                         "uploads, or none")
+    ap.add_argument("--render-size", default="320x180")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per case")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench_scene_load.json"))
-    ap.add_argument("--worker", nargs=4, metavar=("SOURCE", "BACKEND", "ALLOCATOR", "REPEATS"),
-                    help=argparse.SUPPRESS)
+    ap.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.worker:
-        source, backend, strategy, repeats = args.worker
-        print(json.dumps(run_case(source, backend, strategy, int(repeats))))
+    if args.worker:  # SOURCE BACKEND ALLOCATOR REPEATS [RENDER SIZE]
+        source, backend, strategy, repeats, *render = args.worker
+        print(json.dumps(run_case(source, backend, strategy, int(repeats), *render)))
         return 0
 
     scene_dirs = [Path(d) for d in args.scene_dir] or [ROOT / ".scenes"]
@@ -257,8 +329,9 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.scenes.split(","):
         source = scene_source(name, scene_dirs)
         if source is None:
-            skipped.append(f"{name}: not in {', '.join(map(str, scene_dirs))} nor the fetch "
-                           f"cache (rfw scenes fetch {name}; copy {name}.glb into .scenes "
+            skipped.append(f"{name}: no {name}.glb or {name}.npz in "
+                           f"{', '.join(map(str, scene_dirs))}, nor in the fetch cache (rfw "
+                           f"scenes fetch {name}; bench_meshlets.py --export-scenes .scenes "
                            f"to carry it)")
             continue
         for backend in args.backends.split(","):
@@ -266,8 +339,12 @@ def main(argv: list[str] | None = None) -> int:
                 if backend == "vk" else ["-"]  # the block allocator is vk's
             for strategy in strategies:
                 n = args.before_repeats if strategy == "first-fit" else args.repeats
-                row = {"scene": name, "backend": backend, "allocator": strategy,
-                       "repeats": n, **spawn(source, backend, strategy, n, args.timeout)}
+                # the frame is rendered once per scene and backend, not per allocator
+                render = (args.render, args.render_size) if strategy != "first-fit" \
+                    else ("none", "")
+                row = {"scene": name, "source": source, "backend": backend,
+                       "allocator": strategy, "repeats": n,
+                       **spawn(source, backend, strategy, n, args.timeout, render)}
                 # what the allocator says it was (an older commit's knows first fit only)
                 row["allocator"] = row.get("blocks", {}).get("strategy", strategy)
                 if "ms" in row:
