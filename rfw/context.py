@@ -72,6 +72,13 @@ class PassContext(Protocol):
         clamp-to-edge | repeat | mirror-repeat; ``compare``: a depth comparison)."""
 
     # recording -----------------------------------------------------------------------------
+    def replay(self, *key: Any) -> bool:
+        """Call first in ``record``: True when the backend executed again the commands
+        this pass recorded in an earlier frame for the same settings, slot resources, scene
+        and ``key`` (whatever else the commands depend on: bytes the pass computes), and
+        ``record`` returns; False when it records (a backend that can keep the commands
+        keeps them for such a frame). A backend that cannot replay always says False."""
+
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps (``Pass.steps``): the graph's
         barriers between steps (a mip written, then read) are recorded here."""

@@ -120,21 +120,25 @@ class CachedSet:
     offsets: list[int] = field(default_factory=list)
     pinned: list[Any] = field(default_factory=list)
     mapped: Any = None  # the uniform buffer's bytes, mapped once
+    data: list[bytes] = field(default_factory=list)  # the uniform values it holds
+    alive: bool = True
 
     def write(self, data: Sequence[bytes]) -> None:
-        """This frame's uniform values, in binding order."""
-        if not data:
+        """This frame's uniform values, in binding order (written where they changed)."""
+        if not data or data == self.data:
             return
         if self.mapped is None:
             self.mapped = self.uniforms.map()  # type: ignore[union-attr]
         for off, raw in zip(self.offsets, data, strict=True):
             self.mapped[off:off + len(raw)] = np.frombuffer(raw, np.uint8)
+        self.data = list(data)
 
     def destroy(self) -> None:
         for obj in (self.pool, self.uniforms):
             if obj is not None:
                 obj.destroy()
         self.uniforms = self.mapped = None
+        self.alive = False
 
 
 class SetCache:
@@ -145,6 +149,8 @@ class SetCache:
         self.device, self.allocator = device, allocator
         self.alignment = max(16, int(device.limits["minUniformBufferOffsetAlignment"]))
         self.kept = _Kept(lambda s: s.destroy())
+        # per call site, the last sets found by their bound values: [(values, set)]
+        self.quick: dict[Slot, list[tuple[tuple, CachedSet]]] = {}
         self.written = 0
 
     def get(self, slot: Slot, layout: Any, wanted: Sequence[DescriptorInfo],
@@ -155,15 +161,51 @@ class SetCache:
         ``vkext.scene.update_descriptors`` takes it), ``owners(value)`` the objects that
         keep its handles alive: their identities go into the key (and the set keeps them),
         so a handle the driver reuses after its object was destroyed never matches an old
-        set. This frame's uniform values are written before it returns."""
+        set. This frame's uniform values are written before it returns.
+
+        A call site that binds the very objects it bound last time (equal values, kept alive
+        by the memo) finds its set without working out payloads: ``quick`` remembers the
+        last :data:`KEEP` sets per call site by their bound values."""
         data: list[bytes] = []
+        seen: list[Any] = [layout]
+        for d in wanted:
+            value = values[d.name]
+            raw = uniform_bytes(d, value)
+            if raw is not None:
+                data.append(raw)
+                seen.append(len(raw))
+            else:
+                seen.append(tuple(value) if isinstance(value, list) else value)
+        quick = tuple(seen)
+        entry = self._quick(slot, quick)
+        if entry is None:
+            entry = self._find(slot, layout, wanted, values, data, payload, owners)
+            memo = self.quick.setdefault(slot, [])
+            memo[:] = [m for m in memo if m[1] is not entry][-(KEEP - 1):] + [(quick, entry)]
+        entry.write(data)
+        return entry
+
+    def _quick(self, slot: Slot, quick: tuple) -> CachedSet | None:
+        """The set this call site wrote for the same bound values, while it is kept."""
+        try:
+            for seen, entry in self.quick.get(slot, ()):
+                if seen == quick and self.kept.find(slot, entry.key) is entry:
+                    return entry
+        except (TypeError, ValueError):  # a value == cannot answer (an array): in full
+            return None
+        return None
+
+    def _find(self, slot: Slot, layout: Any, wanted: Sequence[DescriptorInfo],
+              values: dict[str, Any], data: list[bytes],
+              payload: Callable[[DescriptorInfo, Any], Any],
+              owners: Callable[[Any], list[Any]]) -> CachedSet:
+        """The kept set of these descriptors (keyed by their payloads), or a new one."""
         fixed: list[Any] = []
         pins: list[Any] = []
         for d in wanted:
             value = values[d.name]
             raw = uniform_bytes(d, value)
             if raw is not None:
-                data.append(raw)
                 fixed.append((d.binding, len(raw)))
                 continue
             p = payload(d, value)
@@ -178,7 +220,6 @@ class SetCache:
             entry = self._write(key, slot, layout, wanted, values, data, payload)
             entry.pinned = pins
             self.kept.add(slot, entry)
-        entry.write(data)
         return entry
 
     def _write(self, key: tuple, slot: Slot, layout: Any, wanted: Sequence[DescriptorInfo],
@@ -216,6 +257,7 @@ class SetCache:
 
     def destroy(self) -> None:
         self.kept.clear()
+        self.quick.clear()
 
 
 @dataclass(eq=False)
@@ -227,6 +269,13 @@ class Bundle:
     cmd: Any  # VkCommandBuffer (secondary)
     draws: int = 0
     sets: list[CachedSet] = field(default_factory=list)
+    # a pass's bundle: the uniform values its sets held when it was recorded (rewritten
+    # when it is replayed: another bundle of the call site may have changed them)
+    writes: list[tuple[CachedSet, list[bytes]]] = field(default_factory=list)
+
+    def usable(self) -> bool:
+        """Whether every set it binds is still kept (an evicted one was destroyed)."""
+        return all(s.alive for s in self.sets)
 
     def __post_init__(self) -> None:
         self.handles = ffi.new("VkCommandBuffer[1]", [self.cmd])  # vkCmdExecuteCommands'
@@ -269,6 +318,30 @@ class BundleCache:
         self.kept.add(slot, bundle)
         self.recorded += 1
         return bundle
+
+    def begin(self, slot: Slot, key: tuple) -> Bundle:
+        """Begin a bundle of a whole pass's commands outside any rendering (dispatches,
+        barriers, renderings begun inside it); :meth:`end` keeps it for ``slot``."""
+        self.kept.make_room(slot)
+        alloc = vk.VkCommandBufferAllocateInfo(
+            commandPool=self.handle, level=vk.VK_COMMAND_BUFFER_LEVEL_SECONDARY,
+            commandBufferCount=1)
+        bundle = Bundle(key, vk.vkAllocateCommandBuffers(self.device.device, alloc)[0])
+        try:
+            inherit = new("VkCommandBufferInheritanceInfo")
+            # simultaneous use, as for a rendering's bundles (frames in flight)
+            vk.vkBeginCommandBuffer(bundle.cmd, new(
+                "VkCommandBufferBeginInfo", pInheritanceInfo=inherit,
+                flags=const("VK_COMMAND_BUFFER_USAGE_SIMULTANEOUS_USE_BIT")))
+        except BaseException:
+            self._free(bundle)
+            raise
+        return bundle
+
+    def end(self, slot: Slot, bundle: Bundle) -> None:
+        vk.vkEndCommandBuffer(bundle.cmd)
+        self.kept.add(slot, bundle)
+        self.recorded += 1
 
     def _begin(self, cmd: Any, colors: Sequence[int], depth: int, stencil: int,
                samples: int) -> None:

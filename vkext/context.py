@@ -5,6 +5,8 @@ the image in for the pass."""
 from __future__ import annotations
 
 import math
+import time
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,6 +27,19 @@ from .programs import Program
 from .scene import BufferRange, Sampler, new, update_descriptors
 
 _COLOR_ATTACHMENT_LAYOUTS = {"COLOR_ATTACHMENT_OPTIMAL", "GENERAL", "ATTACHMENT_OPTIMAL"}
+# a pass's program is looked up from memory between looks at its sources (hot reload):
+# a replayed frame neither stats nor hashes shader files
+RECHECK_S = 0.25
+# per executor: what records look up each frame and that does not change between frames
+# (programs by call, a step's planned barriers); dropped with the executor
+_MEMOS: weakref.WeakKeyDictionary[Any, dict[tuple, Any]] = weakref.WeakKeyDictionary()
+
+
+def _memo(executor: Any) -> dict[tuple, Any]:
+    memo = _MEMOS.get(executor)
+    if memo is None:
+        memo = _MEMOS[executor] = {}
+    return memo
 
 
 @dataclass(frozen=True)
@@ -63,6 +78,10 @@ class VkPassContext(SlotContext):
         self.frame = executor.frame_index
         self._rendering: VkRenderPass | None = None
         self._bound: list[Any] = []  # cached sets bound by this record (bundles keep them)
+        self._memo = _memo(executor)
+        self._pass_bundle: Any = None  # the bundle this record's commands go into (replay)
+        self._primary: Any = None  # the pass's command buffer while they do
+        self._used: list[Any] = []  # every cached set bound by this record
 
     _step = -1  # the declared step (Pass.steps) the pass is in
 
@@ -70,9 +89,63 @@ class VkPassContext(SlotContext):
         """Enter step ``index`` of the pass's declared steps: record the barriers the plan
         puts before it, which order it after the earlier steps (the work inside one step is
         unordered: no barrier is recorded between its dispatches)."""
-        barriers = self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
+        key = ("step", self.pass_.name, index, self._step)
+        barriers = self._memo.get(key)
+        if barriers is None:
+            barriers = self._memo[key] = self.executor.plan.barriers_before_step(
+                self.pass_.name, index, self._step)
         record_barriers(self.cmd, barriers, self.executor.resources)
         self._step = index
+
+    def replay(self, *key: Any) -> bool:
+        """Execute again the commands this pass recorded in an earlier frame for the same
+        settings, slot resources, scene and ``key`` (whatever else its commands depend on),
+        and say so (True: ``record`` returns at once). False: ``record`` goes on, and its
+        commands are recorded into a bundle (``vkext.bundles``) kept for such a frame. Call
+        it first, before recording anything. Without bundles (``RFW_VK_BUNDLES=0``) or
+        under synchronization validation it is always False: the layer does not report
+        hazards between two bundles (a broken plan's went unreported: test_schedule_fuzz),
+        so there every pass records its commands into the frame."""
+        ex = self.executor
+        if ex.bundles is None or self.device.sync_validation:
+            return False
+        if self._pass_bundle is not None or self._step >= 0 or self._draw_calls \
+                or self._set_calls:
+            return False  # too late: commands were recorded already
+        try:
+            full = ("pass", type(self.pass_), _settings_key(self.pass_.params),
+                    tuple(self._slot_objects()), self.scene, key)
+            hash(full)
+        except TypeError:  # an unhashable part: record every frame
+            return False
+        slot = (self.pass_.name, -1)
+        bundle = ex.bundles.find(slot, full)
+        if bundle is not None and bundle.usable():
+            for entry, data in bundle.writes:
+                entry.write(data)
+            lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+            return True
+        self._pass_bundle = ex.bundles.begin(slot, full)
+        self._primary, self.cmd = self.cmd, self._pass_bundle.cmd
+        return False
+
+    def _slot_objects(self) -> list[Any]:
+        """The objects behind the pass's slots (history images swap between frames)."""
+        ex = self.executor
+        out = []
+        for r in self.slots.values():
+            obj = ex.images.get(r)
+            out.append(obj if obj is not None else ex.buffers.get(r, ex.accels.get(r)))
+        return out
+
+    def _end_pass_bundle(self) -> None:
+        """Close the bundle of this record's commands and execute it in the pass."""
+        bundle, self._pass_bundle = self._pass_bundle, None
+        self.cmd, self._primary = self._primary, None
+        bundle.sets = list(dict.fromkeys(self._used))
+        bundle.writes = [(e, list(e.data)) for e in bundle.sets]
+        self.executor.bundles.end((self.pass_.name, -1), bundle)
+        lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:
@@ -134,7 +207,22 @@ class VkPassContext(SlotContext):
         ``shader`` (default: the pass's) and the files of its other ``stages`` (names beside
         the pass, or paths; a name names files as ``rfw.shaders.program_files`` does): a
         mesh program is its mesh shader plus, in ``stages``, an optional task and fragment
-        shader."""
+        shader. Looked up from memory between looks at the sources (``RECHECK_S``)."""
+        try:
+            key = ("program", type(self.pass_), self.pass_.name, kind, shader,
+                   tuple(sorted(defines.items())) if defines else (), tuple(stages))
+            hit = self._memo.get(key)
+        except TypeError:  # an unhashable define or stage: look it up every time
+            return self._program(kind, shader, defines, stages)
+        now = time.monotonic()
+        if hit is not None and now - hit[1] < RECHECK_S:
+            return hit[0]
+        prog = self._program(kind, shader, defines, stages)
+        self._memo[key] = (prog, now)
+        return prog
+
+    def _program(self, kind: str, shader: str | None, defines: dict[str, object] | None,
+                 stages: Sequence[str | Path]) -> Program:
         if kind in ("compute", "render") and not stages:
             paths = self.executor.shader_paths(self.pass_, shader)
         else:
@@ -152,7 +240,8 @@ class VkPassContext(SlotContext):
         return program_files(self.pass_.folder(), name, owner=self.pass_.name)
 
     def _check_extra(self, prog: Program, values: dict[str, Any]) -> None:
-        check_bindings(self.pass_.name, prog.name, prog.descriptors, values)
+        if not prog.descriptors.keys() >= values.keys():
+            check_bindings(self.pass_.name, prog.name, prog.descriptors, values)
 
     def bind(self, prog: Program, values: dict[str, Any], point: int,
              sets: Sequence[int] | None = None) -> None:
@@ -174,8 +263,9 @@ class VkPassContext(SlotContext):
         wanted = prog.set_descriptors(s)
         if not wanted:
             return None
-        check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
-                       missing=True)
+        if not all(d.name in values for d in wanted):
+            check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
+                           missing=True)
         handle = self._scene_set(prog, s, values, wanted)
         if handle is not None:
             return handle
@@ -185,6 +275,7 @@ class VkPassContext(SlotContext):
             entry = ex.sets.get(slot, prog.set_layouts[s], wanted, values,
                                 lambda d, v: self._payload(prog, d, v), _owners)
             self._bound.append(entry)
+            self._used.append(entry)
             return entry.handle
         entries = [(d.binding, d.kind, max(1, d.count)) for d in wanted]
         arr = ex.descriptors.allocate(prog.set_layouts[s], entries)
@@ -331,7 +422,7 @@ class VkPassContext(SlotContext):
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
         prog = self.program("render", shader=shader, defines=defines)
         self._check_extra(prog, {**bindings, "camera": 0, "lights": 0})
-        if self.executor.bundles is None:  # recorded inline, every frame
+        if self.executor.bundles is None or self._pass_bundle is not None:  # inline
             with self.render_pass(color=color, depth=depth,
                                   depth_read_only=not depth_write) as rp:
                 rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend)
@@ -385,7 +476,7 @@ class VkPassContext(SlotContext):
         lib.vkCmdEndRendering(self.cmd)
         return bundle.draws
 
-    _draw_calls = 0  # draw_scene calls so far in this record: one bundle call site each
+    _draw_calls = 0  # draw_scene and render_pass calls so far: one bundle call site each
 
     def render_pass(self, *, color: Sequence[tuple[str, Any]] = (),
                     depth: tuple[str, Any] | None = None,
@@ -394,10 +485,43 @@ class VkPassContext(SlotContext):
         load)]) and ``depth`` ((slot, clear depth or None)); record into the returned
         :class:`VkRenderPass` and ``end()`` it (or use it as a ``with`` block)."""
         colors, targets, dimage = self._targets(color, depth)
+        # begun at end(), around a bundle (inside a pass's bundle: recorded as it comes)
+        if self.executor.bundles is not None and self._pass_bundle is None:
+            self._rendering = VkRenderPass(self, targets, dimage, not depth_read_only,
+                                           begin=(colors, depth))
+            return self._rendering
         first = (targets or [dimage])[0]
         self._begin_rendering(colors, depth, not depth_read_only, (first.width, first.height))
         self._rendering = VkRenderPass(self, targets, dimage, not depth_read_only)
         return self._rendering
+
+    def _execute(self, rp: VkRenderPass) -> None:
+        """Begin the rendering of ``rp`` and execute the bundle of its commands: the one
+        this call site recorded for the same commands, targets and scene, or a new one."""
+        formats = _target_formats(rp.targets, rp.depth)
+        key = ("render_pass", tuple(rp.ops), rp.extent, rp.samples, tuple(formats["colors"]),
+               formats["depth"], formats["stencil"], tuple(id(e) for e in rp.sets), self.scene)
+        slot = (self.pass_.name, self._draw_calls)
+        self._draw_calls += 1
+        bundle = self.executor.bundles.find(slot, key)
+        if bundle is None:
+            ops, device = rp.ops, self.device
+
+            def fill(cmd: Any) -> int:
+                _viewport(cmd, *rp.extent)
+                for op in ops:
+                    _record_op(cmd, op, device)
+                return rp.draws
+
+            bundle = self.executor.bundles.record(
+                slot, key, colors=formats["colors"], depth=formats["depth"] or 0,
+                stencil=formats["depth"] if formats["stencil"] else 0, samples=rp.samples,
+                fill=fill)
+            bundle.sets = rp.sets
+        colors, depth = rp.begin
+        self._begin_rendering(colors, depth, rp.depth_write, rp.extent, secondary=True)
+        lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+        lib.vkCmdEndRendering(self.cmd)
 
     def _targets(self, color: Sequence[tuple[str, Any]], depth: tuple[str, Any] | None
                  ) -> tuple[list[tuple[str, Any]], list[Image], Image | None]:
@@ -416,8 +540,12 @@ class VkPassContext(SlotContext):
 
     def finish(self) -> None:
         """After ``record``: a render pass left open is ended, and named as an error."""
-        if self._rendering is not None and self._rendering.open:
+        left_open = self._rendering is not None and self._rendering.open
+        if left_open:
             self._rendering.end()
+        if self._pass_bundle is not None:
+            self._end_pass_bundle()
+        if left_open:
             raise ShaderError(f"pass '{self.pass_.name}' left a render pass open (end() it, "
                               "or begin it in a with block)")
 
@@ -513,6 +641,11 @@ def _target_formats(targets: list[Image], depth: Image | None) -> dict[str, Any]
             "stencil": bool(depth is not None and depth.info.stencil)}
 
 
+def _settings_key(params: Any) -> tuple:
+    """A pass's settings as a key: their type and values."""
+    return (type(params), tuple(vars(params).items())) if params is not None else ()
+
+
 def _frozen(clear: Any) -> Any:
     """A clear value as a key: None, a number or a tuple of numbers."""
     return tuple(clear) if isinstance(clear, list | tuple) else clear
@@ -547,24 +680,44 @@ def _viewport(cmd: Any, width: int, height: int) -> None:
 class VkRenderPass:
     """Dynamic rendering begun by ``ctx.render_pass``: ``use`` a render or mesh program
     (its pipeline for these targets), ``bind`` its own sets by binding name and the scene's
-    with ``bind_scene``, ``push`` constants, draw; ``end`` ends the rendering."""
+    with ``bind_scene``, ``push`` constants, draw; ``end`` ends the rendering.
+
+    With the executor's bundles (the default), the commands are collected rather than
+    recorded: ``end`` looks them up among the call site's bundles (``vkext.bundles``) and
+    executes the one recorded for the same commands, recording it on a miss, so a frame
+    that draws what the last one drew records no command per draw. Without them
+    (``RFW_VK_BUNDLES=0``) every command goes straight into the pass's command buffer."""
 
     def __init__(self, ctx: VkPassContext, targets: list[Image], depth: Image | None,
-                 depth_write: bool):
+                 depth_write: bool, *, begin: tuple | None = None):
         self.ctx, self.cmd = ctx, ctx.cmd
         self.targets, self.depth, self.depth_write = targets, depth, depth_write
         self.prog: Program | None = None
         self.point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
         self.open = True
         first = (targets or [depth])[0]
-        _viewport(self.cmd, first.width, first.height)
+        self.extent = (first.width, first.height)
         self.samples = first.samples
+        # begin: the (colors, depth) the rendering begins with at end(), around a bundle;
+        # None: begun already, and every command is recorded as it comes
+        self.begin = begin
+        self.ops: list[tuple] | None = None if begin is None else []
+        self.sets: list[Any] = []  # the cached sets the commands bind (a bundle keeps them)
+        self.draws = 0
+        if begin is None:
+            _viewport(self.cmd, *self.extent)
 
     def __enter__(self) -> VkRenderPass:
         return self
 
     def __exit__(self, *exc: Any) -> None:
         self.end()
+
+    def _emit(self, op: tuple) -> None:
+        if self.ops is None:
+            _record_op(self.cmd, op, self.ctx.device)
+        else:
+            self.ops.append(op)
 
     def use(self, prog: Program, *, depth_compare: str = "less", cull: str = "back",
             blend: dict | None = None) -> None:
@@ -575,7 +728,7 @@ class VkRenderPass:
         pipe = self.ctx.executor.programs.graphics_pipeline(
             prog, **_target_formats(self.targets, self.depth), samples=self.samples,
             depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend)
-        lib.vkCmdBindPipeline(self.cmd, self.point, pipe.handle)
+        self._emit(("pipeline", pipe.handle))
         self.prog = prog
 
     def _program(self) -> Program:
@@ -586,10 +739,16 @@ class VkRenderPass:
     def bind(self, *, sets: Sequence[int] | None = None, **values: Any) -> None:
         """Bind the program's own sets (default: every set that is not the scene's),
         matching its binding names to ``values``."""
-        prog = self._program()
-        self.ctx._check_extra(prog, values)
+        prog, ctx = self._program(), self.ctx
+        ctx._check_extra(prog, values)
         own = [s for s in prog.sets() if s not in prog.scene_sets] if sets is None else sets
-        self.ctx.bind(prog, values, self.point, own)
+        layout = prog.pipeline_layout.handle
+        for s in own:
+            start = len(ctx._bound)
+            handle = ctx._set(prog, s, values)
+            self.sets += ctx._bound[start:]
+            if handle is not None:
+                self._emit(("set", layout, s, handle))
 
     def bind_scene(self, *, camera: str = "main", material: int | None = None,
                    instance: int | None = None) -> None:
@@ -600,21 +759,23 @@ class VkRenderPass:
             raise ShaderError(f"pass '{self.ctx.pass_.name}' binds the scene, but none is "
                               "loaded")
         layout = prog.pipeline_layout.handle
-        for s, handle in ((1, scene.camera_sets[camera]),
-                          (2, None if material is None else scene.material_sets[material]),
-                          (3, None if instance is None else scene.instance_sets[instance])):
-            if handle is not None:
-                lib.vkCmdBindDescriptorSets(self.cmd, self.point, layout, s, 1, handle, 0,
-                                            ffi.NULL)
+        self._emit(("set", layout, 1, scene.camera_sets[camera]))
+        if material is not None:
+            self._emit(("set", layout, 2, scene.material_sets[material]))
+        if instance is not None:
+            self._emit(("set", layout, 3, scene.instance_sets[instance]))
 
     def push(self, data: bytes) -> None:
         """Push constants to every stage of the program."""
-        self.ctx._push(self._program(), data)
+        prog = self._program()
+        self.ctx._check_push(prog, data)
+        self._emit(("push", prog.pipeline_layout.handle, prog.stage_flags, bytes(data)))
 
     def draw_mesh_tasks(self, x: int, y: int = 1, z: int = 1) -> None:
         """``vkCmdDrawMeshTasksEXT``: x * y * z task (or mesh) workgroups."""
         self._program()
-        self.ctx.device.fn.vkCmdDrawMeshTasksEXT(self.cmd, int(x), int(y), int(z))
+        self.draws += 1
+        self._emit(("tasks", int(x), int(y), int(z)))
 
     def draw_mesh_tasks_indirect(self, buffer: Buffer | BufferRange, *, offset: int = 0,
                                  count: int = 1, stride: int = 12) -> None:
@@ -623,10 +784,32 @@ class VkRenderPass:
         self._program()
         handle = buffer.buffer if isinstance(buffer, BufferRange) else buffer.handle
         base = buffer.offset if isinstance(buffer, BufferRange) else 0
-        self.ctx.device.fn.vkCmdDrawMeshTasksIndirectEXT(self.cmd, handle, base + offset,
-                                                         int(count), int(stride))
+        self.draws += 1
+        self._emit(("tasks_indirect", handle, base + offset, int(count), int(stride)))
 
     def end(self) -> None:
-        if self.open:
-            self.open = False
+        if not self.open:
+            return
+        self.open = False
+        if self.ops is None:
             lib.vkCmdEndRendering(self.cmd)
+        else:
+            self.ctx._execute(self)
+
+
+def _record_op(cmd: Any, op: tuple, device: Any) -> None:
+    """Record one command a :class:`VkRenderPass` collected."""
+    kind = op[0]
+    point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+    if kind == "pipeline":
+        lib.vkCmdBindPipeline(cmd, point, op[1])
+    elif kind == "set":
+        lib.vkCmdBindDescriptorSets(cmd, point, op[1], op[2], 1, op[3], 0, ffi.NULL)
+    elif kind == "push":
+        lib.vkCmdPushConstants(cmd, op[1], op[2], 0, len(op[3]), ffi.new("char[]", op[3]))
+    elif kind == "tasks":
+        device.fn.vkCmdDrawMeshTasksEXT(cmd, *op[1:])
+    elif kind == "tasks_indirect":
+        device.fn.vkCmdDrawMeshTasksIndirectEXT(cmd, *op[1:])
+    else:  # a command kind added above without its recording
+        raise ShaderError(f"render pass command '{kind}' has no recording")

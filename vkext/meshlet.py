@@ -194,6 +194,7 @@ class MeshletScene:
         self.triangle_count = sum(mesh_triangles[scene.instances[k].mesh] for k in order)
         self._upload("draws", np.frombuffer(b"".join(rows_) or bytes(48), np.uint8))
         self.frozen: bytes | None = None  # the culling camera while frozen
+        self._view: tuple[tuple, bytes] | None = None  # (camera, size) and their bytes
 
     def _upload(self, name: str, data: np.ndarray) -> None:
         data = np.ascontiguousarray(data)
@@ -210,7 +211,10 @@ class MeshletScene:
     def cull_camera(self, freeze: bool) -> bytes:
         """The camera culling tests use: the main camera, or (``freeze``) the one it was when
         the freeze began, while the view moves on."""
-        view = main_camera_bytes(self.vscene.camera, self.vscene.size)
+        seen = (self.vscene.camera, self.vscene.size)
+        if self._view is None or self._view[0] != seen:  # once per camera, not per pass
+            self._view = (seen, main_camera_bytes(*seen))
+        view = self._view[1]
         if freeze and self.frozen is None:
             self.frozen = view
         elif not freeze:

@@ -94,7 +94,10 @@ class Program:
 
     @property
     def name(self) -> str:
-        return " + ".join(str(p) for p in self.paths)
+        name = self.__dict__.get("_name")  # worked out once: binding checks name it per call
+        if name is None:
+            name = self.__dict__["_name"] = " + ".join(str(p) for p in self.paths)
+        return name
 
     @property
     def handle(self) -> Any:
@@ -107,7 +110,10 @@ class Program:
         return self.stage_flags
 
     def sets(self) -> list[int]:
-        return sorted({d.set for d in self.descriptors.values()})
+        out = self.__dict__.get("_sets")  # worked out once: binds ask each frame
+        if out is None:
+            out = self.__dict__["_sets"] = sorted({d.set for d in self.descriptors.values()})
+        return out
 
     def set_descriptors(self, s: int) -> list[DescriptorInfo]:
         """The descriptors of set ``s`` by binding (worked out once: binds ask each frame)."""

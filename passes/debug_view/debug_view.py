@@ -45,6 +45,8 @@ class DebugViewPass(ComputePass):
                                 f"got {self.params.range}")
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings and images as a recorded frame
+            return
         fmt = format_info(ctx.format("source"))
         defines = {"MODE": self.mode}
         if fmt.depth:

@@ -31,6 +31,8 @@ class DeferredLightingPass(ComputePass):
         ambient: float = 1.0  # sky ambient multiplier
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images and scene as a recorded frame
+            return
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}
         extra = {"t_shadow": ctx.sampled("shadow"), "s_shadow": ctx.scene.shadow_sampler} \
             if ctx.has("shadow") else {}

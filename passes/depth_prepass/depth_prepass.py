@@ -21,4 +21,6 @@ class DepthPrepassPass(RenderPass):
     }
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, image and scene as a recorded frame
+            return
         ctx.draw_scene(depth=("depth", 1.0), alpha=("OPAQUE",))

@@ -40,6 +40,8 @@ class DepthPyramidPass(ComputePass):
                          for lv in range(1, self._levels())))
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same images (and so levels) as a recorded frame
+            return
         w, h = ctx.extent("pyramid")
         ctx.step(0)
         ctx.dispatch(threads=(w, h), defines={"FROM_DEPTH": 1}, t_depth=ctx.sampled("depth"),

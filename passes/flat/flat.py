@@ -30,6 +30,8 @@ class FlatPass(RenderPass):
         ambient: Annotated[float, Range(0.0, 1.0)] = 0.25  # share of the colour without light
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images and scene as a recorded frame
+            return
         # masks and blending read textures: without them every material is opaque
         ctx.draw_scene(color=[("color", (0.0, 0.0, 0.0, 1.0))], depth=("depth", 1.0),
                        alpha=("OPAQUE", "MASK", "BLEND"), u_params=self.params)

@@ -33,6 +33,8 @@ class ForwardPass(DepthPrepassMixin, RenderPass):
         prepass: bool = False  # test against a depth input instead of writing depth
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images and scene as a recorded frame
+            return
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}
         extra = {"t_shadow": ctx.sampled("shadow"), "s_shadow": ctx.scene.shadow_sampler} \
             if ctx.has("shadow") else {}

@@ -26,6 +26,8 @@ class FXAAPass(ComputePass):
         search_steps: int = 12  # edge-walk iterations per side (1-12)
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings and images as a recorded frame
+            return
         # clamped bilinear reads: the edge walk samples between texels
         ctx.dispatch(threads=ctx.extent("color"), t_ldr=ctx.sampled("ldr"),
                      s_linear=ctx.sampler(filter="linear", address="clamp-to-edge"),

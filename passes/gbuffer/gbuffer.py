@@ -31,6 +31,8 @@ class GBufferPass(DepthPrepassMixin, RenderPass):
         prepass: bool = False  # test against a depth input instead of writing depth
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images and scene as a recorded frame
+            return
         clear = (0.0, 0.0, 0.0, 0.0)
         color = [("albedo", clear), ("normal", clear), ("material", clear), ("emissive", clear)]
         # less-equal with or without a prepass: where two surfaces tie in depth the last one

@@ -84,9 +84,14 @@ class MeshletCullPass(ComputePass):
         if p.freeze and p.phase == "late":
             return  # frozen: the late phase draws nothing (the pyramid is the view's)
         phase = "single" if p.freeze else p.phase
+        camera = ms.cull_camera(p.freeze)
+        # the same settings, buffers, scene and culling camera as a recorded frame (the
+        # first frame's first phase also clears the visibility)
+        if ctx.replay(camera, ctx.frame == 0 and p.phase != "late"):
+            return
         bindings = {"commands": ctx.buffer("commands"), "counters": ctx.buffer("counters"),
-                    "visibility": ctx.buffer("visibility"), "cull_camera":
-                    ms.cull_camera(p.freeze), **ms.bindings()}
+                    "visibility": ctx.buffer("visibility"), "cull_camera": camera,
+                    **ms.bindings()}
         bindings = {k: v for k, v in bindings.items() if k in _BLOCKS}
         if p.phase != "late":
             # nothing was visible before an executor's first frame

@@ -67,9 +67,12 @@ class MeshletGBufferPass(RenderPass):
         return {**self.inputs, **ins}, {}
 
     def record(self, ctx) -> None:
-        from vkext.meshlet import draw_meshlets, flags_of
+        from vkext.meshlet import draw_meshlets, flags_of, scene_of
 
         p = self.params
+        # the same settings, images, buffers, scene and culling camera as a recorded frame
+        if ctx.replay(scene_of(ctx).cull_camera(p.freeze)):
+            return
         phase = p.phase
         if p.freeze and phase != "single":
             if phase == "late":

@@ -35,6 +35,8 @@ class OverdrawPass(RenderPass):
                                 f"'{self.params.cull}'" + did_you_mean(self.params.cull, _CULL))
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, image and scene as a recorded frame
+            return
         ctx.draw_scene(color=[("count", (0.0, 0.0, 0.0, 0.0))], depth=None,
                        cull=self.params.cull, blend={"color": _ADD, "alpha": _ADD},
                        alpha=("OPAQUE", "MASK", "BLEND"))

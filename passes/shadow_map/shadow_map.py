@@ -22,5 +22,7 @@ class ShadowMapPass(RenderPass):
         return {}, {"depth": self.outputs["depth"].with_(size=size)}
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, image and scene as a recorded frame
+            return
         # front faces culled: thin geometry still shadows, and acne moves to back faces
         ctx.draw_scene(depth=("depth", 1.0), camera="sun", cull="front")

@@ -51,6 +51,8 @@ class SSAOPass(ComputePass):
                 Step("blur", reads="ao_raw", writes="ao"))
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings and images as a recorded frame
+            return
         # depth buffers bind as texture_depth_2d, copies (tests, readbacks) as plain floats
         defines = {"DEPTH_TEXTURE": 1} if format_info(ctx.format("depth")).depth else {}
         depth = ctx.sampled("depth")

@@ -17,5 +17,7 @@ class TonemapPass(ComputePass):
         sky: tuple[float, float, float] = (0.55, 0.7, 0.95)  # where hdr alpha is 0
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings and images as a recorded frame
+            return
         ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
                      o_ldr=ctx.storage("ldr"), u_params=self.params)

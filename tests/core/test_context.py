@@ -58,6 +58,7 @@ class _Complete:
     def buffer(self, slot): return None
     def sampler(self, *, filter="linear", address="clamp-to-edge", compare=None): return None
     def step(self, index): return None
+    def replay(self, *key): return False
     def program(self, kind, **options: Any): return None
     def dispatch(self, *, threads, shader=None, entry="main", defines=None, **bindings):
         return None
