@@ -166,7 +166,8 @@ class AsyncQueues:
             self.releases.setdefault(t.after, []).append(t)
         self.frames = 0  # frames submitted
         self.frame_gpu_ms: list[float] = []
-        self._slots: dict[int, _Slot] = {}
+        self._slots: dict[int, _Slot] = {}  # by id of the executor's frame slot
+        self._owners: list[Any] = []
         self._slot: _Slot | None = None
         self._last: str | None = None
         self._resources: dict[str, Any] = {}
@@ -209,8 +210,7 @@ class AsyncQueues:
         s = self._slots.get(id(slot))
         if s is None:
             s = self._slots[id(slot)] = _Slot(self, f"rfw:slot{len(self._slots)}")
-            self._keep_slot_alive = getattr(self, "_keep_slot_alive", [])
-            self._keep_slot_alive.append(slot)  # ids stay unique while the slot lives
+            self._owners.append(slot)  # kept: its id stays its own
         self._read_span(s)  # its last frame is done: the caller waited for it
         s.begun.clear()
         self._slot, self._last = s, None

@@ -1,0 +1,144 @@
+"""Async compute on vk (vkext.queues): the plan's batches and timeline semaphores run under
+validation with synchronization validation, and give the image the one-queue frame gives.
+
+Lavapipe has one queue: ``async_compute = on`` sends the same batches, waits and signals to
+it one after the other (the H200 runs them on a second queue of its graphics family)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rfw.config import apply_overrides, load_config
+from rfw.graph.queues import COMPUTE, choose
+from vkext import VkDevice
+from vkext.backend import render_vk
+from vkext.queues import AsyncQueues
+
+from ..graph.test_queues import SSAO
+
+SIZE = "96x54"
+
+
+def _render(device, scene, switch, frames=3):
+    cfg = apply_overrides(load_config(SSAO), [f"size={SIZE}", f"async_compute={switch}"])
+    return render_vk(cfg, scene=scene, device=device, frames=frames)
+
+
+def test_async_on_and_off_give_the_same_image(vk_device, courtyard):
+    on = _render(vk_device, courtyard, "on")
+    off = _render(vk_device, courtyard, "off")
+    assert on.timings["validation"]["messages"] == 0, on.timings["validation"]
+    assert off.timings["validation"]["messages"] == 0, off.timings["validation"]
+    q = on.executor.plan.queues
+    # lavapipe: one queue; the H200: a second queue of its graphics family
+    assert q.mode == choose("on", vk_device.caps)[0] and q.async_passes() == ("ssao",)
+    assert off.executor.plan.queues.queues == ("graphics",)
+    assert on.executor.plan.order != off.executor.plan.order  # ssao moved up
+    assert set(on.images) == set(off.images)
+    for name, img in on.images.items():
+        assert np.array_equal(img, off.images[name]), name
+    # the frame's GPU span, one per frame (warm-up included), from the batches' timestamps
+    spans = on.executor.queues.frame_gpu_ms
+    assert len(spans) >= 3 and all(ms > 0 for ms in spans)
+
+
+def test_the_image_changes_when_ssao_is_off(vk_device, courtyard):
+    """Negative control of the comparison: the AO term is visible at this size."""
+    on = _render(vk_device, courtyard, "on", frames=1)
+    cfg = apply_overrides(load_config(SSAO), [f"size={SIZE}", "async_compute=on", "ao=off"])
+    no_ao = render_vk(cfg, scene=courtyard, device=vk_device, frames=1)
+    name = next(iter(on.images))
+    assert not np.array_equal(on.images[name], no_ao.images[name])
+
+
+def test_reused_timeline_values_are_reported(courtyard, monkeypatch):
+    """Negative control of the semaphore logic under validation: batches that signal the
+    values of the frame before (the frame base never advances) break the rule that a
+    timeline only grows, and the validation layer says so."""
+    real = AsyncQueues.submit
+
+    def stuck(self, last):
+        fence = real(self, last)
+        self.frames = 0
+        return fence
+
+    monkeypatch.setattr(AsyncQueues, "submit", stuck)
+    device = VkDevice(validation=True, label="rfw-tests-async-timeline")
+    try:
+        r = _render(device, courtyard, "on")
+        texts = r.timings["validation"]["texts"]
+        assert r.timings["validation"]["messages"] > 0
+        assert any("imeline" in t or "semaphore" in t.lower() for t in texts), texts
+    finally:
+        device.messages.clear()
+        device.destroy()
+        device.messages.clear()
+
+
+def test_the_runner_is_made_only_for_two_queues(vk_device):
+    from rfw.graph import compile
+    from vkext.queues import async_queues
+
+    from ..graph.test_queues import _graph
+
+    one = compile(_graph("off"), caps=vk_device.caps)
+    assert async_queues(vk_device, one) is None
+    two = compile(_graph("on"), caps=vk_device.caps)
+    runner = async_queues(vk_device, two)
+    try:
+        assert runner is not None and COMPUTE in runner.plan.queues
+        assert runner.queue["compute"] == (vk_device.compute_queue or vk_device.queue)
+    finally:
+        runner.destroy()
+
+
+def test_a_two_family_plan_is_refused_without_that_family(vk_device):
+    if vk_device.compute_family not in (None, vk_device.queue_family):
+        pytest.skip("this device has a compute-only family")
+    from rfw.errors import RfwError
+    from rfw.graph import compile
+    from vkext.queues import async_queues
+
+    from ..graph.test_queues import _graph
+
+    plan = compile(_graph("on"), caps=("compute_family", *vk_device.caps))
+    with pytest.raises(RfwError, match="compute-only queue family"):
+        async_queues(vk_device, plan)
+
+
+def test_the_second_queue_choice():
+    from vkext.consts import vk
+    from vkext.device import compute_queue_choice
+
+    g, c, t = vk.VK_QUEUE_GRAPHICS_BIT, vk.VK_QUEUE_COMPUTE_BIT, vk.VK_QUEUE_TRANSFER_BIT
+    nvidia = [(g | c | t, 16, 64), (t, 2, 64), (c | t, 8, 64)]
+    assert compute_queue_choice(nvidia, 0) == (0, 1)  # a second graphics-family queue
+    one_graphics = [(g | c | t, 1, 64), (t, 1, 64), (c | t, 4, 64)]
+    assert compute_queue_choice(one_graphics, 0) == (2, 0)  # the compute-only family
+    untimed = [(g | c | t, 1, 64), (c | t, 4, 0)]
+    assert compute_queue_choice(untimed, 0) is None  # its passes could not be timed
+    assert compute_queue_choice([(g | c | t, 1, 64)], 0) is None  # lavapipe
+
+
+def test_the_device_reports_its_second_queue(vk_device):
+    fam = vk_device.compute_family
+    assert ("compute_queue" in vk_device.caps) == (fam == vk_device.queue_family)
+    assert ("compute_family" in vk_device.caps) == (fam not in (None, vk_device.queue_family))
+    assert (vk_device.compute_queue is None) == (fam is None)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 5])
+def test_async_in_other_orders_with_poison_gives_the_same_image(vk_device, courtyard, seed):
+    """Schedule fuzzing (vkext.poison) with the async plan: another valid order, every
+    transient poisoned where its lifetime starts, the same image and no validation message
+    (the stretched lifetimes keep what the two queues hold apart in every order)."""
+    from vkext.poison import fuzzing
+
+    base = _render(vk_device, courtyard, "off", frames=1)
+    with fuzzing(order_seed=seed, poison=True):
+        r = _render(vk_device, courtyard, "on", frames=2)
+    assert r.timings["validation"]["messages"] == 0, r.timings["validation"]
+    assert r.executor.plan.queues.async_passes() == ("ssao",)
+    for name, img in r.images.items():
+        assert np.array_equal(img, base.images[name]), name
