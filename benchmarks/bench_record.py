@@ -105,9 +105,11 @@ def measure_here(job: dict) -> dict:
 
 def measure(job: dict) -> dict:
     """One measurement in a process of its own (its crash is this row's error)."""
+    # the checkout first, then what the environment adds (the GPU machine's wheels)
+    path = os.pathsep.join(p for p in (job["root"], os.environ.get("PYTHONPATH")) if p)
     proc = subprocess.run([sys.executable, __file__, "--one", json.dumps(job)],
                           capture_output=True, text=True, cwd=job["root"],
-                          env={**os.environ, "PYTHONPATH": job["root"]})
+                          env={**os.environ, "PYTHONPATH": path})
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode or not lines:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
