@@ -142,3 +142,22 @@ def test_async_in_other_orders_with_poison_gives_the_same_image(vk_device, court
     assert r.executor.plan.queues.async_passes() == ("ssao",)
     for name, img in r.images.items():
         assert np.array_equal(img, base.images[name]), name
+
+
+def test_rt_shadows_builds_its_tlas_beside_the_gbuffer(vk_device, courtyard):
+    """The acceleration-structure build is compute work no raster pass needs before the
+    G-buffer: it goes first, on the compute queue's batch, and the image is unchanged."""
+    from rfw.config import resolve_auto
+
+    if "VK_KHR_ray_query" not in vk_device.caps:
+        pytest.skip("no ray queries: rt_shadows falls back to the shadow map here")
+    out = {}
+    for switch in ("on", "off"):
+        cfg = apply_overrides(load_config(SSAO.parent / "rt_shadows.toml"),
+                              [f"size={SIZE}", f"async_compute={switch}"])
+        cfg, _ = resolve_auto(cfg, vk_device.caps)
+        out[switch] = render_vk(cfg, scene=courtyard, device=vk_device, frames=2)
+        assert out[switch].timings["validation"]["messages"] == 0
+    assert out["on"].executor.plan.queues.async_passes() == ("accel",)
+    for name, img in out["on"].images.items():
+        assert np.array_equal(img, out["off"].images[name]), name
