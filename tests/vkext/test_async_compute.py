@@ -65,6 +65,9 @@ def test_reused_timeline_values_are_reported(courtyard, monkeypatch):
 
     monkeypatch.setattr(AsyncQueues, "submit", stuck)
     device = VkDevice(validation=True, label="rfw-tests-async-timeline")
+    # the batches on one queue, as on lavapipe: a GPU's second queue is left out of a test
+    # that breaks the semaphores on purpose
+    device.compute_queue = None
     try:
         r = _render(device, courtyard, "on")
         texts = r.timings["validation"]["texts"]
