@@ -218,6 +218,8 @@ class ShaderCache:
         if key not in self.programs:
             self.programs[key] = self._glsl(paths, spirvs, kind, formats, owner)
             self.programs[key].key = key
+            # what a call site compares to keep the program past RECHECK_S (hot reload)
+            self.programs[key].stamps = _stamps(s for spv in spirvs for s in spv.sources)
         return self.programs[key]
 
     def recent(self, key: tuple, make: Any) -> Program:
@@ -673,7 +675,7 @@ class PassContext(SlotContext):
                                                            bindings)
             sites[site] = (call, tuple(bindings), tuple(bindings.values()),
                            (prog, pipe, bgs, groups), self._uniform_slots(prog, bindings),
-                           time.monotonic())
+                           [time.monotonic()])
         cp = self.encoder.begin_compute_pass(label=self.pass_.name,
                                              timestamp_writes=self._timestamps())
         cp.set_pipeline(pipe)
@@ -698,11 +700,19 @@ class PassContext(SlotContext):
         less than ``RECHECK_S`` ago (hot reload), and this frame's uniform values fit their
         buffers (they are written here)."""
         hit = _same_call(hit, call, bindings)
-        if hit is None or time.monotonic() - hit[5] >= RECHECK_S:
+        if hit is None:
             return None
         prog = hit[3][0]
         if self.executor.shaders.programs.get(prog.key) is not prog:
             return None
+        now = time.monotonic()
+        if now - hit[5][0] >= RECHECK_S:
+            # the sources are looked at again: unchanged, they keep the program (a stat per
+            # file, not the program's whole lookup)
+            stamps = getattr(prog, "stamps", None)
+            if stamps is None or _stamps(p for p, _, _ in stamps) != stamps:
+                return None
+            hit[5][0] = now
         return hit if self._uniforms_fit(hit, bindings) else None
 
     def _uniforms_fit(self, hit: tuple, bindings: dict[str, Any]) -> bool:
@@ -762,7 +772,7 @@ class PassContext(SlotContext):
                 color, depth, shader, defines, depth_compare, depth_write, cull, blend, bindings)
             sites[site] = (call, tuple(bindings), tuple(bindings.values()),
                            (prog, pipe, group0, targets, dfmt),
-                           self._uniform_slots(prog, bindings), time.monotonic())
+                           self._uniform_slots(prog, bindings), [time.monotonic()])
         read_only = depth is not None and not depth_write
         # the draws are recorded once into a bundle and replayed while nothing they name
         # changes: per-frame data (camera, lights, settings) reaches them through buffers

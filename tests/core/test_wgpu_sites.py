@@ -58,8 +58,22 @@ def test_repeated_calls_look_nothing_up(device, lookups, monkeypatch):
         frame.run(2)
         assert lookups == {"programs": 0, "bind groups": 0}
         assert np.array_equal(frame.read("fxaa.color"), image)
-        # negative control: past the hot-reload interval every call looks its program up
+        # past the hot-reload interval every call looks at its sources, and keeps its
+        # program while they are unchanged
+        stamps = []
+        real = wgpu_backend._stamps
+
+        def counting_stamps(paths):
+            out = real(paths)
+            stamps.append(out)
+            return out
+
+        monkeypatch.setattr(wgpu_backend, "_stamps", counting_stamps)
         monkeypatch.setattr(wgpu_backend, "RECHECK_S", 0.0)
+        frame.run(1)
+        assert len(stamps) >= 6 and lookups["programs"] == 0
+        # negative control: changed sources look the program up again
+        monkeypatch.setattr(wgpu_backend, "_stamps", lambda paths: ())
         frame.run(1)
         assert lookups["programs"] >= 6
     finally:
@@ -113,7 +127,7 @@ class _Params(Settings):
 
 def test_a_call_holds_for_the_same_objects_only():
     view, other = object(), object()
-    hit = (("call",), ("t_hdr", "u_params"), (view, _Params("p")), "found", [], 0.0)
+    hit = (("call",), ("t_hdr", "u_params"), (view, _Params("p")), "found", [], [0.0])
     # settings are data: another object with other values still holds
     assert _same_call(hit, ("call",), {"t_hdr": view, "u_params": _Params("q")}) is hit
     # negative controls: another bound object, another binding name, another call
