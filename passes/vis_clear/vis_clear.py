@@ -22,7 +22,8 @@ class VisClearPass(ComputePass):
     backend = "vk"
 
     class Params(Settings):
-        max_pixels: Annotated[int, Range(1, 1 << 26)] = 3840 * 2160  # the largest output
+        # the largest output; at most what one row of 65,535 workgroups of 256 reaches
+        max_pixels: Annotated[int, Range(1, 65535 * 256)] = 3840 * 2160
 
     def declare(self):
         return {}, {"ids": Buffer(WORD * self.params.max_pixels, usage=("storage",),

@@ -1,9 +1,9 @@
 #version 460
 // the G-buffer from the visibility buffer: per pixel, the triangle's three vertices from
-// the scene's own buffers (device addresses), perspective-correct barycentrics and their
-// screen-space derivatives solved from the three clip-space corners, the attributes
-// interpolated as the rasteriser interpolates gbuffer.vert.glsl's outputs, and the
-// material evaluated by the G-buffer's own code (material.glsl) with explicit gradients
+// the scene's own buffers (device addresses), perspective-correct barycentrics solved from
+// the three clip-space corners (also at the pixel's 2x2 quad, for texture gradients), the
+// attributes interpolated as the rasteriser interpolates gbuffer.vert.glsl's outputs, and
+// the material evaluated by the G-buffer's own code (material.glsl) with those gradients
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_nonuniform_qualifier : require

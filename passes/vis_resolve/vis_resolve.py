@@ -20,11 +20,13 @@ class VisResolvePass(ComputePass):
     """The ``gbuffer`` pass's outputs, made by one compute thread per pixel from a
     ``visbuffer``: the thread reads the triangle's three vertices from the scene's own
     vertex and index buffers (device addresses), solves perspective-correct barycentrics
-    and their screen-space derivatives from the camera and the three clip-space corners,
-    interpolates normal, uv and tangent as the rasteriser would, and evaluates the material
-    with the G-buffer's own code (``shaders/common/material.glsl``), sampling with explicit
-    gradients (any material of the scene: descriptor indexing). Where ``depth`` is 1 every
-    output is zero, the G-buffer's clear.
+    from the camera and the three clip-space corners, interpolates normal, uv and tangent
+    as the rasteriser would, and evaluates the material with the G-buffer's own code
+    (``shaders/common/material.glsl``; any material of the scene: descriptor indexing). Its
+    texture gradients are what a fragment shader's implicit lookup takes: differences across
+    the pixel's 2x2 quad, on the triangle's plane. Where ``depth`` is 1 every output is
+    zero, the G-buffer's clear. ``ids = "buffer"`` reads the 64-bit words of a visbuffer
+    with ``write = "atomic"`` instead of its ``r32uint`` image.
 
     ``albedo`` is ``rgba16float`` instead of the G-buffer's ``rgba8unorm-srgb`` (a storage
     image cannot be sRGB): it holds the 8-bit sRGB level decoded, the linear value lighting
