@@ -33,6 +33,8 @@ class VisClearPass(ComputePass):
         # the output's pixels: the size the scene's camera was set for
         size = ctx.scene.size
         check_pixels(self.name, self.params.max_pixels, size)
+        if ctx.replay(size):  # the same buffer and pixel count as a recorded frame
+            return
         ctx.dispatch(threads=(size[0] * size[1],), ids=ctx.buffer("ids"))
 
 

@@ -76,6 +76,8 @@ class VisResolvePass(ComputePass):
         self.tables = {**tables, "textures": textures, "samplers": samplers}
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images and scene (its tables) as recorded
+            return
         ids = {"t_ids": ctx.sampled("ids")} if self.params.ids == "image" else \
             {"ids": ctx.buffer("ids")}
         defines = self.defines if self.params.ids == "image" else {**self.defines, "ATOMIC": 1}

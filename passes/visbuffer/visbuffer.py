@@ -58,6 +58,8 @@ class VisBufferPass(RenderPass):
             {"TRIANGLE_BITS": triangle_bits(ex.scene.scene)}
 
     def record(self, ctx) -> None:
+        if ctx.replay():  # the same settings, images, buffer and scene as a recorded frame
+            return
         if self.params.write == "attachment":
             # less-equal as the gbuffer pass draws: equal depths resolve to the same surface
             ctx.draw_scene(color=[("ids", None)], depth=("depth", 1.0),
