@@ -181,7 +181,8 @@ class SetCache:
         if entry is None:
             entry = self._find(slot, layout, wanted, values, data, payload, owners)
             memo = self.quick.setdefault(slot, [])
-            memo[:] = [m for m in memo if m[1] is not entry][-(KEEP - 1):] + [(quick, entry)]
+            kept = [m for m in memo if m[1] is not entry][-(KEEP - 1):]
+            memo[:] = [*kept, (quick, entry)]
         entry.write(data)
         return entry
 
