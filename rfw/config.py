@@ -40,11 +40,12 @@ from .passes import Pass
 from .registry import get_pass
 
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames",
-         "async_compute")
+         "async_compute", "frames_in_flight")
 _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
 MAX_SIZE = 16384  # pixels per side: beyond any device's 2D image limit we know of
+MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for (rfw.frame.frames_in_flight)
 
 
 @dataclass
@@ -72,6 +73,7 @@ class Config:
     base: list[PassEntry] = field(default_factory=list)  # the passes as the file declares
     explicit: list[tuple[str, Any]] = field(default_factory=list)  # --set pass.key=value
     async_compute: str = "auto"  # compute beside raster on a second queue (rfw.graph.queues)
+    frames_in_flight: int | None = None  # None: RFW_FRAMES_IN_FLIGHT, else 2 (rfw.frame)
 
     def entry(self, name: str) -> PassEntry:
         for p in self.passes:
@@ -250,7 +252,10 @@ def load_config(path: str | Path) -> Config:
                  scene, _size_of(data.get("size", [1280, 720]), source), camera, variants,
                  frames, source, base=list(passes),
                  async_compute=_async_compute(data.get("async_compute", "auto"), source,
-                                              "async_compute"))
+                                              "async_compute"),
+                 frames_in_flight=None if "frames_in_flight" not in data else check_number(
+                     data["frames_in_flight"], "frames_in_flight", kind=int, lo=1,
+                     hi=MAX_FRAMES_IN_FLIGHT, file=source, element="frames_in_flight"))
     for vname, v in variants.items():
         default = v.get("default")
         if isinstance(default, bool):  # a switch: default = true
@@ -429,11 +434,14 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
         elif key == "async_compute":
             cfg = replace(cfg, async_compute=_async_compute(value, cfg.source,
                                                             "--set async_compute"))
+        elif key == "frames_in_flight":
+            cfg = replace(cfg, frames_in_flight=_frames(
+                value, cfg.source, key="frames_in_flight", hi=MAX_FRAMES_IN_FLIGHT))
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
                 known = [p.name for p in cfg.passes] + list(cfg.variants) + [
-                    "size", "scene", "frames", "async_compute"]
+                    "size", "scene", "frames", "async_compute", "frames_in_flight"]
                 raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
                             + did_you_mean(head, known))
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
@@ -451,13 +459,13 @@ def _async_compute(value: Any, source: str, element: str) -> str:
     raise _fail(source, f"must be true, false or \"auto\", not {value!r}", element)
 
 
-def _frames(text: str, source: str) -> int:
+def _frames(text: str, source: str, *, key: str = "frames", hi: int = MAX_FRAMES) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise _fail(source, f"must be an integer, not {text!r}", "--set frames") from None
-    return check_number(value, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=source,
-                        element="--set frames")
+        raise _fail(source, f"must be an integer, not {text!r}", f"--set {key}") from None
+    return check_number(value, key, kind=int, lo=1, hi=hi, file=source,
+                        element=f"--set {key}")
 
 
 @dataclass

@@ -29,14 +29,13 @@ from typing import Any
 import numpy as np
 
 from .backend import Backend, Devices, get_backend
-from .config import Built, Config, pass_class
+from .config import MAX_FRAMES_IN_FLIGHT, Built, Config, pass_class
 from .errors import RfwError, check_number
 from .graph import CompiledGraph
 from .mixed import MixedPlan, split
 
 FRAMES_IN_FLIGHT_ENV = "RFW_FRAMES_IN_FLIGHT"
 DEFAULT_FRAMES_IN_FLIGHT = 2
-MAX_FRAMES_IN_FLIGHT = 8
 
 
 def frames_in_flight(value: Any = None) -> int:

@@ -53,15 +53,18 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     (:mod:`rfw.mixed` plans it): ``backend`` is then the one of unpinned passes, bridges copy
     resources across through host memory and are timed as passes of their own.
 
-    ``frames_in_flight`` frames run on the GPU while the next ones record (default
-    ``RFW_FRAMES_IN_FLIGHT``, else 2; 1 waits for every frame: :mod:`rfw.frame`). Images
+    ``frames_in_flight`` frames run on the GPU while the next ones record (default: the
+    config's ``frames_in_flight``, else ``RFW_FRAMES_IN_FLIGHT``, else 2; 1 waits for every
+    frame: :mod:`rfw.frame`). Images
     and timing samples are the same either way: the frames are drained before anything is
     read, and the last timed frame's drain is part of its wall time."""
     run = get_backend(backend, file=cfg.source)
     check_outputs(cfg)
     if frames is not None:
         check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
-    in_flight = in_flight_setting(frames_in_flight)  # a bad value fails before any device work
+    # a bad value fails before any device work
+    in_flight = in_flight_setting(cfg.frames_in_flight if frames_in_flight is None
+                                  else frames_in_flight)
     devs = Devices((device, *devices), validation=validation)
     frame = None
     try:

@@ -1,11 +1,14 @@
 """Frames in flight (rfw.frame.InFlight): on wgpu and vk, K = 1, 2 and 3 frames in flight give
 the same images, bit for bit, and one timing sample per pass and frame; with K > 1 frames do
 overlap (a frame is submitted while the last one is still pending); the last timed frame
-drains inside its own frame() call, so the bench's per-frame wall clock counts the drain; a
-bad RFW_FRAMES_IN_FLIGHT is one line and exit 2 through the CLI."""
+drains inside its own frame() call, so the bench's per-frame wall clock counts the drain; the
+setting comes from render(), the config (``frames_in_flight``, ``--set``) or
+RFW_FRAMES_IN_FLIGHT, and a bad value is one line and exit 2 through the CLI."""
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -26,8 +29,9 @@ FRAMES = 4
 
 
 def _config(name: str = "deferred", size: str = "96x54"):
+    sets = ["shadow.enabled=true"] if name == "deferred" else []
     return apply_overrides(load_config(ROOT / "configs" / f"{name}.toml"),
-                           ["shadow.enabled=true", f"size={size}"])
+                           [*sets, f"size={size}"])
 
 
 @pytest.fixture
@@ -109,30 +113,57 @@ def test_frames_in_flight_setting(monkeypatch):
             frames_in_flight(bad)
 
 
-def _rfw_run(tmp_path: Path, value: str | None) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in __import__("os").environ.items() if k != "RFW_FRAMES_IN_FLIGHT"}
-    if value is not None:
-        env["RFW_FRAMES_IN_FLIGHT"] = value
+def test_the_config_key_wins_over_the_environment(monkeypatch):
+    monkeypatch.setenv("RFW_FRAMES_IN_FLIGHT", "1")
+    cfg = apply_overrides(_config("flat", "32x18"), ["frames_in_flight=3"])
+    assert cfg.frames_in_flight == 3
+    assert render(cfg, scene=tiny_scene(), frames=1).timings["frames_in_flight"] == 3
+    # without the key the environment decides; a render argument wins over both
+    plain = _config("flat", "32x18")
+    assert render(plain, scene=tiny_scene(), frames=1).timings["frames_in_flight"] == 1
+    assert render(cfg, scene=tiny_scene(), frames=1,
+                  frames_in_flight=2).timings["frames_in_flight"] == 2
+
+
+def _rfw_run(tmp_path: Path, env_value: str | None, *sets: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "RFW_FRAMES_IN_FLIGHT"}
+    if env_value is not None:
+        env["RFW_FRAMES_IN_FLIGHT"] = env_value
+    extra = [a for s in sets for a in ("--set", s)]
     return subprocess.run(
         [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" / "flat.toml"),
-         "--size", "32x18", "--frames", "2", "--out", str(tmp_path / "out")],
+         "--size", "32x18", "--frames", "2", *extra, "--out", str(tmp_path / "out")],
         capture_output=True, text=True, env=env, timeout=600)
 
 
-@pytest.mark.parametrize("value", ["0", "many", "100"])
-def test_a_bad_value_is_one_line_and_exit_2_through_the_cli(tmp_path, value):
-    run = _rfw_run(tmp_path, value)
+@pytest.mark.parametrize(("env_value", "sets", "where"), [
+    ("0", (), "RFW_FRAMES_IN_FLIGHT: "), ("many", (), "RFW_FRAMES_IN_FLIGHT: "),
+    ("100", (), "RFW_FRAMES_IN_FLIGHT: "), (None, ("frames_in_flight=0",), "--set "),
+    (None, ("frames_in_flight=two",), "--set "), (None, ("frames_in_flight=9",), "--set ")])
+def test_a_bad_value_is_one_line_and_exit_2_through_the_cli(tmp_path, env_value, sets, where):
+    run = _rfw_run(tmp_path, env_value, *sets)
     assert run.returncode == 2, run.stderr
     lines = run.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("rfw: error: RFW_FRAMES_IN_FLIGHT: ")
+    assert len(lines) == 1 and lines[0].startswith("rfw: error: ") and where in lines[0]
     assert "Traceback" not in run.stderr and not (tmp_path / "out" / "timings.json").exists()
 
 
-def test_a_good_value_runs_through_the_cli(tmp_path):
-    # negative control of the refusals: the same command with a valid value renders
-    run = _rfw_run(tmp_path, "3")
-    assert run.returncode == 0, run.stderr
-    import json
+def test_a_bad_config_value_is_one_line_and_exit_2(tmp_path):
+    cfg = tmp_path / "flat.toml"
+    text = (ROOT / "configs" / "flat.toml").read_text()
+    cfg.write_text("frames_in_flight = true\n" + text)
+    run = subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(cfg), "--size", "32x18",
+                          "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
+    assert f"rfw: error: {cfg}: frames_in_flight: " in run.stderr
 
+
+@pytest.mark.parametrize(("env_value", "sets", "want"), [("3", (), 3),
+                                                         ("3", ("frames_in_flight=1",), 1)])
+def test_a_good_value_runs_through_the_cli(tmp_path, env_value, sets, want):
+    # negative control of the refusals: the same command with a valid value renders
+    run = _rfw_run(tmp_path, env_value, *sets)
+    assert run.returncode == 0, run.stderr
     timings = json.loads((tmp_path / "out" / "timings.json").read_text())
-    assert timings["frames_in_flight"] == 3 and timings["frames"] == 2
+    assert timings["frames_in_flight"] == want and timings["frames"] == 2
