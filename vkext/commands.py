@@ -574,6 +574,13 @@ def copy_to_host(cmd: Any, buffer: Buffer, staging: Buffer, size: int, *,
     barrier(cmd, buffer_barriers=[BufferBarrier(staging, COPY_WRITE, HOST_READ, 0, size)])
 
 
+def written_for_host(cmd: Any, buffer: Buffer, src: State, size: int) -> None:
+    """Record that ``size`` bytes of the host-visible ``buffer``, written as ``src`` says
+    (a shader writing mapped memory, no copy), are made visible to the host (read them
+    after the submit has finished)."""
+    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, src, HOST_READ, 0, size)])
+
+
 def read_buffer(device: VkDevice, buffer: Buffer, src: State | str | None = None, *,
                 dtype: Any = np.uint8, offset: int = 0, size: int | None = None) -> np.ndarray:
     """Read ``buffer`` back; ``src`` is how it was last written (default: any stage)."""

@@ -33,8 +33,8 @@ A batch is a tiny frame graph (:func:`batch_graph`: copy the rays in, trace, cop
 out), compiled once; its barriers are recorded by ``vkext.accel.plan.PlanRecorder``, as the
 acceleration-structure builds record theirs. Both buffers persist from batch to batch, so
 the plan also orders a batch's copy of the rays after the last batch's trace read them, and
-its trace after the last batch's hits were copied out. A mapped stream skips its copy; two
-more barriers order the trace after earlier work and mapped hits before the host reads them.
+its trace after the last batch's hits were copied out. A mapped stream skips its copy, and
+mapped hits are made visible to the host (``commands.written_for_host``).
 """
 
 from __future__ import annotations
@@ -69,14 +69,13 @@ from .allocation import (
 from .buffers import Buffer, staging_buffer
 from .commands import (
     FENCE_TIMEOUT_NS,
-    HOST_READ,
     CommandPool,
     TimestampPool,
-    barrier,
     begin_label,
     copy_to_host,
     end_label,
     submit,
+    written_for_host,
 )
 from .consts import ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
@@ -103,9 +102,6 @@ INVALID = {-2: ("origins", "non-finite values"), -3: ("directions", "non-finite 
 HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
 GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
 STAMPS = len(GPU_PARTS) + 1
-
-# what a mapped batch's trace waits for: the writes of every earlier command on the queue
-EARLIER_WRITES = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
 
 # rays and hits as records, for callers of Raycaster.trace
 RAY_DTYPE = np.dtype([("origin", "<f4", 3), ("tmin", "<f4"), ("direction", "<f4", 3),
@@ -648,8 +644,9 @@ class Raycaster:
         # timestamps between the passes time the copies and the trace apart
         if self.timer is not None:
             vk.vkCmdResetQueryPool(cmd, self.timer.handle, first, STAMPS)
-        # a mapped stream skips its copy (its stamps meet) and its buffer is the slot's own:
-        # the trace waits for every earlier write, and the host reads mapped hits
+        # a mapped stream skips its copy (its stamps meet); its buffer is the slot's own,
+        # reused only after the host waited for the batch before, and the submit makes the
+        # host's rays visible: only mapped hits need a barrier more, to the host's reads
         plan.enter(cmd, "rays")
         self._stamp(cmd, first)
         if not buffers.mapped_rays:
@@ -657,23 +654,20 @@ class Raycaster:
             copy.size = size
             lib.vkCmdCopyBuffer(cmd, buffers.up[slot].handle, buffers.rays.handle, 1, copy)
         plan.enter(cmd, "trace")
-        if buffers.mapped_rays or buffers.mapped_hits:
-            barrier(cmd, memory_barriers=[(EARLIER_WRITES, self._trace_state())])
         self._stamp(cmd, first + 1)
         self._record(cmd, buffers.sets[slot], sbt, k, per_ray,
                      0.0 if per_ray else tmin, 0.0 if per_ray else tmax)
         self._stamp(cmd, first + 2)
         plan.enter(cmd, "hits")
         if buffers.mapped_hits:
-            barrier(cmd, memory_barriers=[(self._trace_state(), HOST_READ)])
+            written_for_host(cmd, buffers.down[slot], self._trace_state(), k * HIT_WORDS * 4)
         else:
             copy_to_host(cmd, buffers.hits, buffers.down[slot], k * HIT_WORDS * 4)
         self._stamp(cmd, first + 3)
 
     def _trace_state(self) -> State:
         stage = "COMPUTE_SHADER" if self.method == "ray_query" else "RAY_TRACING_SHADER_KHR"
-        return State(None, frozenset({stage}),
-                     frozenset({"SHADER_STORAGE_READ", "SHADER_STORAGE_WRITE"}))
+        return State(None, frozenset({stage}), frozenset({"SHADER_STORAGE_WRITE"}))
 
     def _stamp(self, cmd: Any, query: int) -> None:
         if self.timer is not None:

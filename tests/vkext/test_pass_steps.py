@@ -155,6 +155,7 @@ def test_raycast_without_its_plan_is_a_hazard(vk_device, monkeypatch):
             pass
 
     monkeypatch.setattr(raycast, "PlanRecorder", Silent)
+    monkeypatch.setenv("RFW_RAYCAST_MAPPED", "0")  # staged: the copies the plan orders
     device = VkDevice(validation=True, label="rfw-tests-raycast-plan")
     try:
         if not device.sync_validation:
