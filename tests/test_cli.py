@@ -30,7 +30,7 @@ DEFERRED_TOML = ROOT / "configs" / "deferred.toml"
 
 PLAN_KEYS = {"order", "culled", "disabled", "resources", "heaps", "transient_bytes",
              "unaliased_bytes", "lower_bound_bytes", "raptor_reuse_bytes", "barriers",
-             "step_barriers", "parallel_levels", "diagnostics"}
+             "step_barriers", "parallel_levels", "queues", "diagnostics"}
 RESOURCE_KEYS = {"name", "kind", "format", "width", "height", "bytes", "heap", "offset",
                  "first", "last", "transient"}
 TOTALS = ("transient_bytes", "unaliased_bytes", "lower_bound_bytes", "raptor_reuse_bytes")
@@ -163,6 +163,10 @@ def test_plan_json_schema(capsys, path):
         assert isinstance(b["from"], dict) and isinstance(b["to"], dict)
 
     assert sorted(n for level in d["parallel_levels"] for n in level) == sorted(order)
+    # no device named: one graphics queue, one submission of the whole order (graph.queues)
+    q = d["queues"]
+    assert q["queues"] == ["graphics"] and q["mode"] == "off"
+    assert [s["passes"] for s in q["submissions"]] == [order] and q["transfers"] == []
 
     for diag in d["diagnostics"]:
         assert set(diag) == {"level", "message"}
