@@ -18,7 +18,8 @@ shift || true
 "$py" -c "import rfw, wgpu, vulkan" || {
   echo "device_bench: rfw or its dependencies are not importable: set PYTHONPATH" >&2; exit 1; }
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
-"$py" -m rfw.cli bench deferred deferred@vk forward deferred_ssao_shadows meshlet@vk flat flat@vk \
+"$py" -m rfw.cli bench deferred deferred@vk deferred_vis@vk forward deferred_ssao_shadows meshlet@vk \
+  flat flat@vk \
   --vary ao=on,off --size "${BENCH_SIZE:-1280x720}" --frames "${BENCH_FRAMES:-100}" \
   --warmup 5 --repeat "${BENCH_REPEAT:-5}" --peers all --peer-frames 20 --out "$out" "$@"
 "$py" benchmarks/bench_graph.py --out "$out/bench_graph.jsonl"

@@ -167,3 +167,19 @@ def test_a_good_value_runs_through_the_cli(tmp_path, env_value, sets, want):
     assert run.returncode == 0, run.stderr
     timings = json.loads((tmp_path / "out" / "timings.json").read_text())
     assert timings["frames_in_flight"] == want and timings["frames"] == 2
+
+
+@pytest.mark.parametrize(("env_value", "code"), [("0", 2), ("1", 0)])
+def test_rfw_bench_refuses_a_bad_environment_value_once(tmp_path, env_value, code):
+    # before any run starts (each run would fail alone); "1" is the negative control
+    env = {**os.environ, "RFW_FRAMES_IN_FLIGHT": env_value}
+    run = subprocess.run(
+        [sys.executable, "-m", "rfw.cli", "bench", "flat", "--size", "16x8", "--frames", "1",
+         "--warmup", "0", "--repeat", "1", "--out", str(tmp_path / "b")],
+        capture_output=True, text=True, env=env, timeout=600)
+    assert run.returncode == code, run.stderr
+    if code:
+        assert run.stderr.count("\n") == 1 and "RFW_FRAMES_IN_FLIGHT: " in run.stderr
+        assert not (tmp_path / "b").exists()
+    else:
+        assert (tmp_path / "b" / "results.jsonl").exists()

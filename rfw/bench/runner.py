@@ -168,6 +168,8 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     warmup = check_number(warmup, "--warmup", kind=int, lo=0, hi=MAX_FRAMES)
     repeat = check_number(repeat, "--repeat", kind=int, lo=1, hi=MAX_REPEAT)
     timeout = check_number(timeout, "--timeout", kind=float, lo=1e-3)
+    from ..frame import frames_in_flight
+    frames_in_flight()  # a bad RFW_FRAMES_IN_FLIGHT: refused once here, not by every run
     if peer_frames is not None:
         peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES)
     scenes = list(dict.fromkeys(resolve_scene(s) for s in scenes)) if scenes else [None]
