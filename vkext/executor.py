@@ -69,6 +69,25 @@ from .queues import async_queues
 from .scene import Sampler, VkScene, make_sampler
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
+
+
+def _check(result: int) -> None:
+    # the frame loop calls the C entry points (no wrapper converting arguments per call):
+    # a failure raises what the wrapper would
+    if result != 0:  # VK_SUCCESS
+        from vulkan._vulkan import exception_codes
+
+        raise exception_codes[result]
+
+
+def vk_wait(*args: Any) -> int:
+    """``vkWaitForFences`` (C): a frame's wait for its slot; benchmarks time it apart."""
+    return lib.vkWaitForFences(*args)
+
+
+def vk_query(*args: Any) -> int:
+    """``vkGetQueryPoolResults`` (C), waiting: benchmarks time it apart."""
+    return lib.vkGetQueryPoolResults(*args)
 # with frames in flight a frame opens with this barrier: everything submitted before it
 # (the last frame, still on the GPU) is done and its writes are visible
 FRAME_BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
@@ -92,12 +111,21 @@ class FrameSlot:
     timestamps: TimestampPool | None
     descriptors: FrameDescriptors
     ring: UniformRing
-    fence: Any = None  # the last submit's, until a wait destroys it
+    fence: Any = None  # the last submit's, until a wait resets (or destroys) it
+    # made once per slot, not per frame: the slot's own fence (reset after each wait), the
+    # submit of its command buffer and the memory its timestamps are read into
+    own_fence: Any = None
+    fences: Any = None  # VkFence[1] holding own_fence, for the C calls that take an array
+    submit_info: Any = None
+    ts_data: Any = None
+    keep: list = field(default_factory=list)  # the ffi structs submit_info points into
 
     def destroy(self, device: VkDevice) -> None:
-        if self.fence is not None and device.alive:
-            vk.vkDestroyFence(device.device, self.fence, None)
-        self.fence = None
+        if device.alive:
+            for f in dict.fromkeys(f for f in (self.fence, self.own_fence) if f is not None):
+                vk.vkDestroyFence(device.device, f, None)
+        self.fence = self.own_fence = self.submit_info = None
+        self.keep.clear()
         for obj in (self.descriptors, self.timestamps, self.pool):
             if obj is not None:
                 obj.destroy()
@@ -137,6 +165,7 @@ class VkExecutor(FrameExecutor):
         self.memory_info = dict(memory_info or {})
         self.frame_index = 0
         self.timings = {name: PassTiming(name) for name in plan.order}
+        self._position = {name: k for k, name in enumerate(plan.order)}
         check_passes(plan, passes)
         self._states: dict[tuple[str, str], State] = {}
         self._final: dict[str, State] = {}
@@ -177,6 +206,11 @@ class VkExecutor(FrameExecutor):
         # timestamp write: one scratch write per pass pins the begin before the pass's work
         # (without it compute passes read ~0 ms)
         self._pin_begin = "timestamp" in device.caps and device.driver_name == "llvmpipe"
+        self._host_reset = "host_query_reset" in device.caps
+        self._begin_info = ffi.new("VkCommandBufferBeginInfo*", {
+            "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
+            "flags": vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT})
+        self._query_flags = vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT
         self.in_flight = InFlight([])
         self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
         self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
@@ -348,6 +382,16 @@ class VkExecutor(FrameExecutor):
             n = len(self.plan.order)
             slot.timestamps = TimestampPool(dev, max(2, (3 if self._pin_begin else 2) * n),
                                             label=f"rfw:timestamps{k}")
+            slot.ts_data = ffi.new("uint64_t[]", slot.timestamps.count)
+        slot.own_fence = vk.vkCreateFence(dev.device, vk.VkFenceCreateInfo(), None)
+        slot.fences = ffi.new("VkFence[1]", [slot.own_fence])
+        cmds = ffi.new("VkCommandBufferSubmitInfo[1]")
+        cmds[0].sType = vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_SUBMIT_INFO
+        cmds[0].commandBuffer = slot.cmd
+        info = ffi.new("VkSubmitInfo2*")
+        info.sType = vk.VK_STRUCTURE_TYPE_SUBMIT_INFO_2
+        info.commandBufferInfoCount, info.pCommandBufferInfos = 1, cmds
+        slot.submit_info, slot.keep = info, [cmds]
         return slot
 
     def run(self, frames: int = 1) -> None:
@@ -387,15 +431,14 @@ class VkExecutor(FrameExecutor):
         self._frame_resources = self.resources
         self.descriptors.reset()
         self.ring.reset()
-        self.pool.reset()
-        if ts is not None and "host_query_reset" in dev.caps:
-            ts.reset()
+        _check(lib.vkResetCommandPool(dev.device, self.pool.handle, 0))
+        if ts is not None and self._host_reset:
+            lib.vkResetQueryPool(dev.device, ts.handle, 0, ts.count)
         self._recording = False
         self._cpu: dict[str, float] = {}
         self._gpu: dict[str, float] = {}
         self._pending: list[int] = []  # timestamp slots written since the last flush
         self._recorded: list[str] = []
-        self._position = {name: k for k, name in enumerate(self.plan.order)}
 
     def record(self, name: str) -> None:
         """Record pass ``name``: its debug label, the plan's barriers for it, a timestamp
@@ -407,8 +450,7 @@ class VkExecutor(FrameExecutor):
             self._recording = True
         dev, cmd, ts = self.device, self.cmd, self.timestamps
         if not self._recording:
-            vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo(
-                flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT))
+            _check(lib.vkBeginCommandBuffer(cmd, self._begin_info))
             self._recording = True
             if ts is not None and "host_query_reset" not in dev.caps:
                 ts.reset(cmd)
@@ -455,7 +497,7 @@ class VkExecutor(FrameExecutor):
         if fence is None:
             return
         self._wait(fence)
-        self._collect(self._frame_slot.timestamps, self._pending, self._gpu)
+        self._collect(self._frame_slot, self._pending, self._gpu)
         self._pending = []
 
     def end_frame(self) -> None:
@@ -477,16 +519,33 @@ class VkExecutor(FrameExecutor):
             return None
         self._recording = False
         try:
-            vk.vkEndCommandBuffer(self.cmd)
+            _check(lib.vkEndCommandBuffer(self.cmd))
         except BaseException:
             self.pool.reset()
             raise
         if self.queues is not None:  # async compute: every batch, with its semaphores
             return self.queues.submit(self.cmd)
-        return submit(self.device, [self.cmd], wait=False)
+        slot = self._frame_slot
+        if slot.own_fence is None or self.cmd is not slot.cmd:
+            return submit(self.device, [self.cmd], wait=False)
+        # the slot's submit info and fence, made once (the fence is unsignalled: reset
+        # after its last wait)
+        try:
+            _check(lib.vkQueueSubmit2(self.device.queue, 1, slot.submit_info, slot.own_fence))
+        except BaseException:
+            vk.vkDeviceWaitIdle(self.device.device)
+            raise
+        return slot.own_fence
 
     def _wait(self, fence: Any) -> None:
         dev = self.device.device
+        slot = next((s for s in self.in_flight.slots if fence is s.own_fence), None)
+        if slot is not None:  # the slot's own fence: waited for, then reset for its next submit
+            try:
+                _check(vk_wait(dev, 1, slot.fences, vk.VK_TRUE, FENCE_TIMEOUT_NS))
+            finally:
+                _check(lib.vkResetFences(dev, 1, slot.fences))
+            return
         try:
             vk.vkWaitForFences(dev, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
         finally:
@@ -498,23 +557,27 @@ class VkExecutor(FrameExecutor):
         fence, slot.fence = slot.fence, None
         if fence is not None:
             self._wait(fence)
-        self._collect(slot.timestamps, pending, gpu)
+        self._collect(slot, pending, gpu)
         for name in dict.fromkeys(recorded):
             self.timings[name].cpu_ms.append(cpu[name])
             if slot.timestamps is not None:
                 self.timings[name].gpu_ms.append(gpu[name])
 
-    def _collect(self, ts: TimestampPool | None, pending: list[int],
-                 gpu: dict[str, float]) -> None:
-        # a finished submit's timestamps, per pass, added to the frame's GPU ms
+    def _collect(self, slot: FrameSlot, pending: list[int], gpu: dict[str, float]) -> None:
+        # a finished submit's timestamps, per pass, added to the frame's GPU ms: one query
+        # read per run of passes into the slot's own memory (TimestampPool.results' values)
+        ts = slot.timestamps
         if ts is None or not pending:
             return
-        order = self.plan.order
+        order, data, dev = self.plan.order, slot.ts_data, self.device
+        mask, period = ts.mask, dev.timestamp_period
         for first, count in _runs(sorted(pending)):
-            ns = ts.results(2 * first, 2 * count)
+            _check(vk_query(dev.device, ts.handle, 2 * first, 2 * count, 16 * count, data, 8,
+                            self._query_flags))
             for i in range(count):
                 name = order[first + i]
-                ms = max(0, ns[2 * i + 1] - ns[2 * i]) * 1e-6
+                begin = round((data[2 * i] & mask) * period)
+                ms = max(0, round((data[2 * i + 1] & mask) * period) - begin) * 1e-6
                 gpu[name] = gpu.get(name, 0.0) + ms
 
     def upload(self, resource: str, array: np.ndarray) -> None:
