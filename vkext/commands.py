@@ -101,15 +101,21 @@ class BufferBarrier:
     size: int | None = None  # None: the whole buffer
 
 
+@lru_cache(maxsize=1024)
+def _masks(src: State | str | None, dst: State | str | None) -> tuple[int, ...]:
+    # a transition's stage and access masks and layouts: the same each frame it is recorded
+    s, d = as_state(src, source=True), as_state(dst, source=False)
+    return (stage_flags(s.stages), access_flags(s.access), stage_flags(d.stages),
+            access_flags(d.access), image_layout(s.layout), image_layout(d.layout))
+
+
 def _image_barrier(out: Any, b: ImageBarrier) -> None:
-    src, dst = as_state(b.src, source=True), as_state(b.dst, source=False)
     img = b.image
     handle = img.handle if isinstance(img, Image) else img
     aspect = b.aspect or (img.aspect if isinstance(img, Image) else vk.VK_IMAGE_ASPECT_COLOR_BIT)
     out.sType = const("VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER_2")
-    out.srcStageMask, out.srcAccessMask = stage_flags(src.stages), access_flags(src.access)
-    out.dstStageMask, out.dstAccessMask = stage_flags(dst.stages), access_flags(dst.access)
-    out.oldLayout, out.newLayout = image_layout(src.layout), image_layout(dst.layout)
+    (out.srcStageMask, out.srcAccessMask, out.dstStageMask, out.dstAccessMask,
+     out.oldLayout, out.newLayout) = _masks(b.src, b.dst)
     out.srcQueueFamilyIndex = out.dstQueueFamilyIndex = vk.VK_QUEUE_FAMILY_IGNORED
     out.image = handle
     r = out.subresourceRange
@@ -119,11 +125,10 @@ def _image_barrier(out: Any, b: ImageBarrier) -> None:
 
 
 def _buffer_barrier(out: Any, b: BufferBarrier) -> None:
-    src, dst = as_state(b.src, source=True), as_state(b.dst, source=False)
     buf = b.buffer
     out.sType = const("VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER_2")
-    out.srcStageMask, out.srcAccessMask = stage_flags(src.stages), access_flags(src.access)
-    out.dstStageMask, out.dstAccessMask = stage_flags(dst.stages), access_flags(dst.access)
+    (out.srcStageMask, out.srcAccessMask, out.dstStageMask,
+     out.dstAccessMask) = _masks(b.src, b.dst)[:4]
     out.srcQueueFamilyIndex = out.dstQueueFamilyIndex = vk.VK_QUEUE_FAMILY_IGNORED
     out.buffer = buf.handle if isinstance(buf, Buffer) else buf
     out.offset = b.offset

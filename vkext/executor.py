@@ -46,6 +46,7 @@ from .commands import (
     CommandPool,
     ImageBarrier,
     TimestampPool,
+    access_flags,
     as_state,
     barrier,
     image_layout,
@@ -69,6 +70,20 @@ from .queues import async_queues
 from .scene import Sampler, VkScene, make_sampler
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
+
+
+def _memory_dependency(src: State, dst: State) -> tuple[Any, Any]:
+    """One global memory barrier as a ``VkDependencyInfo`` made once (with the array it
+    points into, which must live as long): the same every frame."""
+    arr = ffi.new("VkMemoryBarrier2[1]")
+    m = arr[0]
+    m.sType = vk.VK_STRUCTURE_TYPE_MEMORY_BARRIER_2
+    m.srcStageMask, m.srcAccessMask = stage_flags(src.stages), access_flags(src.access)
+    m.dstStageMask, m.dstAccessMask = stage_flags(dst.stages), access_flags(dst.access)
+    dep = ffi.new("VkDependencyInfo*")
+    dep.sType = vk.VK_STRUCTURE_TYPE_DEPENDENCY_INFO
+    dep.memoryBarrierCount, dep.pMemoryBarriers = 1, arr
+    return dep, arr
 
 
 def _check(result: int) -> None:
@@ -211,6 +226,7 @@ class VkExecutor(FrameExecutor):
             "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
             "flags": vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT})
         self._query_flags = vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT
+        self._frame_start = _memory_dependency(FRAME_BEFORE, FRAME_AFTER)
         self.in_flight = InFlight([])
         self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
         self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
@@ -455,7 +471,7 @@ class VkExecutor(FrameExecutor):
             if ts is not None and "host_query_reset" not in dev.caps:
                 ts.reset(cmd)
             if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
-                barrier(cmd, memory_barriers=[(FRAME_BEFORE, FRAME_AFTER)])
+                lib.vkCmdPipelineBarrier2(cmd, self._frame_start[0])
         k = self._position[name]
         p = self.passes.get(name)
         try:
