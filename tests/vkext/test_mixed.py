@@ -371,3 +371,24 @@ def test_render_and_drop_returns_to_baseline(vk_device, device):
     grown = {k: (wgpu_before[k], wgpu_after[k]) for k in wgpu_before
              if wgpu_after[k] > wgpu_before[k]}
     assert not grown, f"wgpu objects still alive after dropping the renders: {grown}"
+
+
+def test_a_frame_on_one_side_runs_its_second_queue_order():
+    # meshlet pins every pass to vk: no bridges, so the vk plan's own order (the async
+    # compute culling put first, as on a device with a second queue) is the frame's
+    cfg = apply_overrides(load_config(ROOT / "configs" / "meshlet.toml"),
+                          ["shadow.enabled=true"])
+    m = split(build(cfg), "wgpu")
+    caps = ("VK_EXT_mesh_shader", "timestamp", "timeline_semaphore", "compute_queue")
+    sub = compile(m.graphs["vk"], size=(64, 36), caps=caps)
+    assert not m.bridges and tuple(sub.order) != m.passes_of("vk")
+    m.check("vk", sub)
+    # negative control: with a bridge between sides, the full plan's order is the law
+    two = split(build(mixed("160x90")), "wgpu")
+    vk = compile(two.graphs["vk"], size=(160, 90))
+    swapped = replace(vk, order=tuple(reversed(vk.order)))
+    with pytest.raises(ShaderError, match="the mixed plan needs"):
+        two.check("vk", swapped)
+    # and one side running other passes than the plan's is refused too
+    with pytest.raises(ShaderError, match="the mixed plan needs"):
+        m.check("vk", replace(sub, order=sub.order[1:]))
