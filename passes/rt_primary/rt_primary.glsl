@@ -10,15 +10,7 @@
 #define MAX_TEXTURES 1
 #endif
 
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatArray {
-    float v[];
-};
-layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Vec2Array {
-    vec2 v[];
-};
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintArray {
-    uint v[];
-};
+#include "streams.glsl"
 
 // rt_primary.py's MESH_DTYPE and MATERIAL_DTYPE
 struct GpuMesh {
@@ -72,14 +64,14 @@ void shade(ivec2 px, vec2 size, PrimaryHit h) {
         return;
     }
     GpuMesh mesh = meshes.mesh[instances.mesh[h.instance]];
-    UintArray index = UintArray(mesh.indices);
+    Uints index = Uints(mesh.indices);
     uint i0 = index.v[3 * h.primitive], i1 = index.v[3 * h.primitive + 1];
     uint i2 = index.v[3 * h.primitive + 2];
-    FloatArray pos = FloatArray(mesh.positions);
+    Floats pos = Floats(mesh.positions);
     vec3 p0 = vec3(pos.v[3 * i0], pos.v[3 * i0 + 1], pos.v[3 * i0 + 2]);
     vec3 p1 = vec3(pos.v[3 * i1], pos.v[3 * i1 + 1], pos.v[3 * i1 + 2]);
     vec3 p2 = vec3(pos.v[3 * i2], pos.v[3 * i2 + 1], pos.v[3 * i2 + 2]);
-    Vec2Array uv = Vec2Array(mesh.uvs);
+    Vec2s uv = Vec2s(mesh.uvs);
     vec2 uv0 = uv.v[i0], uv1 = uv.v[i1], uv2 = uv.v[i2];
     float b = h.barycentrics.x, c = h.barycentrics.y, a = 1.0 - b - c;
     GpuMaterial mat = materials.m[mesh.material];

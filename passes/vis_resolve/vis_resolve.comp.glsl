@@ -23,18 +23,7 @@
 
 layout(local_size_x = 8, local_size_y = 8) in;
 
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Floats {
-    float v[];
-};
-layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Vec2s {
-    vec2 v[];
-};
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Vec4s {
-    vec4 v[];
-};
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Uints {
-    uint v[];
-};
+#include "streams.glsl"
 
 // vis_resolve.py's MESH_DTYPE, INSTANCE_DTYPE and MATERIAL_DTYPE
 struct VisMesh {
