@@ -144,6 +144,41 @@ def barrier(cmd: Any, image_barriers: Iterable[ImageBarrier | tuple] = (),
     memory = list(memory_barriers)
     if not (images or buffers or memory):
         return
+    # the structs are a function of the handles, states and ranges alone: a frame that
+    # records the same barriers again (every frame, per pass) reuses the ones made first
+    key = (tuple(map(_image_key, images)), tuple(map(_buffer_key, buffers)), tuple(memory))
+    try:
+        made = _DEPENDENCIES.get(key)
+    except TypeError:  # e.g. ranges given as lists: made for this call only
+        made = key = None
+    if made is None:
+        made = _dependency(images, buffers, memory)
+        if key is not None:
+            if len(_DEPENDENCIES) >= _MAX_DEPENDENCIES:
+                _DEPENDENCIES.clear()
+            _DEPENDENCIES[key] = made
+    lib.vkCmdPipelineBarrier2(cmd, made[0])
+
+
+# made VkDependencyInfo (with the arrays it points into) by what they hold
+_DEPENDENCIES: dict[tuple, tuple[Any, list]] = {}
+_MAX_DEPENDENCIES = 4096
+
+
+def _image_key(b: ImageBarrier) -> tuple:
+    img = b.image
+    if isinstance(img, Image):
+        return (img.handle, b.aspect or img.aspect, b.src, b.dst, b.mips, b.layers)
+    return (img, b.aspect or vk.VK_IMAGE_ASPECT_COLOR_BIT, b.src, b.dst, b.mips, b.layers)
+
+
+def _buffer_key(b: BufferBarrier) -> tuple:
+    buf = b.buffer
+    return (buf.handle if isinstance(buf, Buffer) else buf, b.src, b.dst, b.offset, b.size)
+
+
+def _dependency(images: list[ImageBarrier], buffers: list[BufferBarrier],
+                memory: list[tuple[State, State]]) -> tuple[Any, list]:
     dep = ffi.new("VkDependencyInfo*")
     dep.sType = const("VK_STRUCTURE_TYPE_DEPENDENCY_INFO")
     keep = []
@@ -169,7 +204,7 @@ def barrier(cmd: Any, image_barriers: Iterable[ImageBarrier | tuple] = (),
             m.dstStageMask, m.dstAccessMask = stage_flags(d.stages), access_flags(d.access)
         dep.memoryBarrierCount, dep.pMemoryBarriers = len(memory), arr
         keep.append(arr)
-    vk.vkCmdPipelineBarrier2(cmd, dep)
+    return dep, keep
 
 
 # a plan resource synchronized by memory barriers: acceleration structures (their accesses
