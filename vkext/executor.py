@@ -181,6 +181,7 @@ class VkExecutor(FrameExecutor):
         self.frame_index = 0
         self.timings = {name: PassTiming(name) for name in plan.order}
         self._position = {name: k for k, name in enumerate(plan.order)}
+        self._accels = {r.name: GLOBAL for r in plan.resources if r.kind == "accel"}
         check_passes(plan, passes)
         self._states: dict[tuple[str, str], State] = {}
         self._final: dict[str, State] = {}
@@ -333,8 +334,7 @@ class VkExecutor(FrameExecutor):
     def resources(self) -> dict[str, Any]:
         """Images and buffers by plan name; acceleration structures map to ``GLOBAL``
         (their barriers are memory barriers)."""
-        accels = {r.name: GLOBAL for r in self.plan.resources if r.kind == "accel"}
-        return {**self.images, **self.buffers, **accels}
+        return {**self.images, **self.buffers, **self._accels}
 
     def state_in(self, pass_name: str, resource: str) -> State | None:
         """The state the plan puts ``resource`` in for ``pass_name``."""

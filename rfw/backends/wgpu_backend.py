@@ -1142,12 +1142,12 @@ class Executor(FrameExecutor):
                 label=f"rfw:frame{self.frame_index}{suffix}")
         encoder = self._encoder
         ctx = PassContext(self, p, encoder, self.slots[name])
-        encoder.push_debug_group(name)
+        # no debug group around the pass: each compute and render pass it begins carries
+        # its name as label already, and a group costs two native calls per pass a frame
         t = time.perf_counter()
         with naming(f"pass '{name}'"):
             p.record(ctx)
         self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
-        encoder.pop_debug_group()
         self._recorded.append(name)
 
     def flush(self) -> None:
