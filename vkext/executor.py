@@ -71,6 +71,11 @@ from .scene import Sampler, VkScene, make_sampler
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
 
+# with frames in flight a frame opens with this barrier: everything submitted before it
+# (the last frame, still on the GPU) is done and its writes are visible
+FRAME_BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
+FRAME_AFTER = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
+
 
 def _memory_dependency(src: State, dst: State) -> tuple[Any, Any]:
     """One global memory barrier as a ``VkDependencyInfo`` made once (with the array it
@@ -103,10 +108,6 @@ def vk_wait(*args: Any) -> int:
 def vk_query(*args: Any) -> int:
     """``vkGetQueryPoolResults`` (C), waiting: benchmarks time it apart."""
     return lib.vkGetQueryPoolResults(*args)
-# with frames in flight a frame opens with this barrier: everything submitted before it
-# (the last frame, still on the GPU) is done and its writes are visible
-FRAME_BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
-FRAME_AFTER = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
 
 
 @dataclass
