@@ -304,11 +304,7 @@ class BundleCache:
         """Record a new bundle for ``slot``: a secondary command buffer that continues a
         rendering of ``colors``/``depth``/``stencil`` formats (0: none) at ``samples``;
         ``fill(cmd)`` records its commands and returns the draws."""
-        self.kept.make_room(slot)
-        alloc = vk.VkCommandBufferAllocateInfo(
-            commandPool=self.handle, level=vk.VK_COMMAND_BUFFER_LEVEL_SECONDARY,
-            commandBufferCount=1)
-        bundle = Bundle(key, vk.vkAllocateCommandBuffers(self.device.device, alloc)[0])
+        bundle = self._allocate(slot, key)
         try:
             self._begin(bundle.cmd, colors, depth, stencil, samples)
             bundle.draws = fill(bundle.cmd)
@@ -323,11 +319,7 @@ class BundleCache:
     def begin(self, slot: Slot, key: tuple) -> Bundle:
         """Begin a bundle of a whole pass's commands outside any rendering (dispatches,
         barriers, renderings begun inside it); :meth:`end` keeps it for ``slot``."""
-        self.kept.make_room(slot)
-        alloc = vk.VkCommandBufferAllocateInfo(
-            commandPool=self.handle, level=vk.VK_COMMAND_BUFFER_LEVEL_SECONDARY,
-            commandBufferCount=1)
-        bundle = Bundle(key, vk.vkAllocateCommandBuffers(self.device.device, alloc)[0])
+        bundle = self._allocate(slot, key)
         try:
             inherit = new("VkCommandBufferInheritanceInfo")
             # simultaneous use, as for a rendering's bundles (frames in flight)
@@ -343,6 +335,14 @@ class BundleCache:
         vk.vkEndCommandBuffer(bundle.cmd)
         self.kept.add(slot, bundle)
         self.recorded += 1
+
+    def _allocate(self, slot: Slot, key: tuple) -> Bundle:
+        # a secondary command buffer for a new bundle of ``slot`` (room made first)
+        self.kept.make_room(slot)
+        alloc = vk.VkCommandBufferAllocateInfo(
+            commandPool=self.handle, level=vk.VK_COMMAND_BUFFER_LEVEL_SECONDARY,
+            commandBufferCount=1)
+        return Bundle(key, vk.vkAllocateCommandBuffers(self.device.device, alloc)[0])
 
     def _begin(self, cmd: Any, colors: Sequence[int], depth: int, stencil: int,
                samples: int) -> None:
