@@ -71,7 +71,9 @@ class VkPassContext(SlotContext):
     def __init__(self, executor: Any, pass_: Pass, cmd: Any, slots: dict[str, str]):
         self.executor = executor
         self.pass_ = pass_
-        self.cmd = cmd
+        self._cmd = cmd  # None: the frame is replayed whole (vkext.executor) until used
+        self.executed: Any = None  # the pass bundle executed, if that is all it recorded
+        self.direct = False  # whether it recorded into the frame's command buffer itself
         self.slots = slots
         self.scene = executor.scene
         self.device = executor.device
@@ -84,6 +86,18 @@ class VkPassContext(SlotContext):
         self._used: list[Any] = []  # every cached set bound by this record
 
     _step = -1  # the declared step (Pass.steps) the pass is in
+
+    @property
+    def cmd(self) -> Any:
+        """The command buffer the pass records into."""
+        if self._pass_bundle is None:  # the frame's own: recorded (again) from here on
+            self.direct = True
+            self._primary_cmd()
+        return self._cmd
+
+    @cmd.setter
+    def cmd(self, value: Any) -> None:
+        self._cmd = value
 
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps: record the barriers the plan
@@ -123,11 +137,24 @@ class VkPassContext(SlotContext):
         if bundle is not None and bundle.usable():
             for entry, data in bundle.writes:
                 entry.write(data)
-            lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+            if self._cmd is None and ex.replays(bundle):
+                self.executed = bundle  # in the slot's command buffer already
+                return True
+            lib.vkCmdExecuteCommands(self._primary_cmd(), 1, bundle.handles)
+            self.executed = bundle
             return True
+        primary = self._primary_cmd()
         self._pass_bundle = ex.bundles.begin(slot, full)
-        self._primary, self.cmd = self.cmd, self._pass_bundle.cmd
+        self._primary, self._cmd = primary, self._pass_bundle.cmd
         return False
+
+    def _primary_cmd(self) -> Any:
+        # the frame's command buffer for executing a bundle (not a direct use)
+        if self._cmd is None:
+            self._cmd = self.executor.catch_up()
+            if self.executed is not None:  # replayed, then recorded more: executed here
+                lib.vkCmdExecuteCommands(self._cmd, 1, self.executed.handles)
+        return self._cmd
 
     def _slot_objects(self) -> list[Any]:
         """The objects behind the pass's slots (history images swap between frames)."""
@@ -141,11 +168,12 @@ class VkPassContext(SlotContext):
     def _end_pass_bundle(self) -> None:
         """Close the bundle of this record's commands and execute it in the pass."""
         bundle, self._pass_bundle = self._pass_bundle, None
-        self.cmd, self._primary = self._primary, None
+        self._cmd, self._primary = self._primary, None
         bundle.sets = list(dict.fromkeys(self._used))
         bundle.writes = [(e, list(e.data)) for e in bundle.sets]
         self.executor.bundles.end((self.pass_.name, -1), bundle)
-        lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+        lib.vkCmdExecuteCommands(self._cmd, 1, bundle.handles)
+        self.executed = bundle
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Image:

@@ -15,6 +15,12 @@ descriptor sets and its scene draws (secondary command buffers) from frame to fr
 records no Python per draw; :mod:`vkext.descriptors` holds a frame's descriptor sets and
 uniforms where those caches are off (``RFW_VK_BUNDLES=0``); :mod:`vkext.context` is what a pass
 records through; this module owns the resources and records the frames.
+
+A frame that would record what its slot's command buffer already holds (every pass replays,
+in order, the bundle it executed when that buffer was recorded, over the same resources)
+records nothing: the buffer is submitted again. A pass that records anything else makes the
+frame record its buffer there and then (``catch_up``); ``RFW_VK_FRAME_REPLAY=0`` records
+every frame (the benchmarks' baseline).
 """
 
 from __future__ import annotations
@@ -49,6 +55,8 @@ from .commands import (
     access_flags,
     as_state,
     barrier,
+    begin_label,
+    end_label,
     image_layout,
     label,
     one_time,
@@ -135,6 +143,9 @@ class FrameSlot:
     submit_info: Any = None
     ts_data: Any = None
     keep: list = field(default_factory=list)  # the ffi structs submit_info points into
+    # what the command buffer holds, for a frame that would record the same (whole-frame
+    # replay): the frame's resources and each pass's (name, bundle); None: not reusable
+    holds: tuple | None = None
 
     def destroy(self, device: VkDevice) -> None:
         if device.alive:
@@ -224,9 +235,14 @@ class VkExecutor(FrameExecutor):
         # (without it compute passes read ~0 ms)
         self._pin_begin = "timestamp" in device.caps and device.driver_name == "llvmpipe"
         self._host_reset = "host_query_reset" in device.caps
+        # whole-frame replay: a frame that would record what its slot's command buffer holds
+        # submits it again (so it is not one-time-submit); RFW_VK_FRAME_REPLAY=0 records
+        # every frame, the baseline a benchmark measures against in the same run
+        self.frame_replay = os.environ.get("RFW_VK_FRAME_REPLAY", "1") != "0"
+        self.primaries = 0  # primary command buffers begun (what tests count)
         self._begin_info = ffi.new("VkCommandBufferBeginInfo*", {
             "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
-            "flags": vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT})
+            "flags": 0 if self.frame_replay else vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT})
         self._query_flags = vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT
         self._frame_start = _memory_dependency(FRAME_BEFORE, FRAME_AFTER)
         self.in_flight = InFlight([])
@@ -448,14 +464,80 @@ class VkExecutor(FrameExecutor):
         self._frame_resources = self.resources
         self.descriptors.reset()
         self.ring.reset()
-        _check(lib.vkResetCommandPool(dev.device, self.pool.handle, 0))
         if ts is not None and self._host_reset:
             lib.vkResetQueryPool(dev.device, ts.handle, 0, ts.count)
         self._recording = False
+        # replayed while every pass replays what the slot's command buffer holds, in order
+        held = slot.holds if self.frame_replay and self.queues is None and \
+            self.poison is None else None
+        self._replaying = held is not None and len(held[0]) == len(self._frame_resources) \
+            and all(a is b for a, b in zip(held[0], self._frame_resources.values(),
+                                           strict=True))
+        self._done: list[tuple[str, Any]] = []  # (pass, bundle) replayed so far
+        self._split = False  # flushed mid-frame: not one submit, not kept for replay
+        if not self._replaying:
+            self._reset_primary()
         self._cpu: dict[str, float] = {}
         self._gpu: dict[str, float] = {}
         self._pending: list[int] = []  # timestamp slots written since the last flush
         self._recorded: list[str] = []
+
+    def _reset_primary(self) -> None:
+        slot = self._frame_slot
+        slot.holds = None
+        _check(lib.vkResetCommandPool(self.device.device, slot.pool.handle, 0))
+
+    def replays(self, bundle: Any) -> bool:
+        """Whether the pass being recorded in a replayed frame executes the bundle the
+        slot's command buffer executes there (then nothing is recorded for it)."""
+        if not self._replaying:
+            return False
+        held, i = self._frame_slot.holds[1], len(self._done)
+        return i < len(held) and held[i][0] == self._name and held[i][1] is bundle
+
+    def catch_up(self) -> Any:
+        """Leave whole-frame replay: record the frame so far into the slot's command
+        buffer (its passes' barriers, timestamps and bundles; the current pass's barriers
+        and begin timestamp) and return it."""
+        self._replaying = False
+        self._reset_primary()
+        self._begin()
+        for name, bundle in self._done:
+            with label(self.device, self.cmd, name):
+                k = self._prefix(name)
+                lib.vkCmdExecuteCommands(self.cmd, 1, bundle.handles)
+                self._suffix(k)
+        if self._name is not None:  # the pass being recorded: its label ends after it
+            begin_label(self.device, self.cmd, self._name)
+            self._prefix(self._name)
+        return self.cmd
+
+    def _begin(self) -> None:
+        dev, cmd, ts = self.device, self.cmd, self.timestamps
+        _check(lib.vkBeginCommandBuffer(cmd, self._begin_info))
+        self.primaries += 1
+        self._recording = True
+        if ts is not None and "host_query_reset" not in dev.caps:
+            ts.reset(cmd)
+        if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
+            lib.vkCmdPipelineBarrier2(cmd, self._frame_start[0])
+
+    def _prefix(self, name: str) -> int:
+        # a pass's barriers and begin timestamp; its position
+        cmd, ts, k = self.cmd, self.timestamps, self._position[name]
+        barriers = (self._frame_barriers if len(self.in_flight) > 1 else self._barriers)[name]
+        if self.poison is not None:  # fill what starts its lifetime here first
+            barriers = self.poison.fill(cmd, name, barriers, self._frame_resources)
+        record_barriers(cmd, barriers, self._frame_resources)
+        if ts is not None and self.passes.get(name) is not None:
+            self._timestamp(cmd, 2 * k)
+            if self._pin_begin:
+                self._timestamp(cmd, 2 * len(self.plan.order) + k)
+        return k
+
+    def _suffix(self, k: int) -> None:
+        if self.timestamps is not None:
+            self._timestamp(self.cmd, 2 * k + 1)
 
     def record(self, name: str) -> None:
         """Record pass ``name``: its debug label, the plan's barriers for it, a timestamp
@@ -465,43 +547,58 @@ class VkExecutor(FrameExecutor):
         if self.queues is not None:  # async compute: the command buffer of the pass's batch
             self.cmd = self.queues.command_buffer(name, self._frame_slot, self._frame_resources)
             self._recording = True
-        dev, cmd, ts = self.device, self.cmd, self.timestamps
-        if not self._recording:
-            _check(lib.vkBeginCommandBuffer(cmd, self._begin_info))
-            self._recording = True
-            if ts is not None and "host_query_reset" not in dev.caps:
-                ts.reset(cmd)
-            if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
-                lib.vkCmdPipelineBarrier2(cmd, self._frame_start[0])
-        k = self._position[name]
         p = self.passes.get(name)
+        self._name = None
+        if self._replaying and p is None:  # a bridge's side: recorded from here on
+            self.catch_up()
+        if not self._replaying and not self._recording:
+            self._begin()
+        self._name = name
         try:
-            with label(dev, cmd, name):
-                barriers = (self._frame_barriers if len(self.in_flight) > 1
-                            else self._barriers)[name]
-                if self.poison is not None:  # fill what starts its lifetime here first
-                    barriers = self.poison.fill(cmd, name, barriers, self._frame_resources)
-                record_barriers(cmd, barriers, self._frame_resources)
+            if self._replaying:
+                self._replay_pass(name, p)
+                return
+            with label(self.device, self.cmd, name):
+                k = self._prefix(name)
                 if p is None:
+                    self._done.append((name, None))
                     return
-                if ts is not None:
-                    self._timestamp(cmd, 2 * k)
-                    if self._pin_begin:
-                        self._timestamp(cmd, 2 * len(self.plan.order) + k)
-                ctx = VkPassContext(self, p, cmd, self.slots[name])
-                t = time.perf_counter()
-                with naming(f"pass '{name}'"):
-                    p.record(ctx)
-                    ctx.finish()
-                self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
-                if ts is not None:
-                    self._timestamp(cmd, 2 * k + 1)
-                    self._pending.append(k)
-                self._recorded.append(name)
+                ctx = self._record_pass(name, p, self.cmd)
+                self._suffix(k)
+                self._done.append((name, ctx.executed) if not ctx.direct else (name, None))
         except BaseException:
-            self._recording = False
+            self._recording = self._replaying = False
+            self._frame_slot.holds = None
             self.pool.reset()  # drop the half-recorded commands
             raise
+        finally:
+            self._name = None
+
+    def _record_pass(self, name: str, p: Pass, cmd: Any) -> VkPassContext:
+        ctx = VkPassContext(self, p, cmd, self.slots[name])
+        t = time.perf_counter()
+        with naming(f"pass '{name}'"):
+            p.record(ctx)
+            ctx.finish()
+        self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
+        k = self._position[name]
+        if self.timestamps is not None:
+            self._pending.append(k)
+        self._recorded.append(name)
+        return ctx
+
+    def _replay_pass(self, name: str, p: Pass) -> None:
+        # the pass records with no command buffer: it gets one (catch_up) once it records
+        # anything but the bundle the slot's command buffer executes here
+        ctx = self._record_pass(name, p, None)
+        if self._replaying and ctx.executed is None:  # it recorded nothing: nor did it then
+            self.catch_up()
+        if self._replaying:
+            self._done.append((name, ctx.executed))
+            return
+        self._suffix(self._position[name])
+        end_label(self.device, self.cmd)
+        self._done.append((name, ctx.executed) if not ctx.direct else (name, None))
 
     def _timestamp(self, cmd: Any, index: int) -> None:
         # TimestampPool.write without its checks: the executor numbers its own queries
@@ -513,6 +610,7 @@ class VkExecutor(FrameExecutor):
         fence = self._submit()
         if fence is None:
             return
+        self._split = True
         self._wait(fence)
         self._collect(self._frame_slot, self._pending, self._gpu)
         self._pending = []
@@ -523,6 +621,8 @@ class VkExecutor(FrameExecutor):
         last frame of ``run``) waits here, as every frame did before frames in flight."""
         slot = self._frame_slot
         slot.fence = self._submit()
+        if self._keep:  # what the slot's command buffer now holds, for a frame to replay
+            slot.holds = (tuple(self._frame_resources.values()), tuple(self._done))
         frame = (self._cpu, self._gpu, self._pending, self._recorded)
         self._pending = []
         self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
@@ -531,7 +631,16 @@ class VkExecutor(FrameExecutor):
             self.drain()
 
     def _submit(self) -> Any:
-        """End the command buffer and submit it: its fence, or None if nothing was recorded."""
+        """End the command buffer and submit it: its fence, or None if nothing was recorded.
+        A replayed frame submits the slot's command buffer as it is (or records the rest
+        of it first, if the frame had fewer passes)."""
+        slot = self._frame_slot
+        self._keep = False
+        if self._replaying:
+            self._replaying = False
+            if len(self._done) == len(slot.holds[1]):
+                return self._send(slot)
+            self.catch_up()
         if not self._recording:
             return None
         self._recording = False
@@ -540,11 +649,16 @@ class VkExecutor(FrameExecutor):
         except BaseException:
             self.pool.reset()
             raise
+        self._keep = self.frame_replay and self.queues is None and self.poison is None \
+            and not self._split and self.cmd is slot.cmd and \
+            all(b is not None for _, b in self._done)
         if self.queues is not None:  # async compute: every batch, with its semaphores
             return self.queues.submit(self.cmd)
-        slot = self._frame_slot
         if slot.own_fence is None or self.cmd is not slot.cmd:
             return submit(self.device, [self.cmd], wait=False)
+        return self._send(slot)
+
+    def _send(self, slot: FrameSlot) -> Any:
         # the slot's submit info and fence, made once (the fence is unsignalled: reset
         # after its last wait)
         try:
