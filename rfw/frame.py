@@ -208,14 +208,9 @@ class Frame:
                 ex.run(frames)
             self.frame_index += frames
             return
-        for k in range(frames):
-            self._drain_after = k == frames - 1
-            try:
-                self.frame()
-            finally:
-                self._drain_after = False
+        run_frames(self, frames)
 
-    _drain_after = False  # the last frame of a run drains (inside frame(): the bench's clock)
+    drain_after_frame = False  # the last frame of a run drains (inside frame(): the bench's clock)
 
     def drain(self) -> None:
         """Wait for every executor's frames in flight (their timings are appended)."""
@@ -254,7 +249,7 @@ class Frame:
             timing.bytes = int(data.nbytes)
         for ex in exs.values():
             ex.end_frame()
-        if self._drain_after:
+        if self.drain_after_frame:
             self.drain()
         self.frame_index += 1
 
