@@ -36,7 +36,7 @@ import numpy as np
 
 from rfw.backends.base import FrameExecutor
 from rfw.context import check_sampler
-from rfw.errors import naming
+from rfw.errors import RfwError, naming
 from rfw.frame import InFlight, frames_in_flight, run_frames
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
@@ -166,6 +166,14 @@ def _chained(b: Any) -> Any:
     return replace(b, src=State(b.src.layout, b.dst.stages, frozenset()))
 
 
+def _switch(name: str) -> bool:
+    # an on/off environment switch, on unless "0"; anything but 0 or 1 is a one-line error
+    raw = os.environ.get(name, "1").strip()
+    if raw not in ("0", "1"):
+        raise RfwError(f"must be 0 or 1, not {raw!r}", element=name)
+    return raw == "1"
+
+
 def _runs(slots: list[int]) -> list[tuple[int, int]]:
     """Sorted slot numbers as (first, count) runs of consecutive ones."""
     out: list[tuple[int, int]] = []
@@ -238,7 +246,7 @@ class VkExecutor(FrameExecutor):
         # whole-frame replay: a frame that would record what its slot's command buffer holds
         # submits it again (so it is not one-time-submit); RFW_VK_FRAME_REPLAY=0 records
         # every frame, the baseline a benchmark measures against in the same run
-        self.frame_replay = os.environ.get("RFW_VK_FRAME_REPLAY", "1") != "0"
+        self.frame_replay = _switch("RFW_VK_FRAME_REPLAY")
         self.primaries = 0  # primary command buffers begun (what tests count)
         self._begin_info = ffi.new("VkCommandBufferBeginInfo*", {
             "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,

@@ -8,6 +8,9 @@ frame, bit for bit, and every frame keeps its timing samples."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from itertools import pairwise
 from pathlib import Path
 
@@ -88,3 +91,16 @@ def test_passes_that_record_every_frame_record_the_frame(vk_device, monkeypatch)
     replayed, again, _ = _run(vk_device, monkeypatch, "deferred", 6)
     assert replayed == [2]
     assert all(np.array_equal(a, b) for a, b in zip(images, again, strict=True))
+
+
+@pytest.mark.parametrize(("value", "code"), [("maybe", 2), ("0", 0)])
+def test_a_bad_switch_is_one_line_and_exit_2(tmp_path, value, code):
+    # "0" (a good value, the baseline) is the negative control
+    run = subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
+                          "flat.toml"), "--backend", "vk", "--size", "16x8", "--out",
+                          str(tmp_path / "o")], capture_output=True, text=True, timeout=600,
+                         env={**os.environ, "RFW_VK_FRAME_REPLAY": value})
+    assert run.returncode == code, run.stderr
+    if code:
+        assert run.stderr.count("\n") == 1 and "RFW_VK_FRAME_REPLAY: must be 0 or 1" in \
+            run.stderr and "Traceback" not in run.stderr
