@@ -3,7 +3,7 @@ the GPU (fence waits, timestamp reads that wait, readback mappings).
 
     .venv/bin/python benchmarks/bench_frame_host.py [--variants flat@vk deferred_vis@vk flat
         deferred] [--scene default] [--size 16x16] [--frames 300] [--warmup 20] [--repeat 3]
-        [--trees DIR ...] [--out out/bench_frame_host.json]
+        [--trees DIR ...] [--profile K] [--out out/bench_frame_host.json]
 
 Each variant (``config`` or ``config@backend``) is opened once and run in blocks of
 ``--frames`` frames after ``--warmup`` (frames in flight as configured, default 2). Per
@@ -67,7 +67,21 @@ def count_waits(backend: str) -> list[float]:
     return waited
 
 
-def measure(variant: str, size: str, scene_name: str, frames: int, warmup: int) -> dict:
+def _profiled(run, frames: int, top: int) -> list[list]:
+    """Run ``run(frames)`` under cProfile; the ``top`` functions by own time, per frame."""
+    import cProfile
+    import pstats
+
+    prof = cProfile.Profile()
+    prof.runcall(run, frames)
+    stats = pstats.Stats(prof).stats
+    rows = sorted(stats.items(), key=lambda kv: kv[1][2], reverse=True)[:top]
+    return [[f"{Path(f).name}:{line}:{name}", calls / frames, tt * 1e3 / frames,
+             ct * 1e3 / frames] for (f, line, name), (_, calls, tt, ct, _) in rows]
+
+
+def measure(variant: str, size: str, scene_name: str, frames: int, warmup: int,
+            profile: int = 0) -> dict:
     from rfw.config import apply_overrides, build, load_config
     from rfw.frame import camera_for, load_scene_for, open_frame
     from rfw.scene import load_scene
@@ -86,6 +100,7 @@ def measure(variant: str, size: str, scene_name: str, frames: int, warmup: int) 
         frame.run(frames)
         wall = (time.perf_counter() - t) * 1e3 / frames
         wait = waited[0] * 1e3 / frames
+        top = _profiled(frame.run, frames, profile) if profile else None
         timings = [t for ex in frame.executors.values() for t in ex.timings.values()]
         gpu = [sum(v) for v in zip(*(t.gpu_ms for t in timings if t.gpu_ms), strict=True)]
         record = [sum(v) for v in zip(*(t.cpu_ms for t in timings if t.cpu_ms), strict=True)]
@@ -94,7 +109,8 @@ def measure(variant: str, size: str, scene_name: str, frames: int, warmup: int) 
     return {"variant": variant, "size": size, "scene": scene_name, "frames": frames,
             "wall_ms": wall, "wait_ms": wait, "host_ms": wall - wait,
             "gpu_ms": statistics.median(gpu) if gpu else None,
-            "record_ms": statistics.median(record) if record else None}
+            "record_ms": statistics.median(record) if record else None,
+            **({"profile": top} if top else {})}
 
 
 def _in_tree(tree: str, args: argparse.Namespace) -> list[dict]:
@@ -119,6 +135,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--trees", nargs="*", default=[])
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--profile", type=int, default=0, metavar="K",
+                    help="after each block, run it again under cProfile and add the K "
+                         "functions of most own time (calls, own ms and total ms per frame)")
     args = ap.parse_args()
     rows = []
     for r in range(args.repeat):
@@ -127,7 +146,8 @@ def main() -> None:
             for tree in order:
                 rows += [{**row, "repeat": r} for row in _in_tree(tree, args)]
         else:
-            rows += [{**measure(v, args.size, args.scene, args.frames, args.warmup),
+            rows += [{**measure(v, args.size, args.scene, args.frames, args.warmup,
+                                    args.profile),
                       "repeat": r} for v in args.variants]
     host = {"host": platform.node(), "python": platform.python_version()}
     text = "\n".join(json.dumps({**row, **host}) for row in rows)

@@ -15,6 +15,7 @@ import math
 import re
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from ..units import align_up
 from .base import FrameExecutor, SlotContext
 from .gpu_scene import VERTEX_BUFFERS, scene_layout_entries
 from .scene_data import SCENE_GROUPS
+from .wgpu_calls import FrameCalls
 
 # seconds between looks at a pass's shader sources while frames replay its program
 RECHECK_S = 0.25
@@ -676,13 +678,8 @@ class PassContext(SlotContext):
             sites[site] = (call, tuple(bindings), tuple(bindings.values()),
                            (prog, pipe, bgs, groups), self._uniform_slots(prog, bindings),
                            [time.monotonic()])
-        cp = self.encoder.begin_compute_pass(label=self.pass_.name,
-                                             timestamp_writes=self._timestamps())
-        cp.set_pipeline(pipe)
-        for g, bg in enumerate(bgs):
-            cp.set_bind_group(g, bg)
-        cp.dispatch_workgroups(*groups)
-        cp.end()
+        self.executor.calls.dispatch(self.encoder, self.pass_.name, self._timestamps(), pipe,
+                                     bgs, groups)
 
     def _uniform_slots(self, prog: Program, bindings: dict[str, Any]) -> list[tuple]:
         """The bindings given as data (settings, bytes) with the buffers they went into."""
@@ -783,9 +780,9 @@ class PassContext(SlotContext):
                 dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3)),
             color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
         self._bundles += 1
-        rp = self.render_pass(color=color, depth=depth, depth_read_only=read_only)
-        rp.execute_bundles([bundle])
-        rp.end()
+        self.executor.calls.bundles(self.encoder, self.pass_.name,
+                                    *self._attachments(color, depth, read_only),
+                                    self._timestamps(), (bundle,))
         return n
 
     def _scene_state(self, color: list[tuple[str, Any]], depth: tuple[str, Any] | None,
@@ -833,6 +830,12 @@ class PassContext(SlotContext):
     def render_pass(self, *, color: list[tuple[str, Any]] = (), depth: tuple[str, Any] | None
                     = None, depth_read_only: bool = False) -> Any:
         """Begin a render pass; ``color`` is [(slot, clear color or None to load)]."""
+        attachments, ds = self._attachments(color, depth, depth_read_only)
+        return self.executor.calls.render_pass(self.encoder, self.pass_.name, attachments, ds,
+                                               self._timestamps())
+
+    def _attachments(self, color: list[tuple[str, Any]], depth: tuple[str, Any] | None,
+                     depth_read_only: bool) -> tuple[list[dict], dict | None]:
         attachments = [{"view": self.view(slot), "load_op": "load" if clear is None else "clear",
                         "store_op": "store", "clear_value": clear or (0, 0, 0, 0)}
                        for slot, clear in color]
@@ -843,10 +846,7 @@ class PassContext(SlotContext):
             if not depth_read_only:
                 ds |= {"depth_load_op": "load" if clear is None else "clear",
                        "depth_store_op": "store", "depth_clear_value": clear or 0.0}
-        return self.encoder.begin_render_pass(color_attachments=attachments,
-                                              depth_stencil_attachment=ds,
-                                              timestamp_writes=self._timestamps(),
-                                              label=self.pass_.name)
+        return attachments, ds
 
 
 # ---------------------------------------------------------------------------------------------
@@ -866,25 +866,80 @@ def check_caps(passes: dict[str, Pass], caps: frozenset[str]) -> None:
 
 @dataclass(eq=False)
 class FrameSlot:
-    """What one frame in flight owns until it is finished: its timestamp query set, the
-    buffer its queries resolve into and the mappable copy of it read when the slot comes
-    round again (without timestamps, a 16-byte copy whose mapping says the frame is done)."""
+    """What one frame in flight owns until it is finished: its timestamp query set and
+    the buffer its queries resolve into (copied from there into the executor's
+    :class:`Stamps`), a mappable copy for a frame's earlier submits (``flush``: read at
+    once), and the index of the submit that finishes the frame (waited for when the slot
+    comes round again)."""
 
     query_set: Any
     resolve: Any
     readback: Any
-    mapping: Any = None  # the promise of the readback's mapping, after a submit
+    calls: FrameCalls
+    index: int | None = None  # the last submit of the slot's frame, until waited for
 
     def wait(self) -> None:
-        """Wait until the readback is mapped (the submit that wrote it is done)."""
-        mapping, self.mapping = self.mapping, None
-        if mapping is not None:
-            mapping.sync_wait()
+        """Wait until the slot's last submit is done."""
+        index, self.index = self.index, None
+        if index is not None:
+            self.calls.wait(index)
 
     def destroy(self) -> None:
         for obj in (self.query_set, self.resolve, self.readback):
             if obj is not None:
                 obj.destroy()
+
+
+STAMP_BATCH = 16  # frames whose timestamps are read back together (rfw.backends.wgpu_backend.Stamps)
+
+
+class Stamps:
+    """Frames' timestamps, read back ``frames`` frames at a time (a mapping costs more
+    than the rest of a short frame's fixed calls together). Frame ``f`` copies its
+    resolved queries into buffer ``(f // frames) % 2`` at its place in that batch; once
+    the batch's last frame is finished (or the executor drains), the buffer is mapped,
+    read and unmapped in one go. Frames in flight (at most ``frames``) write the other
+    buffer meanwhile, so a mapped buffer is never one a submitted copy writes."""
+
+    def __init__(self, device: Any, frame_bytes: int, frames: int):
+        self.frame_bytes, self.frames = frame_bytes, frames
+        self.buffers = [device.create_buffer(
+            size=frame_bytes * frames,
+            usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST,
+            label=f"rfw:timestamps:read{k}") for k in range(2)]
+        # frames finished and not read yet: (frame index, bytes used, what to do with them)
+        self.unread: list[tuple[int, int, Callable[[np.ndarray], None]]] = []
+
+    def place(self, frame: int) -> tuple[Any, int]:
+        """The buffer and offset frame ``frame`` copies its timestamps to."""
+        return self.buffers[(frame // self.frames) % 2], (frame % self.frames) * self.frame_bytes
+
+    def finished(self, frame: int, used: int, done: Callable[[np.ndarray], None]) -> None:
+        """Frame ``frame`` is finished: ``done(stamps)`` gets its ``used`` bytes of
+        timestamps (as uint64) once its batch is read."""
+        self.unread.append((frame, used, done))
+        if frame % self.frames == self.frames - 1:
+            self.read()
+
+    def read(self) -> None:
+        """Read every finished frame's timestamps (their submits are done), oldest first."""
+        unread, self.unread = self.unread, []
+        for k in dict.fromkeys((f // self.frames) % 2 for f, _, _ in unread):
+            buf = self.buffers[k]
+            buf.map_sync("READ_NOSYNC")
+            try:
+                raw = np.frombuffer(buf.read_mapped(), np.uint64)
+            finally:
+                buf.unmap()
+            for f, used, done in unread:
+                if (f // self.frames) % 2 == k:
+                    at = (f % self.frames) * self.frame_bytes // 8
+                    done(raw[at:at + used // 8])
+
+    def destroy(self) -> None:
+        for b in self.buffers:
+            b.destroy()
+        self.unread.clear()
 
 
 class Executor(FrameExecutor):
@@ -927,6 +982,8 @@ class Executor(FrameExecutor):
         self._allocate()
         self._timestamp_enabled = "timestamp-query" in device.features
         self._query_set = None  # the frame's slot's
+        self.calls = FrameCalls(device.device)
+        self.stamps: Stamps | None = None
         self.in_flight = InFlight([])
         self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
         self.keep_in_flight(frames_in_flight())
@@ -1087,21 +1144,26 @@ class Executor(FrameExecutor):
         self.drain()
         for slot in self.in_flight.slots:
             slot.destroy()
+        if self.stamps is not None:
+            self.stamps.destroy()
+            self.stamps = None
         self.in_flight = InFlight([self._slot(k) for k in range(frames)])
+        if self._timestamp_enabled:
+            self.stamps = Stamps(self.device.device, 8 * self.in_flight.slots[0].query_set.count,
+                                 max(STAMP_BATCH, frames))
 
     def _slot(self, k: int) -> FrameSlot:
         dev = self.device.device
         if not self._timestamp_enabled:
-            return FrameSlot(None, None, dev.create_buffer(
-                size=16, usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST,
-                label=f"rfw:frame-done{k}"))
+            return FrameSlot(None, None, None, self.calls)
         n = 2 * len(self.plan.order) * 4  # up to four GPU passes per rfw pass
         return FrameSlot(
             dev.create_query_set(type="timestamp", count=n, label=f"rfw:timestamps{k}"),
             dev.create_buffer(size=8 * n, usage=wgpu.BufferUsage.QUERY_RESOLVE |
                               wgpu.BufferUsage.COPY_SRC, label=f"rfw:timestamps{k}"),
             dev.create_buffer(size=8 * n, usage=wgpu.BufferUsage.MAP_READ |
-                              wgpu.BufferUsage.COPY_DST, label=f"rfw:timestamps{k}:read"))
+                              wgpu.BufferUsage.COPY_DST, label=f"rfw:timestamps{k}:read"),
+            self.calls)
 
     def run(self, frames: int = 1) -> None:
         """``frames`` frames; returns once they are done (the last one drains)."""
@@ -1110,6 +1172,8 @@ class Executor(FrameExecutor):
     def drain(self) -> None:
         """Wait for every frame in flight; their timings are appended, oldest first."""
         self.in_flight.drain()
+        if self.stamps is not None and self.stamps.unread:
+            self.stamps.read()
 
     # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
     def begin_frame(self) -> None:
@@ -1137,9 +1201,7 @@ class Executor(FrameExecutor):
             return
         p = self.passes[name]
         if self._encoder is None:
-            suffix = f".{self._segment}" if self._segment else ""
-            self._encoder = self.device.device.create_command_encoder(
-                label=f"rfw:frame{self.frame_index}{suffix}")
+            self._encoder = self.calls.encoder()
         encoder = self._encoder
         ctx = PassContext(self, p, encoder, self.slots[name])
         # no debug group around the pass: each compute and render pass it begins carries
@@ -1154,30 +1216,37 @@ class Executor(FrameExecutor):
         """Submit what was recorded since the last flush, wait for it and collect its
         timestamps (a bridge then copies what it wrote). Nothing recorded: nothing happens."""
         slot, owners = self._frame_slot, self._query_owner
-        if not self._submit(slot):
+        if not self._submit(slot, last=False):
             return
         slot.wait()
-        self._gpu = self._read_timestamps(slot, owners, self._gpu)
+        if owners:
+            slot.readback.map_sync("READ_NOSYNC")
+            try:
+                raw = np.frombuffer(slot.readback.read_mapped(0, 16 * len(owners)), np.uint64)
+            finally:
+                slot.readback.unmap()
+            self._gpu = self._add_timestamps(raw, owners, self._gpu)
 
     def end_frame(self) -> None:
         """Submit what is left without waiting: the frame's timings are appended when it
         is finished (its slot comes round again, or a drain). One frame in flight (or the
         last frame of ``run``) waits here, as every frame did before frames in flight."""
         slot, owners = self._frame_slot, self._query_owner
-        self._submit(slot)
+        self._submit(slot, last=True)
         # bind groups unused last frame and this one name objects no pass binds any more
         if len(self._bind_groups) > 64:
             self._bind_groups = {k: v for k, v in self._bind_groups.items()
                                  if v[2] >= self.frame_index - 1}
-        frame = (owners, self._cpu, self._gpu, self._recorded)
+        frame = (self.frame_index, owners, self._cpu, self._gpu, self._recorded)
         self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
         self.frame_index += 1
         if len(self.in_flight) == 1 or self.drain_after_frame:
             self.drain()
 
-    def _submit(self, slot: FrameSlot) -> bool:
-        """Submit the open encoder with its queries resolved into ``slot``'s readback (or,
-        without queries, a copy into it) and start mapping that: False if none is open."""
+    def _submit(self, slot: FrameSlot, *, last: bool) -> bool:
+        """Submit the open encoder with its queries resolved and copied to where they are
+        read (the frame's place in :class:`Stamps` for its ``last`` submit, else the
+        slot's own readback, read at once): False if none is open."""
         encoder = self._encoder
         if encoder is None:
             return False
@@ -1186,53 +1255,44 @@ class Executor(FrameExecutor):
         n = self._next_query
         if n:
             encoder.resolve_query_set(slot.query_set, 0, n, slot.resolve, 0)
-            encoder.copy_buffer_to_buffer(slot.resolve, 0, slot.readback, 0, 8 * n)
-        else:
-            encoder.copy_buffer_to_buffer(self._fence_buffer(), 0, slot.readback, 0, 16)
-        queue = self.device.device.queue
-        queue.submit([encoder.finish()])
-        # wgpu-py's "READ" first submits an empty encoder in case the buffer was never
-        # written (wgpu-native issue 305); the copy above wrote it in this very submit
-        slot.mapping = slot.readback.map_async("READ_NOSYNC", 0, max(16, 8 * n))
+            if last:
+                buf, at = self.stamps.place(self.frame_index)
+                encoder.copy_buffer_to_buffer(slot.resolve, 0, buf, at, 8 * n)
+            else:
+                encoder.copy_buffer_to_buffer(slot.resolve, 0, slot.readback, 0, 8 * n)
+        slot.index = self.calls.submit(encoder)
         self._next_query = 0
         self._query_owner = []
         return True
 
-    def _finish(self, slot: FrameSlot, owners: list[str], cpu: dict[str, float],
+    def _finish(self, slot: FrameSlot, frame: int, owners: list[str], cpu: dict[str, float],
                 gpu: dict[str, float] | None, recorded: list[str]) -> None:
-        """Wait for a submitted frame, then append its timings of the passes recorded."""
-        if slot.mapping is not None:
-            slot.wait()
-            gpu = self._read_timestamps(slot, owners, gpu)
-        for name in dict.fromkeys(recorded):
-            self.timings[name].cpu_ms.append(cpu[name])
-            if gpu is not None:
-                self.timings[name].gpu_ms.append(gpu.get(name, 0.0))
+        """Wait for a submitted frame, then append its timings of the passes recorded (once
+        its timestamps are read, if its last submit had any)."""
+        slot.wait()
 
-    def _read_timestamps(self, slot: FrameSlot, owners: list[str],
-                         gpu: dict[str, float] | None) -> dict[str, float] | None:
-        """A finished submit's timestamps (mapped in ``slot``), per pass, added to the
-        frame's GPU ms (None while no pass of the frame was timed); unmaps the readback."""
-        try:
-            if not owners:
-                return gpu
-            raw = np.frombuffer(slot.readback.read_mapped(0, 16 * len(owners)), np.uint64)
-        finally:
-            slot.readback.unmap()
+        def append(raw: np.ndarray | None) -> None:
+            times = self._add_timestamps(raw, owners, gpu) if owners else gpu
+            for name in dict.fromkeys(recorded):
+                self.timings[name].cpu_ms.append(cpu[name])
+                if times is not None:
+                    self.timings[name].gpu_ms.append(times.get(name, 0.0))
+
+        if self.stamps is not None:  # every frame: a batch is read after its last frame
+            self.stamps.finished(frame, 16 * len(owners), append)
+        else:
+            append(None)
+
+    def _add_timestamps(self, raw: np.ndarray, owners: list[str],
+                        gpu: dict[str, float] | None) -> dict[str, float]:
+        """Pass ``owners[k]``'s begin and end stamps (``raw[2k]``, ``raw[2k + 1]``) added
+        to the frame's GPU ms per pass."""
         gpu = {} if gpu is None else gpu
+        period = self.device.timestamp_period * 1e-6
         for k, name in enumerate(owners):
             begin, end = int(raw[2 * k]), int(raw[2 * k + 1])
-            gpu[name] = gpu.get(name, 0.0) + max(0, end - begin) * \
-                self.device.timestamp_period * 1e-6
+            gpu[name] = gpu.get(name, 0.0) + max(0, end - begin) * period
         return gpu
-
-    def _fence_buffer(self) -> Any:
-        buf = getattr(self, "_fence", None)
-        if buf is None:
-            buf = self._fence = self.device.device.create_buffer(
-                size=16, usage=wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST,
-                label="rfw:fence")
-        return buf
 
     def upload(self, resource: str, array: np.ndarray) -> None:
         """Fill an external image from an (H, W, C) array of its texel type."""
@@ -1271,6 +1331,10 @@ class Executor(FrameExecutor):
         for slot in self.in_flight.slots:
             slot.destroy()
         self.in_flight.slots.clear()
+        if self.stamps is not None:
+            self.stamps.destroy()
+            self.stamps = None
+        self.calls.clear()
         for t in self._textures.values():
             t.destroy()
         self._textures.clear()
