@@ -8,6 +8,7 @@ validation layer's leak report at ``vkDestroyDevice``/``vkDestroyInstance`` stay
 from __future__ import annotations
 
 import itertools
+import os
 import warnings
 from collections import Counter
 from types import SimpleNamespace
@@ -242,22 +243,43 @@ if ffi is not None:
         return 0  # VK_FALSE: do not abort the call
 
 
-def compute_queue_choice(families: list[tuple[int, int, int]],
-                         graphics: int) -> tuple[int, int] | None:
+ASYNC_QUEUE_ENV = "RFW_VK_ASYNC_QUEUE"  # which second queue async compute uses
+
+
+def async_queue_preference() -> str:
+    """``RFW_VK_ASYNC_QUEUE``: ``graphics`` (default) or ``family`` (see
+    :func:`compute_queue_choice`); anything else is a one-line error naming it."""
+    raw = os.environ.get(ASYNC_QUEUE_ENV, "graphics").strip()
+    if raw not in ("graphics", "family"):
+        raise RfwError(f"must be graphics or family, not {raw!r}", element=ASYNC_QUEUE_ENV)
+    return raw
+
+
+def compute_queue_choice(families: list[tuple[int, int, int]], graphics: int,
+                         prefer: str = "graphics") -> tuple[int, int] | None:
     """The second queue for async compute (``rfw.graph.queues``), as (family, index), from
-    each family's (queue flags, queue count, timestamp valid bits): a second queue of the
-    graphics family where it has one (no ownership transfers: the scene's buffers, made
-    exclusive, are read by both queues), else the first queue of a compute-only family
-    whose timestamps work where the graphics family's do (the passes on it are timed);
-    else None."""
-    if families[graphics][1] > 1:
-        return graphics, 1
-    bits = families[graphics][2]
-    for i, (flags, count, valid) in enumerate(families):
-        only = flags & vk.VK_QUEUE_COMPUTE_BIT and not flags & vk.VK_QUEUE_GRAPHICS_BIT
-        if only and count > 0 and (valid > 0 or not bits):
-            return i, 0
-    return None
+    each family's (queue flags, queue count, timestamp valid bits).
+
+    ``prefer="graphics"``: a second queue of the graphics family where it has one (no
+    ownership transfers: the scene's buffers, made exclusive, are read by both queues),
+    else a compute-only family. ``prefer="family"``: a compute-only family first (on
+    NVIDIA and AMD its queues feed the compute engines that run beside graphics; the
+    compiler plans the ownership transfers), else the graphics family's second queue.
+    A compute-only family counts where its timestamps work where the graphics family's
+    do (the passes on it are timed). None where there is neither."""
+    def second() -> tuple[int, int] | None:
+        return (graphics, 1) if families[graphics][1] > 1 else None
+
+    def family() -> tuple[int, int] | None:
+        bits = families[graphics][2]
+        for i, (flags, count, valid) in enumerate(families):
+            only = flags & vk.VK_QUEUE_COMPUTE_BIT and not flags & vk.VK_QUEUE_GRAPHICS_BIT
+            if only and count > 0 and (valid > 0 or not bits):
+                return i, 0
+        return None
+
+    first, then = (family, second) if prefer == "family" else (second, family)
+    return first() or then()
 
 
 class VkDevice:
@@ -426,7 +448,8 @@ class VkDevice:
     def _pick_compute_queue(self) -> None:
         families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
         pick = compute_queue_choice([(f.queueFlags, f.queueCount, f.timestampValidBits)
-                                     for f in families], self.queue_family)
+                                     for f in families], self.queue_family,
+                                    async_queue_preference())
         self.compute_family, self.compute_index = pick or (None, None)
 
     def _queue_infos(self) -> tuple[Any, int]:

@@ -6,6 +6,11 @@ it one after the other (the H200 runs them on a second queue of its graphics fam
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -16,6 +21,8 @@ from vkext.backend import render_vk
 from vkext.queues import AsyncQueues
 
 from ..graph.test_queues import SSAO
+
+ROOT = Path(__file__).resolve().parents[2]
 
 SIZE = "96x54"
 
@@ -122,6 +129,22 @@ def test_the_second_queue_choice():
     untimed = [(g | c | t, 1, 64), (c | t, 4, 0)]
     assert compute_queue_choice(untimed, 0) is None  # its passes could not be timed
     assert compute_queue_choice([(g | c | t, 1, 64)], 0) is None  # lavapipe
+    # RFW_VK_ASYNC_QUEUE=family: the compute engines' family first, else the second queue
+    assert compute_queue_choice(nvidia, 0, "family") == (2, 0)
+    assert compute_queue_choice([(g | c | t, 16, 64)], 0, "family") == (0, 1)
+    assert compute_queue_choice(untimed, 0, "family") is None
+
+
+def test_a_bad_async_queue_preference_is_one_line(tmp_path):
+    env = {**os.environ, "RFW_VK_ASYNC_QUEUE": "fast"}
+    r = subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
+                        "flat.toml"), "--backend", "vk", "--size", "16x16", "--out",
+                        str(tmp_path / "out")], env=env, capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "RFW_VK_ASYNC_QUEUE" in lines[0] and "'fast'" in lines[0]
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_device_reports_its_second_queue(vk_device):
