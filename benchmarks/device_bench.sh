@@ -7,7 +7,8 @@
 #
 #   PYTHONPATH=$PWD:/path/to/site-packages benchmarks/device_bench.sh [OUT] [extra rfw bench args]
 #
-# BENCH_SIZE, BENCH_FRAMES, BENCH_REPEAT change the matrix; RFW_MITSUBA_VARIANT=cuda_ad_rgb
+# BENCH_SIZE, BENCH_FRAMES, BENCH_REPEAT change the matrix; BENCH_GRAPH=0 skips the graph
+# compiler's benchmark (bench_graph.py, CPU only, minutes) after it; RFW_MITSUBA_VARIANT=cuda_ad_rgb
 # runs the Mitsuba peer on the GPU (default llvm_ad_rgb, CPU). Then compare with lavapipe's:
 #   rfw bench compare out/bench OUT   (devices differ: read it as a ratio table, not a verdict)
 set -euo pipefail
@@ -22,5 +23,7 @@ command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version -
   flat flat@vk \
   --vary ao=on,off --size "${BENCH_SIZE:-1280x720}" --frames "${BENCH_FRAMES:-100}" \
   --warmup 5 --repeat "${BENCH_REPEAT:-5}" --peers all --peer-frames 20 --out "$out" "$@"
-"$py" benchmarks/bench_graph.py --out "$out/bench_graph.jsonl"
+if [ "${BENCH_GRAPH:-1}" != 0 ]; then
+  "$py" benchmarks/bench_graph.py --out "$out/bench_graph.jsonl"
+fi
 echo "device_bench: report in $out/report.md and $out/report.html"
