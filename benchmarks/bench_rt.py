@@ -18,9 +18,13 @@ Per scene (the embedded courtyard, and the fetched ``dragon``/``city`` where pre
    CPU cores (one process per core, each with its own BVH, hits into shared memory), all in
    the same run; hit-or-miss agreement with Embree beside them. Each ray placement
    (``staged``: copies on the GPU; ``mapped``: the trace reads and writes host-visible
-   memory; ``rays mapped`` or ``hits mapped``: one stream so) casts into new arrays, into reused ``out=`` arrays, and in one submit, and a
-   second table says where each cast's wall time went (``Raycaster.last``: the host's
-   upload, submit, wait and readback, the rest, and the GPU's copies and trace).
+   memory; ``rays mapped`` or ``hits mapped``: one stream so; ``host``: both, the rays in
+   host-cached rather than device-local host-visible memory) casts into new arrays and
+   into reused ``out=`` arrays in the batches ``vkext.raycast.batch_rays`` picks (the
+   default: one batch unless measured overlap pays), then, into ``out=``, forced into one
+   submit and into ``OVERLAP_PARTS`` overlapped batches (the old default), and a second
+   table says where each cast's wall time went (``Raycaster.last``: the host's upload,
+   submit, wait and readback, the rest, and the GPU's copies and trace).
 4. **Shadows in the frame**: ``configs/rt_shadows.toml`` with the shadow map, ray-query and
    ray-pipeline shadows (sun only, so the images are comparable): the GPU ms of the shadow
    pass and the share of pixels within 8/255 of the shadow-map image.
@@ -369,8 +373,11 @@ def embree_one_thread(v, f, o, d, repeats):
 # then the GPU's (timestamps); "other" is the wall time outside them (checks, result arrays)
 HOST_PARTS = ("upload_ms", "submit_ms", "wait_ms", "readback_ms")
 GPU_PARTS = ("gpu_upload_ms", "gpu_ms", "gpu_readback_ms")
+# the old default's overlap: a cast in this many batches (vkext.raycast.OVERLAP_PARTS)
+OVERLAP_PARTS = 4
 # RFW_RAYCAST_MAPPED per placement (vkext.raycast.mapped_streams)
-PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits"}
+PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits",
+              "host": "host"}
 
 
 def _casts(rs, o, d, repeats, out=None):
@@ -390,25 +397,31 @@ def _casts(rs, o, d, repeats, out=None):
     return statistics.median(walls), med, hits, parts[-1]["batches"]
 
 
-def _one_submit(rs, o, d, repeats, out):
-    """:func:`_casts` into ``out`` with every ray in one batch (one submit, no overlap of the
-    host's copies with the GPU's work), the same-run baseline for the overlapped batches."""
+def _forced(rs, o, d, repeats, out, parts):
+    """:func:`_casts` into ``out`` with the rays in ``parts`` batches whatever
+    ``vkext.raycast.batch_rays`` would choose: 1 (one submit, no overlap of the host's
+    copies with the GPU's work) or ``OVERLAP_PARTS`` (the overlap of the old default, at
+    least ``OVERLAP_MIN`` rays a batch), the same-run baselines for the default's choice."""
     from vkext import raycast
 
-    saved = raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN
-    raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN = 1, len(o)
+    def forced(n, batch, **_):
+        return n if parts == 1 else min(n, max(raycast.OVERLAP_MIN, -(-n // parts)))
+
+    saved = raycast.batch_rays
+    raycast.batch_rays = forced
     try:
         return _casts(rs, o, d, repeats, out=out)
     finally:
-        raycast.OVERLAP_PARTS, raycast.OVERLAP_MIN = saved
+        raycast.batch_rays = saved
 
 
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
     """Per method and ray placement (staged through copies, or mapped: the trace reads and
-    writes host-visible memory, for both streams or one; RFW_RAYCAST_MAPPED picks it):
-    RayScene build, then casts
-    (wall: what the caller waits for, and its parts; GPU: the trace alone), casts into
-    reused ``out=`` arrays, and the one-shot rfw.raycast's wall; hit-or-miss agreement with
+    writes host-visible memory, for both streams or one, or both with the rays in
+    host-cached memory; RFW_RAYCAST_MAPPED picks it): RayScene build, then casts (wall:
+    what the caller waits for, and its parts; GPU: the trace alone), casts into reused
+    ``out=`` arrays, forced into one batch and into overlapped ones, and the one-shot
+    rfw.raycast's wall; hit-or-miss agreement with
     Embree's ``ref_t``. Every placement's hits must equal the first one's bit for bit."""
     import rfw
     from rfw.errors import RfwError
@@ -434,8 +447,10 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
                 wall, parts, hits, batches = _casts(rs, o, d, repeats)
                 out = {k: np.empty_like(v) for k, v in hits.items()}
                 wall_out, parts_out, hits_out, _ = _casts(rs, o, d, repeats, out=out)
-                wall_one, parts_one, hits_one, one_batches = _one_submit(rs, o, d, repeats,
-                                                                         out)
+                wall_one, parts_one, hits_one, one_batches = _forced(rs, o, d, repeats, out,
+                                                                     1)
+                wall_over, parts_over, hits_over, over_batches = _forced(
+                    rs, o, d, repeats, out, OVERLAP_PARTS)
             except RfwError as e:  # e.g. no room for mapped buffers: say so, go on
                 notes.add(f"RayScene {method} {placement}: failed on {device.name} ({e})")
                 continue
@@ -443,7 +458,7 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
         notes.add(f"RayScene {placement} on {device.name}: rays in "
                   f"{memory.get('rays')}, hits in {memory.get('hits')}")
         first = first or hits
-        for got in (hits, hits_out, hits_one):
+        for got in (hits, hits_out, hits_one, hits_over):
             if any(not np.array_equal(got[k], first[k]) for k in first):
                 notes.add(f"RayScene {method} {placement}: hits differ from the first caster's")
         one_shot = None
@@ -456,7 +471,8 @@ def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):
                      "build_s": build, "batches": batches, "wall_s": wall,
                      "wall_out_s": wall_out, "parts_ms": parts, "parts_out_ms": parts_out,
                      "wall_one_s": wall_one, "parts_one_ms": parts_one,
-                     "one_batches": one_batches,
+                     "one_batches": one_batches, "wall_over_s": wall_over,
+                     "parts_over_ms": parts_over, "over_batches": over_batches,
                      "gpu_s": parts["gpu_ms"] / 1e3 if "gpu_ms" in parts else None,
                      "one_shot_s": one_shot, "agreement": agree})
     return rows
@@ -480,6 +496,7 @@ def cast_lines(rows, embree, n):
         row(f"{name} (wall: upload + trace + readback)", r["wall_s"], f"{r['agreement']:.5f}")
         row(f"{name} (wall, into reused out= arrays)", r["wall_out_s"])
         row(f"{name} (wall, out=, all rays in one submit)", r["wall_one_s"])
+        row(f"{name} (wall, out=, overlapped: {r['over_batches']} batches)", r["wall_over_s"])
         if r["gpu_s"]:
             row(f"{name} (trace only, GPU timestamps)", r["gpu_s"])
         if r["one_shot_s"]:
@@ -506,7 +523,9 @@ def breakdown_lines(rows):
         for label, batches, wall, parts in (
                 ("", r["batches"], r["wall_s"], r["parts_ms"]),
                 (", out=", r["batches"], r["wall_out_s"], r["parts_out_ms"]),
-                (", out=, one submit", r["one_batches"], r["wall_one_s"], r["parts_one_ms"])):
+                (", out=, one submit", r["one_batches"], r["wall_one_s"], r["parts_one_ms"]),
+                (", out=, overlapped", r["over_batches"], r["wall_over_s"],
+                 r["parts_over_ms"])):
             cells = [fmt(parts.get(k)) for k in (*HOST_PARTS, "other_ms", *GPU_PARTS)]
             lines.append(f"| {r['method']} {r['placement']}{label} | {batches} | "
                          f"{wall * 1e3:.2f} | " + " | ".join(cells) + " |")

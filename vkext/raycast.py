@@ -19,9 +19,13 @@ threads when large: :func:`parallel_copy`); hits go into new arrays or the calle
 direction that is not zero): such a ray is not traced, and :meth:`Raycaster.cast` raises
 naming the argument and the first bad row.
 
-Rays go through in batches of at most ``batch`` rays (a large cast in at least
-:data:`OVERLAP_PARTS`), :data:`SLOTS` in flight, so the host fills one batch's rays and
-reads another's hits while the GPU works; memory stays bounded for any ray count. Where
+Rays go through in batches of at most ``batch`` rays, :data:`SLOTS` in flight, so the host
+fills one batch's rays and reads another's hits while the GPU works; memory stays bounded
+for any ray count. A cast of at most ``batch`` rays is one batch unless overlap pays
+(:func:`batch_rays`: a GPU that is not the host's CPU, with measured GPU and host times both
+large enough to hide behind each other; then :data:`OVERLAP_PARTS` batches): on the
+H200 and on lavapipe a batch more cost more than it hid. Every batch reuses its slot's
+fence and, for a cast like the last, its command buffer: a cast only submits. Where
 the buffers live (:func:`mapped_streams`, per stream): on a discrete GPU, per batch one
 submit copies the rays from a staging buffer to device-local memory, traces, and copies the
 hits back (about 160 bytes a ray of the batch, staging included); where memory is
@@ -41,6 +45,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -74,10 +79,9 @@ from .commands import (
     begin_label,
     copy_to_host,
     end_label,
-    submit,
     written_for_host,
 )
-from .consts import ffi, lib, vk
+from .consts import const, ffi, lib, vk
 from .device import VkDevice, VkMissingFeatureError
 from .rt import BindingSet, ComputePipeline, HitGroup, RayTracingPipeline
 from .sbt import ShaderBindingTable
@@ -85,9 +89,27 @@ from .sbt import ShaderBindingTable
 SHADERS = Path(__file__).resolve().parent / "shaders" / "raycast"
 METHODS = ("ray_query", "ray_pipeline")
 DEFAULT_BATCH = 1 << 20
-# a large cast goes in OVERLAP_PARTS submits (of at least OVERLAP_MIN rays), SLOTS of them in
-# flight: the host copies one part's rays in and another's hits out while the GPU works
+# Batches go SLOTS in flight: the host copies one batch's rays in and another's hits out
+# while the GPU works. A cast of at most ``batch`` rays is one batch unless overlap pays
+# (batch_rays): then OVERLAP_PARTS batches of at least OVERLAP_MIN rays. Overlap hides at
+# most the smaller of the GPU's time and the host's copies, and each batch more costs a
+# submit, a wait and smaller copies. Measured (benchmarks/bench_rt.py --sections cast,
+# courtyard primary rays, medians, ms):
+# - NVIDIA H200 (driver 580.159.04, 16-thread Xeon), 921,600 rays, staged: 4 batches 11.85
+#   wall (into new arrays), 1 batch 5.92 (into out= arrays); mapped: 10.84 against 5.87.
+#   The GPU's share is 1.3-1.7 ms (copies 0.6 + 0.35, trace 0.4), the host's copies 3-8
+#   ms; 4 submits cost 1.68 ms against 0.48 for one, and the host's copies in four pieces
+#   took 4.8 ms (in) and 3.0 (out, page faults of new arrays included) against 1.6 and 1.4:
+#   about 2 ms a batch more (OVERLAP_BATCH_MS), for at most the GPU's 1.5 ms hidden.
+# - lavapipe (2 cores; mapped, ray_query), 921,600 rays: 4 batches 348-350 ms wall (host
+#   copies 14-19 in, 10-15 out; trace 340), 1 batch 313-325 (copies 5 in, 3-4 out; trace
+#   303-311). The "GPU" is the host's own cores: the host's copies compete with the trace
+#   instead of hiding behind it, so a CPU device never overlaps.
+# So on a GPU a cast overlaps only when the last cast of at least OVERLAP_MIN rays through
+# the same buffers measured GPU and host rates (timestamps; upload + readback) that put
+# both over OVERLAP_PARTS * OVERLAP_BATCH_MS for this one; the first cast is one batch.
 OVERLAP_PARTS, OVERLAP_MIN, SLOTS = 4, 1 << 16, 2
+OVERLAP_BATCH_MS = 2.0
 
 # raycast.glsl's streams: 4-byte words per ray, in this order
 RAY_STREAMS = (("origin", 3), ("direction", 3), ("tmin", 1), ("tmax", 1))
@@ -136,6 +158,22 @@ def batch_graph(method: str) -> Graph:
     return g.build()
 
 
+def batch_rays(n: int, batch: int, *, device_type: str = "discrete_gpu",
+               rates: tuple[float, float] | None = None) -> int:
+    """Rays per batch for a cast of ``n`` rays (``n > 0``) capped at ``batch``: all of them
+    (at most ``batch``) in one, or OVERLAP_PARTS batches of at least OVERLAP_MIN where
+    overlap pays (see OVERLAP_BATCH_MS): on a device that is not the host's CPU
+    (``device_type``, :attr:`VkDevice.device_type`), with ``rates`` measured (the GPU's
+    and the host's nanoseconds per ray, :attr:`RayBuffers.rates`) that put both the GPU's
+    time and the host's copies for ``n`` rays at OVERLAP_PARTS * OVERLAP_BATCH_MS or more."""
+    per = min(batch, n)
+    if device_type == "cpu" or rates is None or n < 2 * OVERLAP_MIN:
+        return per
+    if min(rates) * n / 1e6 < OVERLAP_PARTS * OVERLAP_BATCH_MS:
+        return per
+    return min(per, max(OVERLAP_MIN, -(-n // OVERLAP_PARTS)))
+
+
 def pick_method(device: VkDevice, method: str = "auto") -> str:
     """``"auto"``: ray queries where the device has them, else the pipeline. A named method
     the device lacks raises :class:`VkMissingFeatureError`."""
@@ -152,40 +190,79 @@ def pick_method(device: VkDevice, method: str = "auto") -> str:
     return method
 
 
-def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]], *, cached: bool = True) -> None:
+def parallel_copy(jobs: list[tuple[np.ndarray, np.ndarray]], *, cached: bool = True,
+                  check: int | None = None) -> bool:
     """``dst[...] = src`` for every (dst, src) pair of arrays of one shape (any layout and
     real dtype: a source is converted while it is copied). Jobs of at least two
-    :data:`COPY_SPLIT` in all are cut along their first axis into parts of at least that,
-    and the parts shared among up to :data:`COPY_THREADS` tasks of about equal bytes on a
-    thread pool (one task per thread: a task costs more Python than a part). Without
-    ``cached`` the destinations are written in order only (they may be write-combined
-    memory)."""
+    :data:`COPY_SPLIT` in all are cut along their first axis into parts of at least that
+    (up to ``2 * COPY_THREADS`` a job), which this thread and up to ``COPY_THREADS - 1``
+    threads of a pool take one at a time until none is left: a thread that wakes late
+    (a busy or virtual host) then copies less instead of holding everyone up, and this
+    thread waits only for parts already taken. Without ``cached`` the destinations are
+    written in order only (they may be write-combined memory).
+
+    ``check`` names the job (its index) whose destination is scanned for NaN part by part
+    as it lands, while in cache; returns whether it has any (False without ``check``)."""
     global _copy_pool
     copy = _copy if cached else _copy_in_order
     total = sum(dst.nbytes for dst, _ in jobs)
     if COPY_THREADS < 2 or total < 2 * COPY_SPLIT:
-        for dst, src in jobs:
-            copy(dst, src)
-        return
-    tasks: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(COPY_THREADS)]
-    load = [0] * COPY_THREADS
-    for dst, src in jobs:  # small streams too: they copy beside the large ones
+        parts = [(dst, src, i == check) for i, (dst, src) in enumerate(jobs)]
+        return _copy_parts(copy, parts)
+    parts = []
+    for i, (dst, src) in enumerate(jobs):  # small streams too: they copy beside the large
         n = len(dst)
-        pieces = max(1, min(COPY_THREADS, dst.nbytes // COPY_SPLIT, n))
-        for i in range(pieces):
-            a, b = n * i // pieces, n * (i + 1) // pieces
-            least = load.index(min(load))
-            tasks[least].append((dst[a:b], src[a:b]))
-            load[least] += dst[a:b].nbytes
+        pieces = max(1, min(2 * COPY_THREADS, dst.nbytes // COPY_SPLIT, n))
+        parts += [(dst[a:b], src[a:b], i == check) for a, b in
+                  ((n * k // pieces, n * (k + 1) // pieces) for k in range(pieces))]
+    parts.sort(key=lambda p: -p[0].nbytes)  # the largest first: the last parts are short
     if _copy_pool is None:
-        _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="vkext-raycast-copy")
-    for done in [_copy_pool.submit(_copy_parts, copy, t) for t in tasks if t]:
-        done.result()
+        _copy_pool = ThreadPoolExecutor(COPY_THREADS - 1,
+                                        thread_name_prefix="vkext-raycast-copy")
+    shared = _SharedParts(copy, parts)
+    for _ in range(min(COPY_THREADS - 1, len(parts) - 1)):
+        _copy_pool.submit(shared.run)
+    shared.run()
+    return shared.wait()
 
 
-def _copy_parts(copy: Any, parts: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    for dst, src in parts:
+class _SharedParts:
+    """Parts that threads take one at a time (``next`` on a list's iterator holds the GIL,
+    so each part goes to one thread); :meth:`wait` returns once every part is copied."""
+
+    def __init__(self, copy: Any, parts: list[tuple[np.ndarray, np.ndarray, bool]]):
+        self.copy, self.parts, self.left = copy, iter(parts), len(parts)
+        self.lock, self.done = threading.Lock(), threading.Event()
+        self.nan, self.error = False, None
+
+    def run(self) -> None:
+        for part in self.parts:
+            nan, error = False, None
+            try:
+                nan = _copy_parts(self.copy, [part])
+            except BaseException as e:  # handed to the waiting thread
+                error = e
+            with self.lock:
+                self.nan |= nan
+                self.error = self.error or error
+                self.left -= 1
+                if self.left == 0:
+                    self.done.set()
+
+    def wait(self) -> bool:
+        self.done.wait()
+        if self.error is not None:
+            raise self.error
+        return self.nan
+
+
+def _copy_parts(copy: Any, parts: list[tuple[np.ndarray, np.ndarray, bool]]) -> bool:
+    nan = False
+    for dst, src, checked in parts:
         copy(dst, src)
+        # min() propagates NaN: one pass over the part while it is in cache
+        nan = nan or bool(checked and len(dst) and np.isnan(dst.min()))
+    return nan
 
 
 def _copy(dst: np.ndarray, src: np.ndarray) -> None:
@@ -219,17 +296,18 @@ def _type_bits(device: VkDevice, names: list[str]) -> int:
                if props & need == need)
 
 
-# RFW_RAYCAST_MAPPED: which streams the trace reads and writes in mapped memory
+# RFW_RAYCAST_MAPPED: which streams the trace reads and writes in mapped memory; "host":
+# both, the rays too in host-cached memory (see rays_in_host_memory)
 PLACEMENTS = {"0": (False, False), "1": (True, True), "rays": (True, False),
-              "hits": (False, True)}
+              "hits": (False, True), "host": (True, True)}
 
 
 def mapped_streams(device: VkDevice) -> tuple[bool, bool]:
     """Whether casts on ``device`` map (rays, hits) rather than stage them (see
     :class:`RayBuffers`). ``RFW_RAYCAST_MAPPED`` says so: ``0`` (neither), ``1`` (both),
-    ``rays`` or ``hits``; unset (or ``auto``) both where memory is device-local,
-    host-visible and host-cached at once (unified memory: no copy is worth making), else
-    neither: a discrete GPU stages, its host copies overlapping the traces."""
+    ``rays``, ``hits`` or ``host`` (both, see :func:`rays_in_host_memory`); unset (or
+    ``auto``) both where memory is device-local, host-visible and host-cached at once
+    (unified memory: no copy is worth making), else neither: a discrete GPU stages."""
     value = os.environ.get("RFW_RAYCAST_MAPPED", "auto")
     if value != "auto" and value not in PLACEMENTS:
         raise RfwError(f"RFW_RAYCAST_MAPPED is {', '.join(PLACEMENTS)} or auto, not "
@@ -239,6 +317,16 @@ def mapped_streams(device: VkDevice) -> tuple[bool, bool]:
     unified = bool(_type_bits(device, [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT,
                                        HOST_CACHED]))
     return unified, unified
+
+
+def rays_in_host_memory() -> bool:
+    """Whether mapped rays go to host-cached memory (``RFW_RAYCAST_MAPPED=host``) rather
+    than device-local host-visible memory where there is such. On a discrete GPU the host
+    then writes them at the speed of its own memory, as into a staging buffer, and the
+    trace reads them across the bus instead of a copy doing so first (the H200 at 921,600
+    rays: the staged copy in took 0.62 ms of GPU time, writing device-local host-visible
+    memory 2.64 ms of host time against 1.63 for host-cached staging)."""
+    return os.environ.get("RFW_RAYCAST_MAPPED") == "host"
 
 
 def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,
@@ -299,8 +387,9 @@ class RayBuffers:
       fills or reads, copied on the GPU;
     - mapped: :data:`SLOTS` host-visible buffers that the trace itself reads or writes (no
       copy): on unified memory (lavapipe, integrated GPUs) the host then works at memory
-      speed; on a discrete GPU the rays go to device-local host-visible memory (a BAR) and
-      the hits to host-cached memory, across the bus.
+      speed; on a discrete GPU the rays go to device-local host-visible memory (a BAR), or
+      with :func:`rays_in_host_memory` to host-cached memory, and the hits to host-cached
+      memory, across the bus.
 
     ``up[slot]`` and ``down[slot]`` are what the host writes and reads either way, and
     ``sets[slot]`` the descriptor set binding the slot's buffers with a TLAS.
@@ -312,9 +401,13 @@ class RayBuffers:
         self.caster, self.device, self.tlas, self.label = caster, caster.device, tlas, label
         self.mapped_rays, self.mapped_hits = \
             mapped_streams(self.device) if mapped is None else mapped
+        self.host_rays = self.mapped_rays and mapped is None and rays_in_host_memory()
         self.capacity = self.allocations = 0
         self.generation = 0  # new buffers, new number: commands recorded for old ones expire
         self.up_cached = True  # whether the host writes rays into host-cached memory
+        # (GPU, host) nanoseconds per ray of the last cast of at least OVERLAP_MIN rays
+        # through these buffers, with timestamps: what batch_rays decides overlap by
+        self.rates: tuple[float, float] | None = None
         self._made: list[Any] = []
         self.rays = self.hits = None
         self.up: list[Buffer] = []
@@ -350,7 +443,7 @@ class RayBuffers:
             # staging is host-cached where there is such memory (readback=True prefers it):
             # a converting copy writes partial lines, slow in write-combined memory
             self.up.append(
-                self._mapped(size["rays"], readback=False, name=f"rays {slot}")
+                self._mapped(size["rays"], readback=self.host_rays, name=f"rays {slot}")
                 if self.mapped_rays else self._keep(staging_buffer(
                     dev, size["rays"], readback=True, label=f"{label}:rays upload {slot}")))
             self.down.append(
@@ -366,7 +459,10 @@ class RayBuffers:
 
     @property
     def placement(self) -> str:
-        """``staged``, ``mapped`` (both streams) or which one is mapped."""
+        """``staged``, ``mapped`` (both streams), which one is mapped, or ``host`` (both, the
+        rays in host-cached memory)."""
+        if self.host_rays:
+            return "host"
         return {(False, False): "staged", (True, True): "mapped", (True, False): "rays mapped",
                 (False, True): "hits mapped"}[(self.mapped_rays, self.mapped_hits)]
 
@@ -419,17 +515,19 @@ class RayBuffers:
         parallel_copy(jobs, cached=self.up_cached)
         return (8 if len(jobs) > 2 else 6) * k * 4
 
-    def read_hits(self, slot: int, k: int, out: dict[str, np.ndarray], start: int) -> None:
+    def read_hits(self, slot: int, k: int, out: dict[str, np.ndarray], start: int) -> bool:
         """The ``k`` hits in readback buffer ``slot`` into ``out``'s arrays (those it has)
-        at ``start``."""
+        at ``start``; returns whether any ``t`` is NaN (a ray the shaders refused), checked
+        as the copy lands."""
         words = self.down[slot].map()[:k * HIT_WORDS * 4].view(np.float32)
-        at, jobs = 0, []
+        at, jobs, check = 0, [], None
         for name, width in HIT_STREAMS:
             if name in out:
                 dst = out[name][start:start + k].reshape(-1)
+                check = len(jobs) if name == "t" else check
                 jobs.append((dst, words[at:at + width * k].view(dst.dtype)))
             at += width * k
-        parallel_copy(jobs)
+        return parallel_copy(jobs, check=check)
 
     def _free(self) -> None:
         for obj in reversed(self._made):
@@ -457,6 +555,9 @@ class Raycaster:
         self._host: dict[str, float] = {}  # the cast under way: host seconds of its parts
         # per batch index of a cast: its command buffer and what it was recorded for
         self.cmds: list[tuple[Any, tuple | None]] = []
+        self._submits: list[Any] = []  # per batch index: (cmd, its submit info structs)
+        self.fences: list[Any] = []  # per slot, reset and reused by every cast
+        self._refused = False  # the cast under way read a NaN t
         self.recorded = self._timer_generation = 0
         self.last: dict[str, Any] = {}
         self.plan: CompiledGraph = compiled(batch_graph(self.method))
@@ -514,8 +615,8 @@ class Raycaster:
         self.last = {"method": self.method, "rays": n, "batches": 0}
         if n == 0:
             return {k: arrays[k] for k in hits}
-        per = min(batch, n, max(OVERLAP_MIN, -(-n // OVERLAP_PARTS)))
         wall = time.perf_counter()
+        per = batch_rays(n, batch, device_type=self.device.device_type, rates=buffers.rates)
         buffers.reserve(per)
         sbt = self._table(accel.hit_records) if self.method == "ray_pipeline" else None
         per_ray = not (np.ndim(tmin) == 0 and np.ndim(tmax) == 0)
@@ -525,6 +626,7 @@ class Raycaster:
         batches = -(-n // per)
         self._timestamps(batches)
         flight: deque[tuple[int, int, int, Any]] = deque()  # (slot, start, rays, fence)
+        self._refused = False
         try:
             for j, start in enumerate(range(0, n, per)):
                 slot = j % SLOTS
@@ -546,7 +648,12 @@ class Raycaster:
             for *_, fence in flight:  # after an error: nothing may still run on the buffers
                 self._wait(fence)
         self._report(n, batches, time.perf_counter() - wall)
-        _check_traced(arrays["t"], arrays["primitive"])
+        if n >= OVERLAP_MIN and "gpu_ms" in self.last:
+            gpu = sum(self.last[k] for k in GPU_PARTS)
+            host = self.last["upload_ms"] + self.last["readback_ms"]
+            buffers.rates = (gpu * 1e6 / n, host * 1e6 / n)
+        if self._refused:  # read_hits saw a NaN t: find the first
+            _check_traced(arrays["t"], arrays["primitive"])
         return {k: arrays[k] for k in hits}
 
     def _timestamps(self, batches: int) -> None:
@@ -616,14 +723,37 @@ class Raycaster:
             vk.vkEndCommandBuffer(cmd)
             self.cmds[j] = (cmd, key)
             self.recorded += 1
-        return submit(self.device, [cmd], wait=False)
+        return self._submit_slot(slot, j, cmd)
+
+    def _submit_slot(self, slot: int, j: int, cmd: Any) -> Any:
+        """Submit ``cmd`` (batch ``j``'s) with slot ``slot``'s fence, kept from cast to cast
+        (reset here: the slot's last batch was waited for), and return the fence; the
+        submit info is built once per command buffer."""
+        dev = self.device.device
+        while len(self.fences) <= slot:
+            self.fences.append(vk.vkCreateFence(dev, vk.VkFenceCreateInfo(), None))
+        while len(self._submits) <= j:
+            self._submits.append(None)
+        made = self._submits[j]
+        if made is None or made[0] != cmd:
+            infos = ffi.new("VkCommandBufferSubmitInfo*")
+            infos.sType = const("VK_STRUCTURE_TYPE_COMMAND_BUFFER_SUBMIT_INFO")
+            infos.commandBuffer = cmd
+            info = ffi.new("VkSubmitInfo2*")
+            info.sType = const("VK_STRUCTURE_TYPE_SUBMIT_INFO_2")
+            info.commandBufferInfoCount, info.pCommandBufferInfos = 1, infos
+            made = self._submits[j] = (cmd, infos, info)
+        fence = self.fences[slot]
+        vk.vkResetFences(dev, 1, [fence])
+        try:
+            vk.vkQueueSubmit2(self.device.queue, 1, made[2], fence)
+        except BaseException:
+            vk.vkDeviceWaitIdle(dev)
+            raise
+        return fence
 
     def _wait(self, fence: Any) -> None:
-        dev = self.device.device
-        try:
-            vk.vkWaitForFences(dev, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
-        finally:
-            vk.vkDestroyFence(dev, fence, None)
+        vk.vkWaitForFences(self.device.device, 1, [fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
 
     def _finish(self, batch: tuple[int, int, int, Any], buffers: RayBuffers,
                 out: dict[str, np.ndarray]) -> None:
@@ -632,7 +762,7 @@ class Raycaster:
         t0 = time.perf_counter()
         self._wait(fence)
         t1 = time.perf_counter()
-        buffers.read_hits(slot, k, out, start)
+        self._refused |= buffers.read_hits(slot, k, out, start)
         self._host["wait_ms"] += t1 - t0
         self._host["readback_ms"] += time.perf_counter() - t1
         self.last["batches"] += 1
@@ -698,6 +828,10 @@ class Raycaster:
         if self.pipeline is not None:
             self.pipeline.destroy()
             self.pipeline = None
+        if self.fences and self.device.alive:
+            for fence in self.fences:
+                vk.vkDestroyFence(self.device.device, fence, None)
+        self.fences = []
         if self.commands is not None:
             self.commands.destroy()
             self.commands = None

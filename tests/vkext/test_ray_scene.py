@@ -280,7 +280,9 @@ def test_import_rfw_does_not_load_vulkan_for_ray_scene():
 
 def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
     """Host copies split among threads (forced here on small casts) give the hits of whole
-    copies; the pool really got the parts (counted), with tmin/tmax streams too."""
+    copies; the parts really went through the copy (counted), with tmin/tmax streams too,
+    and the pool was asked for its threads."""
+    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     from vkext import raycast as rc
@@ -291,27 +293,74 @@ def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
     t_max = np.full(len(o), 50.0)
     with rfw.RayScene(v, mesh.faces, device=vk_device) as scene:
         whole, whole_arrays = scene.cast(o, d), scene.cast(o, d, t_max=t_max)
-        parts, tasks = [], []
+        parts, threads, submits = [], set(), []
+        copy = rc._copy
+
+        def counting(dst, src):
+            parts.append(dst.nbytes)
+            threads.add(threading.get_ident())
+            copy(dst, src)
 
         class Counting(ThreadPoolExecutor):
-            def submit(self, fn, *args):  # fn(copy, parts): a task copies a list of parts
-                tasks.append(len(args[1]))
-                parts.extend(dst.nbytes for dst, _ in args[1])
+            def submit(self, fn, *args):
+                submits.append(fn)
                 return super().submit(fn, *args)
 
-        pool = Counting(3)
+        pool = Counting(2)
         monkeypatch.setattr(rc, "_copy_pool", pool)
+        monkeypatch.setattr(rc, "_copy", counting)
         monkeypatch.setattr(rc, "COPY_THREADS", 3)
         monkeypatch.setattr(rc, "COPY_SPLIT", 1024)
         try:
             _same(scene.cast(o, d), whole)
-            # rays: 2 streams, hits: 3 (no instance), 3 parts each, of uneven sizes, in 3
-            # tasks per copy (one batch: one copy in, one out)
-            assert len(parts) == 5 * 3 and len(set(parts)) > 1 and len(tasks) == 2 * 3
+            # rays: 2 streams, hits: 3 (no instance), 2 * 3 parts each, of uneven sizes;
+            # 2 pool threads asked to help per copy (one batch: one copy in, one out)
+            assert len(parts) == 5 * 6 and len(set(parts)) > 1 and len(submits) == 2 * 2
             _same(scene.cast(o, d, t_max=t_max), whole_arrays)
-            assert len(parts) == 5 * 3 + 7 * 3 and len(tasks) == 4 * 3
+            assert len(parts) == 5 * 6 + 7 * 6 and len(submits) == 4 * 2
+            assert threading.get_ident() in threads  # this thread copies its share
         finally:
             pool.shutdown()
+
+
+def test_parallel_copy_needs_no_pool_thread(monkeypatch):
+    """The calling thread takes parts too, so a copy ends even if no pool thread ever
+    starts (a late one finds nothing left): here the pool runs nothing at all."""
+    from vkext import raycast as rc
+
+    class Idle:
+        def submit(self, fn, *args):
+            self.asked = getattr(self, "asked", 0) + 1
+
+    idle = Idle()
+    monkeypatch.setattr(rc, "_copy_pool", idle)
+    monkeypatch.setattr(rc, "COPY_THREADS", 4)
+    src = np.arange(1 << 18, dtype=np.float32)
+    dst = np.zeros_like(src)
+    assert rc.parallel_copy([(dst, src)]) is False
+    np.testing.assert_array_equal(dst, src)
+    assert idle.asked == 3  # control: the pool was asked, and did nothing
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_parallel_copy_finds_nan_in_the_checked_job(monkeypatch, split):
+    """``check`` names the job whose copy is scanned for NaN (whole or in parts); a NaN in
+    another job is not its business (negative control)."""
+    from vkext import raycast as rc
+
+    if split:
+        monkeypatch.setattr(rc, "COPY_THREADS", 3)
+        monkeypatch.setattr(rc, "COPY_SPLIT", 1024)
+    t = np.ones(50_000, np.float32)
+    other = np.ones(50_000, np.float32)
+    jobs = lambda: [(np.empty_like(other), other), (np.empty_like(t), t)]  # noqa: E731
+    assert rc.parallel_copy(jobs(), check=1) is False
+    other[40_000] = np.nan
+    assert rc.parallel_copy(jobs(), check=1) is False
+    assert rc.parallel_copy(jobs(), check=0) is True
+    t[49_999] = np.nan  # in the last part
+    assert rc.parallel_copy(jobs(), check=1) is True
+    assert rc.parallel_copy(jobs()) is False
 
 
 def test_parallel_copy_copies_every_element():
@@ -345,7 +394,8 @@ def test_parallel_copy_converts_any_layout(cached):
         assert not np.array_equal(dst, src.astype(np.float16))  # control: rounding shows
 
 
-PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits"}
+PLACEMENTS = {"staged": "0", "mapped": "1", "rays mapped": "rays", "hits mapped": "hits",
+              "host": "host"}
 
 
 def _placed(monkeypatch, placement: str) -> None:
@@ -480,7 +530,7 @@ def test_bad_out_is_one_line(vk_device, case):
 def test_a_bad_placement_setting_is_one_line(vk_device, monkeypatch):
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "yes")
     with pytest.raises(RfwError, match=r"^vkext\.raycast: RFW_RAYCAST_MAPPED is 0, 1, rays, "
-                                        r"hits or auto, not 'yes'$"):
+                                        r"hits, host or auto, not 'yes'$"):
         rfw.RayScene(_TRI, _FACES, device=vk_device)
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "auto")  # control: the documented values pass
     with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
@@ -538,5 +588,5 @@ def test_mapped_batches_copy_nothing(vk_device, monkeypatch, placement):
     with rfw.RayScene(_TRI, _FACES, device=vk_device, batch=97) as scene:
         assert np.isfinite(scene.cast(o, d)["t"]).all()
         buffers = scene._scene.buffers
-        assert (buffers.rays is None) is (placement in ("mapped", "rays mapped"))
-    assert len(copies) == (0 if placement in ("mapped", "hits mapped") else 4)
+        assert (buffers.rays is None) is (placement in ("mapped", "rays mapped", "host"))
+    assert len(copies) == (0 if placement in ("mapped", "hits mapped", "host") else 4)
