@@ -890,7 +890,7 @@ class FrameSlot:
                 obj.destroy()
 
 
-STAMP_BATCH = 16  # frames whose timestamps are read back together (rfw.backends.wgpu_backend.Stamps)
+STAMP_BATCH = 32  # frames whose timestamps are read back together (rfw.backends.wgpu_backend.Stamps)
 
 
 class Stamps:
