@@ -33,6 +33,10 @@ export RFW_CACHE=${RFW_CACHE:-/tmp/rfw-cache/scenes}
     > "$OUT/validate.txt" 2>&1
 "$PYTHON" benchmarks/bench_async.py --size "$SIZE" --frames "$FRAMES" --warmup 5 --repeat 3 \
     --out "$OUT/bench_async.json" 2>&1 | tee "$OUT/bench_async.log"
+# the same on the graphics family's second queue (RFW_VK_ASYNC_QUEUE's other choice)
+RFW_VK_ASYNC_QUEUE=graphics "$PYTHON" benchmarks/bench_async.py --size "$SIZE" \
+    --frames "$FRAMES" --warmup 5 --repeat 3 --out "$OUT/bench_async_graphics.json" 2>&1 \
+    | tee "$OUT/bench_async_graphics.log"
 "$PYTHON" -m rfw.cli bench deferred_ssao_shadows@vk --vary async_compute=on,off \
     --size "$SIZE" --frames "$FRAMES" --warmup 5 --repeat 3 --out "$OUT/bench" \
     2>&1 | tee "$OUT/bench.log"

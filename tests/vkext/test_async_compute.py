@@ -123,16 +123,17 @@ def test_the_second_queue_choice():
 
     g, c, t = vk.VK_QUEUE_GRAPHICS_BIT, vk.VK_QUEUE_COMPUTE_BIT, vk.VK_QUEUE_TRANSFER_BIT
     nvidia = [(g | c | t, 16, 64), (t, 2, 64), (c | t, 8, 64)]
-    assert compute_queue_choice(nvidia, 0) == (0, 1)  # a second graphics-family queue
+    assert compute_queue_choice(nvidia, 0) == (2, 0)  # the compute engines' family first
+    assert compute_queue_choice([(g | c | t, 16, 64)], 0) == (0, 1)  # else a second queue
     one_graphics = [(g | c | t, 1, 64), (t, 1, 64), (c | t, 4, 64)]
-    assert compute_queue_choice(one_graphics, 0) == (2, 0)  # the compute-only family
+    assert compute_queue_choice(one_graphics, 0) == (2, 0)
     untimed = [(g | c | t, 1, 64), (c | t, 4, 0)]
     assert compute_queue_choice(untimed, 0) is None  # its passes could not be timed
     assert compute_queue_choice([(g | c | t, 1, 64)], 0) is None  # lavapipe
-    # RFW_VK_ASYNC_QUEUE=family: the compute engines' family first, else the second queue
-    assert compute_queue_choice(nvidia, 0, "family") == (2, 0)
-    assert compute_queue_choice([(g | c | t, 16, 64)], 0, "family") == (0, 1)
-    assert compute_queue_choice(untimed, 0, "family") is None
+    # RFW_VK_ASYNC_QUEUE=graphics: the graphics family's second queue first
+    assert compute_queue_choice(nvidia, 0, "graphics") == (0, 1)
+    assert compute_queue_choice(one_graphics, 0, "graphics") == (2, 0)
+    assert compute_queue_choice(untimed, 0, "graphics") is None
 
 
 def test_a_bad_async_queue_preference_is_one_line(tmp_path):
