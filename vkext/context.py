@@ -106,8 +106,12 @@ class VkPassContext(SlotContext):
         key = ("step", self.pass_.name, index, self._step)
         barriers = self._memo.get(key)
         if barriers is None:
-            barriers = self._memo[key] = self.executor.plan.barriers_before_step(
-                self.pass_.name, index, self._step)
+            barriers = self.executor.plan.barriers_before_step(self.pass_.name, index,
+                                                               self._step)
+            queues = self.executor.queues
+            if queues is not None:  # as the pass's queue can record them
+                barriers = queues.barriers_for(self.pass_.name, barriers)
+            self._memo[key] = barriers
         record_barriers(self.cmd, barriers, self.executor.resources)
         self._step = index
 
@@ -119,10 +123,13 @@ class VkPassContext(SlotContext):
         it first, before recording anything. Without bundles (``RFW_VK_BUNDLES=0``) or
         under synchronization validation it is always False: the layer does not report
         hazards between two bundles (a broken plan's went unreported: test_schedule_fuzz),
-        so there every pass records its commands into the frame."""
+        so there every pass records its commands into the frame. So it is for a pass on a
+        compute-only queue family (async compute): bundles are the graphics family's."""
         ex = self.executor
         if ex.bundles is None or self.device.sync_validation:
             return False
+        if ex.queues is not None and self.pass_.name in ex.queues.elsewhere:
+            return False  # bundles come from the graphics family's pool: not for its queue
         if self._pass_bundle is not None or self._step >= 0 or self._draw_calls \
                 or self._set_calls:
             return False  # too late: commands were recorded already

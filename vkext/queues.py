@@ -20,6 +20,7 @@ they are (a pass's begin and end are on its own queue).
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from typing import Any
 
 from rfw.errors import RfwError
@@ -44,6 +45,37 @@ SPAN_ENV = "RFW_VK_FRAME_SPAN"
 # the queue is done; the executor's barriers chain after it); compute batches wait for it
 _BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
 _AFTER = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_READ", "MEMORY_WRITE"}))
+
+
+# what a compute-only family's command buffers cannot name (VUID-vkCmdPipelineBarrier2-
+# srcStageMask-03849): the graphics pipeline's stages and the accesses only they make
+GRAPHICS_STAGES = frozenset({
+    "VERTEX_INPUT", "INDEX_INPUT", "VERTEX_ATTRIBUTE_INPUT", "VERTEX_SHADER",
+    "TESSELLATION_CONTROL_SHADER", "TESSELLATION_EVALUATION_SHADER", "GEOMETRY_SHADER",
+    "PRE_RASTERIZATION_SHADERS", "FRAGMENT_SHADER", "EARLY_FRAGMENT_TESTS",
+    "LATE_FRAGMENT_TESTS", "COLOR_ATTACHMENT_OUTPUT", "ALL_GRAPHICS", "TASK_SHADER_EXT",
+    "MESH_SHADER_EXT", "FRAGMENT_SHADING_RATE_ATTACHMENT_KHR", "TRANSFORM_FEEDBACK_EXT",
+    "CONDITIONAL_RENDERING_EXT", "FRAGMENT_DENSITY_PROCESS_EXT"})
+GRAPHICS_ACCESS = frozenset({
+    "INDEX_READ", "VERTEX_ATTRIBUTE_READ", "INPUT_ATTACHMENT_READ", "COLOR_ATTACHMENT_READ",
+    "COLOR_ATTACHMENT_WRITE", "DEPTH_STENCIL_ATTACHMENT_READ",
+    "DEPTH_STENCIL_ATTACHMENT_WRITE"})
+
+
+def on_compute_family(state: State) -> State:
+    """``state`` as a barrier on a compute-only family's queue can name it: graphics stages
+    become ALL_COMMANDS (every earlier command on the queue; what ran on the graphics queue
+    is ordered by the semaphore the batch waits for), graphics-only accesses the generic
+    MEMORY_READ/MEMORY_WRITE."""
+    if not state.stages & GRAPHICS_STAGES and not state.access & GRAPHICS_ACCESS:
+        return state
+    stages = state.stages - GRAPHICS_STAGES
+    if stages != state.stages:
+        stages = frozenset({"ALL_COMMANDS"})
+    access = state.access - GRAPHICS_ACCESS
+    for a in state.access & GRAPHICS_ACCESS:
+        access |= {"MEMORY_WRITE" if a.endswith("WRITE") else "MEMORY_READ"}
+    return State(state.layout, stages, frozenset(access))
 
 
 def async_queues(device: VkDevice, plan: CompiledGraph,
@@ -159,6 +191,10 @@ class AsyncQueues:
         self.first_graphics = next(s.index for s in plan.submissions if s.queue == GRAPHICS)
         self.position = {p: k for k, p in enumerate(p for s in sorted(
             plan.submissions, key=lambda s: s.index) for p in s.passes)}
+        # passes whose batches go to a queue of another family than the graphics one
+        self.elsewhere = frozenset(p for p, k in self.sub_of.items()
+                                   if self.family[plan.submissions[k].queue]
+                                   != device.queue_family)
         self.acquires: dict[str, list[Transfer]] = {}
         self.releases: dict[str, list[Transfer]] = {}
         for t in plan.transfers:
@@ -206,6 +242,14 @@ class AsyncQueues:
         self._acquire(cmd, name)
         return cmd
 
+    def barriers_for(self, name: str, barriers: list[Any]) -> list[Any]:
+        """Pass ``name``'s plan barriers as its queue can record them (a compute-only
+        family's: see :func:`on_compute_family`)."""
+        if name not in self.elsewhere:
+            return barriers
+        return [replace(b, src=on_compute_family(b.src), dst=on_compute_family(b.dst))
+                for b in barriers]
+
     def _start(self, slot: Any) -> None:
         s = self._slots.get(id(slot))
         if s is None:
@@ -215,7 +259,10 @@ class AsyncQueues:
         s.begun.clear()
         self._slot, self._last = s, None
 
-    def _transfer_barrier(self, cmd: Any, t: Transfer, b: Any) -> None:
+    def _transfer_barrier(self, cmd: Any, t: Transfer, b: Any, queue: str) -> None:
+        # ``queue``: the one whose command buffer ``cmd`` is (the release's or the acquire's)
+        if self.family[queue] != self.device.queue_family:
+            b = replace(b, src=on_compute_family(b.src), dst=on_compute_family(b.dst))
         res = self._resources[t.resource]
         dep = ffi.new("VkDependencyInfo*")
         dep.sType = const("VK_STRUCTURE_TYPE_DEPENDENCY_INFO")
@@ -235,11 +282,11 @@ class AsyncQueues:
 
     def _acquire(self, cmd: Any, name: str) -> None:
         for t in self.acquires.get(name, ()):
-            self._transfer_barrier(cmd, t, t.acquire)
+            self._transfer_barrier(cmd, t, t.acquire, t.dst)
 
     def _release(self, name: str) -> None:
         for t in self.releases.get(name, ()):
-            self._transfer_barrier(self._slot.cmds[self.sub_of[name]], t, t.release)
+            self._transfer_barrier(self._slot.cmds[self.sub_of[name]], t, t.release, t.src)
 
     # submitting ---------------------------------------------------------------------------
     def submit(self, last: Any) -> Any:

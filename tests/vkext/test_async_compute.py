@@ -188,3 +188,52 @@ def test_rt_shadows_builds_its_tlas_beside_the_gbuffer(vk_device, courtyard):
     assert out["on"].executor.plan.queues.async_passes() == ("accel",)
     for name, img in out["on"].images.items():
         assert np.array_equal(img, out["off"].images[name]), name
+
+
+def test_barriers_on_a_compute_only_family_name_no_graphics_stage():
+    # VUID-vkCmdPipelineBarrier2-srcStageMask-03849, as the H200 reported it on its compute
+    # family: a release after a graphics write, recorded on the compute queue
+    from rfw.graph.sync import State
+    from vkext.queues import GRAPHICS_ACCESS, GRAPHICS_STAGES, on_compute_family
+
+    written = State("COLOR_ATTACHMENT_OPTIMAL", frozenset({"COLOR_ATTACHMENT_OUTPUT"}),
+                    frozenset({"COLOR_ATTACHMENT_WRITE"}))
+    got = on_compute_family(written)
+    assert got.layout == written.layout
+    assert got.stages == {"ALL_COMMANDS"} and got.access == {"MEMORY_WRITE"}
+    mixed = State(None, frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
+                  frozenset({"SHADER_SAMPLED_READ", "INPUT_ATTACHMENT_READ"}))
+    got = on_compute_family(mixed)
+    assert not got.stages & GRAPHICS_STAGES and not got.access & GRAPHICS_ACCESS
+    assert got.access == {"SHADER_SAMPLED_READ", "MEMORY_READ"}
+    # negative control: what a compute queue can name stays as it is
+    compute = State("GENERAL", frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_STORAGE_WRITE"}))
+    assert on_compute_family(compute) is compute
+
+
+def test_a_pass_on_another_family_records_instead_of_replaying(vk_device, monkeypatch):
+    # its bundles would come from the graphics family's pool (VUID-vkCmdExecuteCommands-
+    # pCommandBuffers-00094 on the H200's compute family): it records every frame
+    from vkext.context import VkPassContext
+
+    cfg = apply_overrides(load_config(SSAO), ["async_compute=on", "size=32x18"])
+    replayed: list[tuple[str, bool]] = []
+    real_replay, real_init = VkPassContext.replay, AsyncQueues.__init__
+
+    def watched(self, *key):
+        got = real_replay(self, *key)
+        replayed.append((self.pass_.name, got))
+        return got
+
+    def elsewhere(self, device, plan):  # as on a device whose compute family is its own
+        real_init(self, device, plan)
+        self.elsewhere = frozenset(p for p, q in plan.queue_of.items() if q == COMPUTE)
+
+    monkeypatch.setattr(VkPassContext, "replay", watched)
+    monkeypatch.setattr(AsyncQueues, "__init__", elsewhere)
+    monkeypatch.setattr(vk_device, "sync_validation", False)  # replay is off under it
+    render_vk(cfg, frames=3, device=vk_device)
+    assert any(n == "ssao" for n, _ in replayed)
+    assert not any(got for n, got in replayed if n == "ssao")
+    # negative control: the passes of the graphics family replay from the second frame
+    assert any(got for n, got in replayed if n != "ssao")
