@@ -62,8 +62,36 @@ def _compile_file(args: argparse.Namespace) -> CompiledGraph:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     c = _compile_file(args)
+    note = _outputs_note(args, c)
+    page = None
+    if args.html:  # made (and checked) before anything is printed
+        from .graph.html import to_html
+
+        if Path(args.html).is_dir():
+            raise RfwError("is a folder, not a file to write", file=args.html, element="--html")
+        page = to_html(c, note=note)
     print(json.dumps(c.to_json(), indent=2) if args.json else describe(c))
+    if note and not args.json:
+        print(note)
+    if page is not None:
+        _write_atomic(Path(args.html), page)
+        print(f"wrote {args.html}", file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _outputs_note(args: argparse.Namespace, c: CompiledGraph) -> str | None:
+    # a graph without declared outputs (Raptor's): name what became outputs, suggest --output
+    from .graph.html import outputs_note, suggested_output
+
+    graph = _load(args)
+    if args.output or graph.outputs is not None or suggested_output(c) is None:
+        return None
+    args.output = [suggested_output(c)]
+    try:
+        kept = _compile_file(args)
+    finally:
+        args.output = None
+    return outputs_note(graph, c, kept)
 
 
 def cmd_dot(args: argparse.Namespace) -> int:
@@ -318,6 +346,9 @@ def parser() -> argparse.ArgumentParser:
     plan = gsub.add_parser("plan", help="print order, memory, barriers and totals")
     _graph_args(plan)
     plan.add_argument("--json", action="store_true", help="one JSON object")
+    plan.add_argument("--html", metavar="OUT.html",
+                      help="also write one self-contained page: the pass DAG and the memory "
+                      "timeline (Graphviz dot needed)")
     plan.set_defaults(func=cmd_plan)
     dot = gsub.add_parser("dot", help="Graphviz DOT (and SVG when dot is installed)")
     _graph_args(dot)

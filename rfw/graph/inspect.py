@@ -132,9 +132,26 @@ def _q(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def to_dot(c: CompiledGraph) -> str:
-    """Passes as boxes, resources as ellipses; dashed edges order without data."""
-    lines = [f"digraph {_q(c.name)} {{", "  rankdir=LR;", "  node [fontname=Helvetica];"]
+# what the boxes, ellipses and edges of ``to_dot`` mean, drawn beside the graph
+_LEGEND = (
+    '<<table border="0" cellborder="1" cellspacing="0" cellpadding="4">'
+    '<tr><td colspan="2"><b>legend</b></td></tr>'
+    '<tr><td bgcolor="lightblue">pass</td><td>box, in execution order top to bottom</td></tr>'
+    '<tr><td bgcolor="palegreen">transient</td><td>lives within the frame (aliasable)</td></tr>'
+    '<tr><td bgcolor="lightgoldenrod">kept</td><td>external, history or persistent</td></tr>'
+    '<tr><td>solid edge</td><td>writes (pass to resource) or reads (resource to pass)</td></tr>'
+    '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: read back in place'
+    '</td></tr>'
+    '<tr><td>dashed edge</td><td>orders only, no data</td></tr></table>>')
+
+
+def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str:
+    """Passes as boxes, resources as ellipses; dashed edges order without data. Top to
+    bottom by default (a long frame stays readable), with a legend node."""
+    lines = [f"digraph {_q(c.name)} {{", f"  rankdir={rankdir};", "  newrank=true;",
+             "  node [fontname=Helvetica];", "  edge [fontname=Helvetica];"]
+    if legend:
+        lines.append(f"  legend [shape=plaintext, fontsize=10, label={_LEGEND}];")
     for name in c.order:
         lines.append(f"  {_q('pass:' + name)} [shape=box, style=filled, fillcolor=lightblue, "
                      f"label={_q(name)}];")

@@ -1,0 +1,198 @@
+"""``rfw graph plan --html``: one self-contained page with the pass DAG (Graphviz, top to
+bottom, with a legend), the memory timeline and the plan's totals.
+
+The timeline draws each transient as a rectangle: x spans its lifetime (first..last pass in
+execution order), y its bytes in its heap (offset..offset+bytes). Two rectangles that share
+bytes never share a pass column when the plan aliases correctly, so what aliasing saved is
+visible. Every rectangle carries the plan's numbers as ``data-*`` attributes.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+import shutil
+import subprocess
+import zlib
+
+from ..units import MiB
+from .errors import GraphError
+from .graph import Graph
+from .inspect import to_dot
+from .plan import CompiledGraph, ResourcePlan
+
+# timeline geometry, in SVG user units
+_COL = 70  # one pass column
+_ROW = 260  # one heap's height
+_LEFT, _TOP, _BOTTOM, _RIGHT = 80, 24, 130, 16
+
+
+def _mib(n: int) -> str:
+    return f"{n / MiB:.2f} MiB"
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def dangling_outputs(graph: Graph, c: CompiledGraph) -> tuple[str, ...]:
+    """The graph outputs that became outputs only because nothing reads them: a graph that
+    declares none (every Raptor graph) keeps each never-read resource alive to the end."""
+    if graph.outputs is not None:
+        return ()
+    # application-owned ones are outputs because the application keeps them, read or not
+    plans = {r.name: r for r in c.resources}
+    return tuple(n for n in c.outputs if n in plans and not plans[n].external)
+
+
+def suggested_output(c: CompiledGraph) -> str | None:
+    """The image the frame most likely presents: the output written last in pass order."""
+    rank = {name: i for i, name in enumerate(c.order)}
+    plans = {r.name: r for r in c.resources}
+    # a described image the plan allocates first, an application-owned one next
+    images = [n for n in c.outputs if n in plans and plans[n].kind == "image"]
+    described = [n for n in images if plans[n].format and not plans[n].external]
+    pool = described or images or list(c.outputs)
+    if not pool:
+        return None
+    return max(pool, key=lambda n: (rank.get(plans[n].producer or "", -1)
+                                    if n in plans else -1, -pool.index(n)))
+
+
+def outputs_note(graph: Graph, c: CompiledGraph, kept: CompiledGraph | None = None) -> str | None:
+    """One line for a graph without declared outputs: which resources became outputs, and
+    the ``--output`` that keeps only the presented one (with its transient bytes when
+    ``kept``, the plan compiled with it, is given)."""
+    dangling = dangling_outputs(graph, c)
+    pick = suggested_output(c)
+    if not dangling or pick is None:
+        return None
+    saved = ""
+    if kept is not None:
+        saved = (f" (transient {_mib(c.transient_bytes)} -> {_mib(kept.transient_bytes)}, "
+                 f"{len(c.order) - len(kept.order)} of {len(c.order)} passes culled)")
+    return (f"note: no outputs declared, so {len(dangling)} resources nothing reads became "
+            f"outputs and live to the end of the frame: {', '.join(dangling)}; keep only what "
+            f"you present with --output {pick}{saved}")
+
+
+def dag_svg(c: CompiledGraph) -> str:
+    """The DAG as inline SVG (``dot -Tsvg``, top to bottom, legend included)."""
+    exe = shutil.which("dot")
+    if exe is None:
+        raise GraphError("graphviz 'dot' is not installed: the HTML view needs it for the "
+                         "pass DAG", element="--html")
+    done = subprocess.run([exe, "-Tsvg"], input=to_dot(c), capture_output=True, text=True,
+                          check=False)
+    if done.returncode != 0:
+        raise GraphError(f"dot failed: {done.stderr.strip()}", element="--html")
+    svg = done.stdout
+    # inline: no XML prolog, doctype or generator comments inside HTML
+    return svg[svg.index("<svg"):]
+
+
+def _placed(c: CompiledGraph) -> list[ResourcePlan]:
+    return [r for r in c.resources
+            if r.transient and r.heap is not None and r.offset is not None and r.first
+            and r.last]
+
+
+def _colour(name: str) -> str:
+    # stable per name, light enough for black labels
+    return f"hsl({zlib.crc32(name.encode()) % 360}, 60%, 72%)"
+
+
+def timeline_svg(c: CompiledGraph) -> str:
+    """Passes on x, heap bytes on y (one band per heap), a rectangle per transient."""
+    placed = _placed(c)
+    col = {name: i for i, name in enumerate(c.order)}
+    n = max(len(c.order), 1)
+    heaps = list(c.heaps) or [0]
+    width = _LEFT + n * _COL + _RIGHT
+    height = _TOP + len(heaps) * (_ROW + _TOP) + _BOTTOM
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" class="timeline" width="{width}" '
+           f'height="{height}" viewBox="0 0 {width} {height}" font-family="Helvetica" '
+           'font-size="11">']
+    for h, heap_bytes in enumerate(heaps):
+        y0 = _TOP + h * (_ROW + _TOP)
+        scale = _ROW / heap_bytes if heap_bytes else 0.0
+        out.append(f'<text x="{_LEFT}" y="{y0 - 6}" font-weight="bold">heap #{h}: '
+                   f'{_e(_mib(heap_bytes))}</text>')
+        out.append(f'<rect class="heap" x="{_LEFT}" y="{y0}" width="{n * _COL}" '
+                   f'height="{_ROW}" fill="#f6f6f6" stroke="#999"/>')
+        for k in range(5):  # byte ticks, offsets grow downwards as in a memory map
+            y = y0 + _ROW * k / 4
+            out.append(f'<line x1="{_LEFT - 4}" y1="{y:.1f}" x2="{_LEFT}" y2="{y:.1f}" '
+                       'stroke="#999"/>')
+            out.append(f'<text x="{_LEFT - 6}" y="{y + 4:.1f}" text-anchor="end">'
+                       f'{heap_bytes * k / 4 / MiB:.1f} MiB</text>')
+        for r in (r for r in placed if r.heap == h):
+            x = _LEFT + col[r.first] * _COL
+            w = (col[r.last] - col[r.first] + 1) * _COL
+            y, rh = y0 + r.offset * scale, max(r.bytes * scale, 1.0)
+            tip = (f"{r.name}: {r.format or r.kind} {r.width}x{r.height}, {r.bytes:,} B at "
+                   f"offset {r.offset:,} in heap #{h}, {r.first}..{r.last}")
+            out.append(f'<rect class="transient" data-resource="{_e(r.name)}" data-heap="{h}" '
+                       f'data-offset="{r.offset}" data-bytes="{r.bytes}" '
+                       f'data-first="{col[r.first]}" data-last="{col[r.last]}" '
+                       f'x="{x + 2}" y="{y:.2f}" width="{w - 4}" height="{rh:.2f}" '
+                       f'fill="{_colour(r.name)}" stroke="#333" stroke-width="0.6">'
+                       f'<title>{_e(tip)}</title></rect>')
+            if rh >= 12:
+                out.append(f'<text x="{x + 6}" y="{y + min(rh, 26) / 2 + 4:.1f}" '
+                           f'font-size="10">{_e(r.name)}</text>')
+    base = _TOP + len(heaps) * (_ROW + _TOP) - _TOP + 10
+    for name, i in col.items():  # pass names under their columns, slanted
+        x = _LEFT + i * _COL + _COL / 2
+        out.append(f'<text x="{x:.1f}" y="{base}" transform="rotate(35 {x:.1f} {base})">'
+                   f'{_e(name)}</text>')
+    out.append("</svg>")
+    return "\n".join(out)
+
+
+def totals(c: CompiledGraph) -> list[tuple[str, str]]:
+    saved = c.unaliased_bytes - c.transient_bytes
+    pct = f" ({100 * saved / c.unaliased_bytes:.0f} %)" if c.unaliased_bytes else ""
+    return [("heaps", ", ".join(f"#{i} {_mib(b)}" for i, b in enumerate(c.heaps)) or "-"),
+            ("transients", str(len(_placed(c)))),
+            ("aliased (allocated)", f"{c.transient_bytes:,} B ({_mib(c.transient_bytes)})"),
+            ("unaliased", f"{c.unaliased_bytes:,} B ({_mib(c.unaliased_bytes)})"),
+            ("saved by aliasing", f"{saved:,} B ({_mib(saved)}){pct}"),
+            ("lower bound", f"{c.lower_bound_bytes:,} B ({_mib(c.lower_bound_bytes)})")]
+
+
+_CSS = """body{font-family:Helvetica,Arial,sans-serif;margin:24px;max-width:1400px}
+h1{font-size:20px}h2{font-size:16px;margin-top:28px}
+table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}
+.note{background:#fff6d6;border:1px solid #e0c060;padding:8px}
+.scroll{overflow-x:auto}svg{max-width:none}"""
+
+
+def to_html(c: CompiledGraph, *, note: str | None = None) -> str:
+    """The whole page: no external file, script or style is referenced."""
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in totals(c))
+    res = "".join(
+        f"<tr><td>{_e(r.name)}</td><td>{_e(r.format or r.kind)}</td>"
+        f"<td>{r.width}x{r.height}</td><td>{r.bytes:,}</td><td>{r.heap}</td>"
+        f"<td>{r.offset:,}</td><td>{_e(r.first)}..{_e(r.last)}</td></tr>" for r in _placed(c))
+    body = [f"<h1>graph {_e(c.name)} at {c.size[0]}x{c.size[1]}</h1>"]
+    if note:
+        body.append(f'<p class="note">{_e(note)}</p>')
+    body += ["<h2>passes (top to bottom in execution order)</h2>",
+             f'<div class="scroll">{dag_svg(c)}</div>',
+             "<h2>memory timeline</h2>",
+             "<p>x: passes in execution order; y: bytes in the heap (offset grows downwards); "
+             "each transient is a rectangle from its first to its last pass. Rectangles "
+             "sharing bytes in different columns are aliased.</p>",
+             f'<table class="totals">{rows}</table>',
+             f'<div class="scroll">{timeline_svg(c)}</div>',
+             "<h2>transients</h2>",
+             "<table><tr><th>resource</th><th>format</th><th>size</th><th>bytes</th>"
+             f"<th>heap</th><th>offset</th><th>first..last</th></tr>{res}</table>"]
+    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>rfw graph {_e(c.name)}</title><style>{_CSS}</style></head>\n<body>\n"
+            + "\n".join(body) + "\n</body></html>\n")
+    # graphviz may reference nothing external, but say so loudly if it ever does
+    if re.search(r'(?:href|src)="(?!#)', page):
+        raise GraphError("the HTML view would reference an external file", element="--html")
+    return page
