@@ -172,7 +172,10 @@ def _run(args: argparse.Namespace) -> int:
         result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
                         alias=not args.no_alias)
     formats = {r.name: r.format for r in result.executor.plan.resources}
-    written = write_outputs(result, out, formats)
+    written = write_outputs(result, out, formats, exr=args.exr)
+    if args.exr:  # 8-bit and integer outputs keep their exact values in the PNG
+        print("".join(f"  {n}: {formats[n]}, not float: PNG only (--exr)\n"
+                      for n in result.images if not (out / f"{n}.exr").is_file()), end="")
     print(table(result.timings))
     memory = result.timings.get("memory")
     if memory:
@@ -288,6 +291,9 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--poison", action="store_true",
                      help="vk: fill every transient with NaN or a loud pattern where its "
                      "lifetime starts, each frame (a correct plan gives the same image)")
+    run.add_argument("--exr", action="store_true",
+                     help="also write <output>.exr (OpenEXR, the exact float values) for "
+                     "each float output; 8-bit outputs stay PNG only")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a setting, toggle a pass or pick a variant (repeatable)")
     run.add_argument("--out", default="out", help="output folder (default: out)")

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from .backend import Devices, get_backend
 from .config import MAX_FRAMES, Config, build, pass_class, resolve_auto
 from .errors import RfwError, check_number
-from .fileio import atomic_write, inside
+from .fileio import FAILED_MARK, atomic_write, inside, write_run
+from .fileio import to_png_array as to_png_array  # moved to fileio; imported from here
 from .frame import (
     Frame,
     Result,
@@ -27,7 +25,6 @@ from .frame import (
 from .frame import (
     frames_in_flight as in_flight_setting,
 )
-from .graph.formats import format_info
 
 # timings.json's fields a backend adds, in this order after the ones every run has
 EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
@@ -149,27 +146,6 @@ def backend_for(cfg: Config) -> str:
     return pins.pop() if len(pins) == 1 and None not in pins else "wgpu"
 
 
-def to_png_array(image: np.ndarray, fmt: str) -> np.ndarray:
-    """8-bit RGBA for a PNG: unorm as is, floats clamped, depth and single channels grey."""
-    info = format_info(fmt)
-    a = image
-    if a.dtype != np.uint8:
-        a = a.astype(np.float32)
-        if info.kind in ("unorm",):
-            a = a / np.iinfo(image.dtype).max
-        a = np.clip(a, 0.0, 1.0) * 255 + 0.5
-        a = a.astype(np.uint8)
-    if a.shape[2] == 1:
-        a = np.repeat(a, 3, axis=2)
-    if a.shape[2] == 2:
-        a = np.concatenate([a, np.zeros_like(a[..., :1])], axis=2)
-    if a.shape[2] == 3:
-        a = np.concatenate([a, np.full_like(a[..., :1], 255)], axis=2)
-    if fmt.startswith("bgra") or fmt.startswith("VK_FORMAT_B8G8R8A8"):
-        a = a[..., [2, 1, 0, 3]]
-    return a
-
-
 def output_paths(out_dir: Path, names: Any) -> list[Path]:
     """Where a run writes: ``<output>.png`` per name, then ``timings.json``, each refused
     unless it lands inside ``out_dir`` (symlinks resolved)."""
@@ -180,12 +156,10 @@ def output_paths(out_dir: Path, names: Any) -> list[Path]:
 def clear_outputs(out_dir: Path, names: Any) -> None:
     """Remove what a previous run left at this run's paths: a run that fails then leaves no
     image or timings that could pass for its own."""
-    for path in output_paths(out_dir, names):
+    exrs = [inside(out_dir, f"{name}.exr") for name in names]
+    for path in output_paths(out_dir, names) + exrs:
         if path.is_file() or path.is_symlink():
             path.unlink()
-
-
-FAILED_MARK = "RUN-FAILED.txt"  # beside outputs a failed run could not replace
 
 
 def mark_failed(out_dir: Path, reason: str = "") -> None:
@@ -204,20 +178,13 @@ def mark_failed(out_dir: Path, reason: str = "") -> None:
         mark.unlink(missing_ok=True)
 
 
-def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str]) -> list[Path]:
-    """``<output>.png`` per graph output, then ``timings.json`` (last: it marks a complete
+def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str], *,
+                  exr: bool = False) -> list[Path]:
+    """``<output>.png`` per graph output (with ``exr``, ``<output>.exr`` too for each float
+    output: :func:`rfw.fileio.exr_names`), then ``timings.json`` (last: it marks a complete
     run), each written atomically inside ``out_dir``."""
-    from PIL import Image
-
-    *images, timings = output_paths(out_dir, result.images)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for path, (name, image) in zip(images, result.images.items(), strict=True):
-        rgba = to_png_array(image, plan_formats[name])
-        atomic_write(path, lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
-    inside(out_dir, FAILED_MARK).unlink(missing_ok=True)
-    atomic_write(timings, lambda f: f.write(json.dumps(result.timings, indent=2).encode()
-                                            + b"\n"))
-    return [*images, timings]
+    return write_run(out_dir, result.images, plan_formats, result.timings, exr=exr,
+                     source=result.config.source)
 
 
 def table(timings: dict[str, Any]) -> str:
