@@ -1,12 +1,22 @@
-"""rfw: a frame-graph framework for real-time graphics research."""
+"""rfw: a frame-graph framework for real-time graphics research.
 
+The Python API (:mod:`rfw.api`, docs/python-api.md): ``rfw.load``/``rfw.make_config`` make a
+config, ``rfw.override`` applies ``--set`` strings, ``rfw.run`` renders once and
+``rfw.Session`` keeps devices and scenes across renders; results are ``rfw.Result``.
+"""
+
+from .errors import RfwError
 from .passes import ComputePass, Pass, RenderPass, Settings, SettingsError, Tex2D
 from .registry import available, get_pass, register_pass
 
 __version__ = "0.1.0"
 
-__all__ = ["ComputePass", "Pass", "RayScene", "RenderPass", "Settings", "SettingsError", "Tex2D",
-           "available", "get_pass", "raycast", "register_pass"]
+# loaded on first use (PEP 562): importing rfw stays light and never imports vulkan
+_API = ("Config", "PassEntry", "Result", "Session", "load", "make_config", "override", "run")
+
+__all__ = ["ComputePass", "Config", "Pass", "PassEntry", "RayScene", "RenderPass", "Result",
+           "RfwError", "Session", "Settings", "SettingsError", "Tex2D", "available",
+           "get_pass", "load", "make_config", "override", "raycast", "register_pass", "run"]
 
 
 def __getattr__(name: str):
@@ -16,4 +26,8 @@ def __getattr__(name: str):
         from . import raycasting
 
         return getattr(raycasting, name)
+    if name in _API:  # rfw.api's names; rfw.run is a function, rfw.render stays the module
+        from . import api
+
+        return getattr(api, name)
     raise AttributeError(f"module 'rfw' has no attribute {name!r}")

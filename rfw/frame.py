@@ -113,10 +113,84 @@ def run_frames(executor: Any, frames: int) -> None:
 
 @dataclass
 class Result:
+    """What a render gives back: ``images`` (output -> (H, W, C) numpy array as read back:
+    uint8 for 8-bit formats, float16/float32 for float ones), ``timings`` (what
+    ``timings.json`` holds) and the executor (destroyed; its ``plan`` stays readable).
+    In Jupyter a result shows its images and per-pass times."""
+
     config: Config
     images: dict[str, np.ndarray]  # output resource -> (H, W, C) array
     timings: dict[str, Any]  # what timings.json holds
     executor: Any
+
+    @property
+    def formats(self) -> dict[str, str]:
+        """Each output's format (``rgba8unorm``, ``rgba16float``, ...)."""
+        return {r.name: r.format for r in self.executor.plan.resources
+                if r.name in self.images}
+
+    @property
+    def gpu_ms(self) -> dict[str, float | None]:
+        """Per pass, the median GPU ms over the timed frames (None: no timestamps)."""
+        return {p["name"]: p["gpu_ms"] for p in self.timings["passes"]}
+
+    @property
+    def cpu_ms(self) -> dict[str, float]:
+        """Per pass, the median CPU ms of recording it."""
+        return {p["name"]: p["cpu_ms"] for p in self.timings["passes"]}
+
+    @property
+    def gpu_ms_total(self) -> float:
+        return self.timings["gpu_ms_total"]
+
+    def png(self, name: str | None = None) -> bytes:
+        """Output ``name`` (default: the first) as the PNG ``rfw run`` writes for it."""
+        from .fileio import png_bytes
+
+        name = self._name(name)
+        return png_bytes(self.images[name], self.formats[name])
+
+    def save(self, out: str | Path, *, exr: bool = False) -> list[Path]:
+        """Write what ``rfw run --out OUT [--exr]`` writes into folder ``out``; returns the
+        paths written."""
+        from .fileio import write_run
+
+        return write_run(Path(out), self.images, self.formats, self.timings, exr=exr,
+                         source=self.config.source)
+
+    def _name(self, name: str | None) -> str:
+        if name is None:
+            return next(iter(self.images))
+        if name not in self.images:
+            from .errors import did_you_mean
+
+            raise RfwError(f"no output '{name}'" + did_you_mean(name, self.images)
+                           + f"; outputs: {', '.join(self.images)}", file=self.config.source,
+                           element="outputs")
+        return name
+
+    def _repr_png_(self) -> bytes:
+        return self.png()
+
+    def _repr_html_(self) -> str:
+        import base64
+        import html
+
+        cells = "".join(
+            f'<figure style="display:inline-block;margin:4px"><img alt="{html.escape(n)}" '
+            f'src="data:image/png;base64,{base64.b64encode(self.png(n)).decode()}"/>'
+            f"<figcaption>{html.escape(n)} ({html.escape(self.formats[n])})</figcaption>"
+            "</figure>" for n in self.images)
+        rows = "".join(
+            f"<tr><td>{html.escape(p['name'])}</td><td>"
+            f"{'-' if p['gpu_ms'] is None else format(p['gpu_ms'], '.3f')}</td>"
+            f"<td>{p['cpu_ms']:.3f}</td></tr>" for p in self.timings["passes"])
+        t = self.timings
+        head = html.escape(f"{t['config']} on {t['device']}, {t['size'][0]}x{t['size'][1]}, "
+                           f"{t['frames']} frames")
+        return (f"<div><p>{head}</p>{cells}<table><tr><th>pass</th><th>gpu ms</th>"
+                f"<th>cpu ms</th></tr>{rows}<tr><td>total</td>"
+                f"<td>{t['gpu_ms_total']:.3f}</td><td></td></tr></table></div>")
 
 
 def load_scene_for(cfg: Config, scene: Any = None) -> Any:
