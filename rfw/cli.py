@@ -218,7 +218,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     view(Path(args.config or DEFAULT_CONFIG), sets, scene=args.scene, frames=args.frames,
-         script=[k for k in (args.keys or "").split(",") if k])
+         script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
+         screenshot=Path(args.screenshot) if args.screenshot else None)
     return 0
 
 
@@ -305,6 +306,9 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--set", action="append", metavar="KEY=VALUE")
     v.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES), help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
+    v.add_argument("--no-overlay", action="store_true", help="start without the overlay (H)")
+    v.add_argument("--screenshot", metavar="FILE.png",
+                   help="save the presented pixels there on the last frame and on key C")
     v.set_defaults(func=cmd_view)
     scenes = sub.add_parser("scenes", help="real test scenes from package registries")
     ssub = scenes.add_subparsers(dest="scenes_command", required=True)

@@ -1,9 +1,18 @@
 """``rfw view``: a live window (glfw through rendercanvas) with camera, toggles and timings.
 
 Mouse drag orbits, wheel zooms, W/A/S/D/Q/E move. Keys 1-9 toggle the config's passes in
-order, V cycles the first variant (Shift+V the next variant group), R reloads shaders, P
-prints the per-pass table. Shaders are also reloaded whenever their source changes: the
-pipeline cache is keyed by the preprocessed source's hash.
+order, V cycles the options of the selected variant group and Shift+V selects the next group
+(every group is reachable, and listed on screen), R reloads shaders, P prints the per-pass
+table, H hides or shows the overlay (:mod:`rfw.overlay`), C saves the presented pixels to the
+``--screenshot`` file. Shaders are also reloaded whenever their source changes: the pipeline
+cache is keyed by the preprocessed source's hash.
+
+The window shows the graph output's bytes as they are: the swapchain is configured with a
+non-sRGB format (the output is display-encoded already; an ``*-srgb`` swapchain would encode
+it a second time). A change (key or mouse) is transactional: the new config is built,
+compiled and given an executor before it replaces the current one; a refused change leaves
+everything as it was and says why in one line. A frame that fails (a shader edited into an
+error) says so once, not every frame, and once more when frames render again.
 """
 
 from __future__ import annotations
@@ -17,11 +26,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import wgpu
 
 from .config import Config, apply_overrides, build
 from .errors import RfwError
 from .frame import camera_for, load_scene_for
-from .graph import GraphError, compile
+from .graph import compile
+from .overlay import Overlay
 
 _BLIT = """
 @group(0) @binding(0) var t: texture_2d<f32>;
@@ -48,7 +59,8 @@ class Viewer:
     """Owns the window, the device, the scene and the executor of the current config."""
 
     def __init__(self, cfg: Config, *, scene: Any = None, script: list[str] = (),
-                 frames: int | None = None, report_every: int = 60, canvas: Any = None):
+                 frames: int | None = None, report_every: int = 60, canvas: Any = None,
+                 overlay: bool = True, screenshot: Path | None = None):
         from rendercanvas.glfw import RenderCanvas, loop
 
         from .backends.gpu_scene import GpuScene
@@ -65,16 +77,32 @@ class Viewer:
         self.device = Device()
         self.gpu_scene = GpuScene(self.device.device, self.scene, self.camera)
         self.context = self.canvas.get_wgpu_context()
-        self.format = self.context.get_preferred_format(self.device.adapter)
-        self.context.configure(device=self.device.device, format=self.format)
+        self.format = present_format(self.context.get_preferred_format(self.device.adapter))
+        # COPY_SRC: the presented texture can be read back (C, --screenshot, the tests)
+        try:
+            self.context.configure(device=self.device.device, format=self.format,
+                                   usage=wgpu.TextureUsage.RENDER_ATTACHMENT |
+                                   wgpu.TextureUsage.COPY_SRC)
+        except ValueError as e:  # a format this surface does not offer
+            self.canvas.close()
+            raise RfwError(str(e).splitlines()[0], element="RFW_VIEW_FORMAT") from None
         self.script = list(script)
         self.frames_left = frames
         self.report_every = report_every
-        self.frame_count = 0
+        self.screenshot = screenshot
+        self.frame_count = 0  # frames drawn
         self.executor = None
         self.log: list[str] = []
+        self.status = ""  # the last refusal or error, shown in the overlay
+        self.group = 0  # the variant group V cycles
+        self.captured: np.ndarray | None = None  # the last presented pixels read back (RGBA)
+        self._capture_next = False
+        self._error: str | None = None  # the frame error said last (said once)
+        self._last_draw: float | None = None
         self._blit = self._blit_pipeline()
-        self._rebuild()
+        self._rebuild(cfg)
+        self.overlay = Overlay(self, self.canvas, self.device.device, self.format) \
+            if overlay else None
         self.canvas.add_event_handler(self._on_event, "key_down", "pointer_move", "wheel",
                                       "pointer_down", "resize")
         self._drag: tuple[float, float] | None = None
@@ -89,20 +117,24 @@ class Viewer:
                       "targets": [{"format": self.format}]},
             primitive={"topology": "triangle-list"}, label="rfw:blit")
 
-    def _rebuild(self) -> None:
+    def _rebuild(self, cfg: Config) -> None:
+        """Make ``cfg`` current: everything that can fail happens before anything changes."""
         from .backends.wgpu_backend import Executor
 
-        built = build(self.cfg)
+        built = build(cfg)
         plan = compile(built.graph)
         old = self.executor
-        self.executor = Executor(self.device, plan, built.passes, built.slots,
-                                 self.gpu_scene, present=plan.outputs[:1])
+        executor = Executor(self.device, plan, built.passes, built.slots,
+                            self.gpu_scene, present=plan.outputs[:1])
         if old is not None:
-            self.executor.shaders = old.shaders  # keep compiled pipelines across toggles
+            executor.shaders = old.shaders  # keep compiled pipelines across toggles
             old.destroy()
+        self.executor, self.cfg = executor, cfg
+        self.group = min(self.group, max(0, len(cfg.variants) - 1))
         self.gpu_scene.camera = self.camera
         self.gpu_scene.set_viewport(self.cfg.size)
         self.output = plan.outputs[0]
+        self.output_format = plan.resource(self.output).format
         self.say(f"graph: {' -> '.join(plan.order)}"
                  + (f" (off: {', '.join(plan.disabled)})" if plan.disabled else ""))
 
@@ -116,29 +148,66 @@ class Viewer:
         passes = [p.name for p in self.cfg.passes]
         if key.isdigit() and 1 <= int(key) <= len(passes):
             name = passes[int(key) - 1]
-            entry = self.cfg.entry(name)
-            self._apply([f"{name}.enabled={'false' if entry.enabled else 'true'}"])
+            self.set_pass(name, not self.cfg.entry(name).enabled)
         elif key.lower() == "v" and self.cfg.variants:
             groups = list(self.cfg.variants)
-            group = groups[(1 if shift and len(groups) > 1 else 0)]
+            if shift or key == "V":  # the next group: every group is reachable
+                self.group = (self.group + 1) % len(groups)
+                self.say(f"variant group: {self.variants_line()}")
+                return
+            group = groups[self.group]
             options = [k for k in self.cfg.variants[group] if k != "default"]
-            now = self.cfg.chosen.get(group, options[0])
-            self._apply([f"{group}={options[(options.index(now) + 1) % len(options)]}"])
+            now = self.chosen(group)
+            self.choose(group, options[(options.index(now) + 1) % len(options)])
         elif key.lower() == "r":
             self.executor.shaders.programs.clear()
             self.say("shaders reloaded")
         elif key.lower() == "p":
             self.report()
+        elif key.lower() == "h" and self.overlay is not None:
+            self.overlay.visible = not self.overlay.visible
+        elif key.lower() == "c":
+            if self.screenshot is None:
+                self.say("C saves a screenshot where --screenshot says: none given")
+            else:
+                self._capture_next = True
         elif key.lower() in "wasdqe":
             self._move(key.lower())
 
-    def _apply(self, sets: list[str]) -> None:
+    def set_pass(self, name: str, enabled: bool) -> bool:
+        """Switch pass ``name`` on or off (keys 1-9, the overlay's checkboxes)."""
+        return self._apply([f"{name}.enabled={'true' if enabled else 'false'}"])
+
+    def chosen(self, group: str) -> str:
+        options = [k for k in self.cfg.variants[group] if k != "default"]
+        return self.cfg.chosen.get(group, options[0])
+
+    def choose(self, group: str, option: str) -> bool:
+        """Pick ``option`` of variant group ``group`` (V, the overlay's buttons)."""
+        return self._apply([f"{group}={option}"])
+
+    def variants_line(self) -> str:
+        """Every variant group with its option in force; ``>`` marks the one V cycles."""
+        return ", ".join(f"{'>' if i == self.group else ''}{g}={self.chosen(g)}"
+                         for i, g in enumerate(self.cfg.variants))
+
+    def culling(self) -> dict[str, Any]:
+        """Culling counters of the current executor, where it keeps them (wgpu: none)."""
+        stats = getattr(self.executor, "culling_stats", None)
+        return dict(stats()) if callable(stats) else {}
+
+    def _apply(self, sets: list[str]) -> bool:
+        """All or nothing: a change that breaks the config or graph leaves the current one."""
         try:
-            cfg = apply_overrides(self.cfg, sets)
-            self.cfg = cfg
-            self._rebuild()
-        except GraphError as e:  # a toggle that breaks the graph is refused, not fatal
-            self.say(f"refused {', '.join(sets)}: {e}")
+            self._rebuild(apply_overrides(self.cfg, sets))
+        except RfwError as e:  # a toggle that breaks the graph is refused, not fatal
+            self.status = f"refused {', '.join(sets)}: {e}"
+            self.say(self.status)
+            return False
+        self.status = ""
+        if self.cfg.variants:
+            self.say(f"variants: {self.variants_line()}")
+        return True
 
     def _move(self, k: str) -> None:
         eye, at = np.array(self.camera.position), np.array(self.camera.target)
@@ -185,12 +254,37 @@ class Viewer:
     # drawing ------------------------------------------------------------------------------
     def draw(self) -> None:
         if self.script:
-            self.key(self.script.pop(0))
+            k = self.script.pop(0)
+            self.key(k, shift=k == "V")
+        now = time.perf_counter()
+        if self._last_draw is not None and self.overlay is not None:
+            self.overlay.frame_ms.append((now - self._last_draw) * 1e3)
+        self._last_draw = now
+        last = self.frames_left is not None and self.frames_left <= 1
         try:
             self.executor.frame()
-        except GraphError as e:  # e.g. a shader edited into an error: keep the window up
-            self.say(f"frame skipped: {e}")
-            return
+        except RfwError as e:  # e.g. a shader edited into an error: keep the window up
+            self._failed(f"frame skipped: {e}")
+        else:
+            if self._error is not None:
+                self._error, self.status = None, ""
+                self.say("frames render again")
+            self._present(capture=(last and self.screenshot is not None) or self._capture_next)
+            self.frame_count += 1
+            if self.report_every and self.frame_count % self.report_every == 0:
+                self.report()
+        if self.frames_left is not None:  # failed frames count: --frames always ends
+            self.frames_left -= 1
+            if self.frames_left <= 0:
+                self.canvas.close()
+
+    def _failed(self, line: str) -> None:
+        # said once: the same error on every frame would bury everything else
+        if line != self._error:
+            self._error = self.status = line
+            self.say(line)
+
+    def _present(self, *, capture: bool) -> None:
         target = self.context.get_current_texture()
         dev = self.device.device
         src = self.executor.view(self.output)
@@ -203,15 +297,16 @@ class Viewer:
         rp.set_pipeline(self._blit)
         rp.set_bind_group(0, bg)
         rp.draw(3)
+        if self.overlay is not None and self.overlay.visible:
+            self.overlay.draw(rp, (target.width, target.height))
         rp.end()
         dev.queue.submit([enc.finish()])
-        self.frame_count += 1
-        if self.report_every and self.frame_count % self.report_every == 0:
-            self.report()
-        if self.frames_left is not None:
-            self.frames_left -= 1
-            if self.frames_left <= 0:
-                self.canvas.close()
+        if capture:
+            self._capture_next = False
+            self.captured = read_target(dev, target, self.format)
+            if self.screenshot is not None:
+                save_png(self.screenshot, self.captured)
+                self.say(f"wrote {self.screenshot}")
 
     def report(self) -> None:
         self.executor.drain()  # frames in flight append their timings once done
@@ -235,10 +330,54 @@ class Viewer:
         self.gpu_scene.destroy()
 
 
+def present_format(preferred: str) -> str:
+    """The swapchain format: the preferred one without ``-srgb`` (the graph output is
+    display-encoded already). ``RFW_VIEW_FORMAT`` names another (the tests' negative
+    control shows an ``*-srgb`` one double-encodes)."""
+    chosen = os.environ.get("RFW_VIEW_FORMAT") or preferred.removesuffix("-srgb")
+    if chosen not in ("bgra8unorm", "rgba8unorm", "bgra8unorm-srgb", "rgba8unorm-srgb"):
+        raise RfwError(f"'{chosen}' is no window format (bgra8unorm, rgba8unorm, or either "
+                       "with -srgb)", element="RFW_VIEW_FORMAT")
+    return chosen
+
+
+def read_target(dev: Any, texture: Any, fmt: str) -> np.ndarray:
+    """The pixels of a presented (not yet shown) texture as RGBA bytes, rows top first."""
+    w, h = texture.width, texture.height
+    row = (w * 4 + 255) // 256 * 256
+    data = dev.queue.read_texture({"texture": texture, "origin": (0, 0, 0)},
+                                  {"offset": 0, "bytes_per_row": row}, (w, h, 1))
+    a = np.frombuffer(data, np.uint8).reshape(h, row)[:, :w * 4].reshape(h, w, 4)
+    return np.ascontiguousarray(a[..., [2, 1, 0, 3]] if fmt.startswith("bgra") else a)
+
+
+def save_png(path: Path, rgba: np.ndarray) -> None:
+    from PIL import Image
+
+    from .fileio import atomic_write
+
+    atomic_write(path, lambda f: Image.fromarray(rgba, "RGBA").save(f, format="png"))
+
+
+def check_screenshot(path: Path | None) -> None:
+    """A screenshot path is checked before a window opens."""
+    if path is None:
+        return
+    if path.suffix.lower() != ".png":
+        raise RfwError("a screenshot is written as PNG: give a .png name", file=str(path),
+                       element="--screenshot")
+    if not path.parent.is_dir():
+        raise RfwError(f"no folder '{path.parent}' to write the screenshot into",
+                       file=str(path), element="--screenshot")
+
+
 def view(config: Path, sets: list[str], *, scene: str | None = None,
-         frames: int | None = None, script: list[str] = ()) -> Viewer:
+         frames: int | None = None, script: list[str] = (), overlay: bool = True,
+         screenshot: Path | None = None) -> Viewer:
     from .config import load_config
 
+    check_screenshot(screenshot)
+    present_format("bgra8unorm")  # a bad RFW_VIEW_FORMAT fails before a window opens
     cfg = load_config(config)
     if scene:
         sets = [*sets, f"scene={scene}"]
@@ -249,7 +388,8 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
         # glfw aborts the process without a display: say so instead
         raise RfwError("no display for a window (set DISPLAY, or run under xvfb-run -a); "
                        "'rfw run' renders headless", element="rfw view")
-    v = Viewer(cfg, scene=loaded, frames=frames, script=script)
+    v = Viewer(cfg, scene=loaded, frames=frames, script=script, overlay=overlay,
+               screenshot=screenshot)
     start = time.perf_counter()
     v.run()
     v.say(f"closed after {v.frame_count} frames in {time.perf_counter() - start:.1f} s")

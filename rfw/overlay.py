@@ -1,0 +1,198 @@
+"""``rfw view``'s on-screen overlay: Dear ImGui (imgui-bundle) drawn with wgpu-py's imgui
+backend into the window's own render pass, after the graph's image.
+
+It shows per-pass GPU and CPU ms (medians of the last frames), the plan's memory (transient
+bytes after aliasing, before aliasing, the textures the executor holds), culling counters
+where the executor keeps them, a frame-time graph, and the variant groups; a checkbox per
+pass and a button per variant option change the config through the viewer, which refuses a
+change that breaks the graph (the overlay shows the reason). The overlay only reads the
+viewer's state and calls :meth:`rfw.view.Viewer.set_pass` / :meth:`~rfw.view.Viewer.choose`.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+HISTORY = 120  # frames the frame-time graph shows
+RECENT = 30  # frames the per-pass medians are taken over
+
+
+def _mib(n: float) -> str:
+    return f"{n / (1 << 20):.2f} MiB"
+
+
+def median_ms(values: list[float]) -> float | None:
+    recent = values[-RECENT:]
+    return statistics.median(recent) if recent else None
+
+
+def texture_bytes(executor: Any) -> int:
+    """Bytes of the textures ``executor`` holds (each mip, layer and sample counted)."""
+    from .graph.formats import format_info
+
+    total = 0
+    for tex in getattr(executor, "_textures", {}).values():
+        w, h, layers = tex.size
+        size = 0
+        for mip in range(tex.mip_level_count):
+            size += max(1, w >> mip) * max(1, h >> mip)
+        try:
+            texel = format_info(str(tex.format)).block_bytes
+        except ValueError:  # a format the table does not know: counted at 4 bytes a texel
+            texel = 4
+        total += size * layers * tex.sample_count * texel
+    return total
+
+
+class Overlay:
+    """ImGui over the viewer's window; ``draw(render_pass)`` records it into that pass."""
+
+    def __init__(self, viewer: Any, canvas: Any, device: Any, target_format: str):
+        from imgui_bundle import imgui
+        from wgpu.utils.imgui.imgui_backend import ImguiWgpuBackend
+
+        self.imgui = imgui
+        self.viewer = viewer
+        self.canvas = canvas
+        self.context = imgui.create_context()
+        imgui.set_current_context(self.context)
+        self.backend = ImguiWgpuBackend(device, target_format)
+        self.io = self.backend.io
+        self.frame_ms: deque[float] = deque(maxlen=HISTORY)
+        self.visible = True
+        # what the last frame showed: its text lines, and where each control lies (for
+        # tests and scripts, which click through the window's own events)
+        self.lines: list[str] = []
+        self.rects: dict[str, tuple[float, float, float, float]] = {}
+        # the overlay takes mouse events over its window before the viewer's camera does
+        canvas.add_event_handler(self._on_pointer, "pointer_move", "pointer_down",
+                                 "pointer_up", order=-99)
+        canvas.add_event_handler(self._on_wheel, "wheel", order=-99)
+
+    # input --------------------------------------------------------------------------------
+    def _on_pointer(self, event: dict) -> None:
+        self.io.add_mouse_pos_event(event["x"], event["y"])
+        if event["event_type"] != "pointer_move":
+            self.io.add_mouse_button_event(max(0, event.get("button", 1) - 1),
+                                           event["event_type"] == "pointer_down")
+        if self.visible and self.io.want_capture_mouse:
+            event["stop_propagation"] = True
+
+    def _on_wheel(self, event: dict) -> None:
+        self.io.add_mouse_wheel_event(event.get("dx", 0.0) / 100, -event.get("dy", 0.0) / 100)
+        if self.visible and self.io.want_capture_mouse:
+            event["stop_propagation"] = True
+
+    # drawing ------------------------------------------------------------------------------
+    def draw(self, render_pass: Any, size: tuple[int, int]) -> None:
+        imgui = self.imgui
+        imgui.set_current_context(self.context)
+        self.io.display_size = (float(size[0]), float(size[1]))
+        self.io.display_framebuffer_scale = (1.0, 1.0)
+        self.lines, self.rects = [], {}
+        imgui.new_frame()
+        try:
+            self._gui()
+        finally:
+            imgui.render()
+        self.backend.render(imgui.get_draw_data(), render_pass)
+
+    def _text(self, line: str) -> None:
+        self.imgui.text(line)
+        self.lines.append(line)
+
+    def _rect(self, name: str) -> None:
+        lo, hi = self.imgui.get_item_rect_min(), self.imgui.get_item_rect_max()
+        self.rects[name] = (lo.x, lo.y, hi.x, hi.y)
+
+    def _gui(self) -> None:
+        imgui, v = self.imgui, self.viewer
+        imgui.set_next_window_pos((4, 4), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_bg_alpha(0.75)
+        imgui.begin("rfw", None, imgui.WindowFlags_.always_auto_resize)
+        self._text(f"{v.cfg.name}  {v.cfg.size[0]}x{v.cfg.size[1]}  frame {v.frame_count}")
+        self._timings()
+        self._frame_graph()
+        self._memory()
+        self._passes()
+        self._variants()
+        if v.status:
+            imgui.text_wrapped(v.status)
+            self.lines.append(v.status)
+        pos, size = imgui.get_window_pos(), imgui.get_window_size()
+        self.rects["window"] = (pos.x, pos.y, pos.x + size.x, pos.y + size.y)
+        imgui.end()
+
+    def _timings(self) -> None:
+        imgui, ex = self.imgui, self.viewer.executor
+        if not imgui.begin_table("timings", 3, imgui.TableFlags_.borders_inner_v):
+            return
+        for head in ("pass", "GPU ms", "CPU ms"):
+            imgui.table_setup_column(head)
+        imgui.table_headers_row()
+        for name, t in ex.timings.items():
+            gpu, cpu = median_ms(t.gpu_ms), median_ms(t.cpu_ms)
+            imgui.table_next_row()
+            imgui.table_next_column()
+            imgui.text(name)
+            imgui.table_next_column()
+            imgui.text("-" if gpu is None else f"{gpu:.3f}")
+            imgui.table_next_column()
+            imgui.text("-" if cpu is None else f"{cpu:.3f}")
+            self.lines.append(f"{name} gpu {'-' if gpu is None else f'{gpu:.3f}'} "
+                              f"cpu {'-' if cpu is None else f'{cpu:.3f}'}")
+        imgui.end_table()
+
+    def _frame_graph(self) -> None:
+        imgui = self.imgui
+        values = np.array(self.frame_ms, np.float32)
+        if len(values) < 2:
+            return
+        top = float(values.max()) * 1.1
+        text = f"frame {values[-1]:.1f} ms (max {values.max():.1f})"
+        imgui.plot_lines("##frame", values, overlay_text=text, scale_min=0.0, scale_max=top,
+                         graph_size=(260, 48))
+        self._rect("frame_graph")
+        self.lines.append(f"graph: {text}")
+
+    def _memory(self) -> None:
+        v = self.viewer
+        plan = v.executor.plan
+        self._text(f"memory: transients {_mib(plan.transient_bytes)} aliased, "
+                   f"{_mib(plan.unaliased_bytes)} unaliased")
+        self._text(f"        textures held {_mib(texture_bytes(v.executor))}")
+        culling = v.culling()
+        self._text("culling: " + (", ".join(f"{k} {val}" for k, val in culling.items())
+                                  if culling else "no counters on this backend"))
+
+    def _passes(self) -> None:
+        imgui, v = self.imgui, self.viewer
+        imgui.separator_text("passes (keys 1-9)")
+        for i, entry in enumerate(v.cfg.passes):
+            changed, on = imgui.checkbox(f"{i + 1} {entry.name}##pass", entry.enabled)
+            self._rect(f"pass:{entry.name}")
+            if changed:
+                v.set_pass(entry.name, on)
+
+    def _variants(self) -> None:
+        imgui, v = self.imgui, self.viewer
+        if not v.cfg.variants:
+            return
+        imgui.separator_text("variants (V cycles, Shift+V next group)")
+        for gi, (group, options) in enumerate(v.cfg.variants.items()):
+            mark = ">" if gi == v.group else " "
+            imgui.text(f"{mark} {group}:")
+            self.lines.append(f"{mark} {group}: " + " ".join(
+                f"[{o}]" if o == v.chosen(group) else o for o in options if o != "default"))
+            for option in (o for o in options if o != "default"):
+                imgui.same_line()
+                chosen = v.chosen(group) == option
+                clicked = imgui.radio_button(f"{option}##{group}", chosen)
+                self._rect(f"variant:{group}={option}")
+                if clicked and not chosen:
+                    v.group = gi
+                    v.choose(group, option)

@@ -1,0 +1,128 @@
+"""``rfw view`` under Xvfb through the real CLI: the presented pixels are the ``rfw run``
+image, toggles are transactional, every variant group is reachable, bad input is one line."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from .conftest import ROOT
+
+pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
+                                reason="needs xvfb-run (scripts/setup-system.sh installs it)")
+
+SIZE = "48x27"
+DEFERRED = str(ROOT / "configs" / "deferred.toml")
+SSAO = str(ROOT / "configs" / "deferred_ssao_shadows.toml")
+
+
+def _env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "RFW_VIEW_FORMAT")}
+    env.update(extra)
+    return env
+
+
+def view(tmp: Path, config: str, *args: str, **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable, "-m", "rfw.cli",
+         "view", config, "--size", SIZE, *args],
+        capture_output=True, text=True, timeout=180, env=_env(**env), cwd=tmp, check=False)
+
+
+def run_png(tmp: Path, config: str, *sets: str) -> np.ndarray:
+    out = tmp / ("run_" + "_".join(s.replace("=", "-") for s in sets))
+    done = subprocess.run(
+        [sys.executable, "-m", "rfw.cli", "run", config, "--size", SIZE, "--frames", "1",
+         "--out", str(out), *(a for s in sets for a in ("--set", s))],
+        capture_output=True, text=True, timeout=180, env=_env(), cwd=tmp, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    [png] = [p for p in out.glob("*.png")]
+    return np.asarray(Image.open(png).convert("RGBA")).astype(int)
+
+
+def shot(tmp: Path, config: str, name: str, *args: str, **env: str) -> tuple[np.ndarray, str]:
+    path = tmp / name
+    done = view(tmp, config, "--no-overlay", "--screenshot", str(path), *args, **env)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr and "Validation Error" not in done.stderr
+    return np.asarray(Image.open(path)).astype(int), done.stdout
+
+
+def max_diff(a: np.ndarray, b: np.ndarray) -> int:
+    assert a.shape == b.shape
+    return int(np.abs(a - b).max())
+
+
+def test_window_shows_the_run_image(tmp_path):
+    expected = run_png(tmp_path, DEFERRED)
+    seen, _ = shot(tmp_path, DEFERRED, "view.png", "--frames", "3")
+    assert max_diff(seen, expected) <= 1
+    # negative control: an sRGB swapchain (the old behaviour) encodes a second time, brighter
+    srgb, _ = shot(tmp_path, DEFERRED, "srgb.png", "--frames", "3",
+                   RFW_VIEW_FORMAT="bgra8unorm-srgb")
+    assert max_diff(srgb, expected) > 20
+    mid = (expected[..., :3] > 16) & (expected[..., :3] < 240)  # where encoding brightens
+    assert (srgb[..., :3][mid] > expected[..., :3][mid]).all()
+
+
+def test_refused_toggle_rolls_back_and_later_toggles_work(tmp_path):
+    # key 2 would disable gbuffer, which lighting reads: refused; key 1 then turns shadow on
+    seen, out = shot(tmp_path, DEFERRED, "toggled.png", "--frames", "4", "--keys", "2,1")
+    refused = [line for line in out.splitlines() if line.startswith("refused")]
+    assert refused == [refused[0]] and "gbuffer.enabled=false" in refused[0]
+    assert "pass 'lighting'" in refused[0] and "'gbuffer.albedo'" in refused[0]
+    graphs = [line for line in out.splitlines() if line.startswith("graph:")]
+    assert graphs == ["graph: gbuffer -> lighting -> tonemap (off: shadow)",
+                      "graph: shadow -> gbuffer -> lighting -> tonemap"]
+    assert max_diff(seen, run_png(tmp_path, DEFERRED, "shadow.enabled=true")) <= 1
+    # negative control: the image without the shadow pass is told apart
+    assert max_diff(seen, run_png(tmp_path, DEFERRED)) > 1
+
+
+def test_every_variant_group_is_reachable(tmp_path):
+    # v: ao=off; V: next group (shadows); v: shadows=off; V: next group (view);
+    # v: view=ao, refused (its source, ssao, is off); V: back to the first group
+    seen, out = shot(tmp_path, SSAO, "variants.png", "--frames", "8",
+                     "--keys", "v,V,v,V,v,V")
+    lines = out.splitlines()
+    assert [x for x in lines if x.startswith(("variants:", "variant group:"))] == [
+        "variants: >ao=off, shadows=on, view=final",
+        "variant group: ao=off, >shadows=on, view=final",
+        "variants: ao=off, >shadows=off, view=final",
+        "variant group: ao=off, shadows=off, >view=final",
+        "variant group: >ao=off, shadows=off, view=final"]
+    [refused] = [x for x in lines if x.startswith("refused")]
+    assert refused.startswith("refused view=ao:") and "ssao" in refused
+    assert max_diff(seen, run_png(tmp_path, SSAO, "ao=off", "shadows=off")) <= 1
+    # negative control: with shadows on the picture differs
+    assert max_diff(seen, run_png(tmp_path, SSAO, "ao=off")) > 1
+
+
+@pytest.mark.parametrize(("args", "env", "names"), [
+    (["--screenshot", "shot.jpg"], {}, "--screenshot"),
+    (["--screenshot", "nowhere/shot.png"], {}, "--screenshot"),
+    ([], {"RFW_VIEW_FORMAT": "rgba16float"}, "RFW_VIEW_FORMAT"),
+    ([], {"RFW_VIEW_FORMAT": "rgba8unorm"}, "RFW_VIEW_FORMAT"),  # not offered by the surface
+])
+def test_bad_view_input_is_one_line(tmp_path, args, env, names):
+    done = view(tmp_path, DEFERRED, "--frames", "2", *args, **env)
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rfw: error:") and names in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written
+
+
+def test_good_view_input_control(tmp_path):
+    # the negative control of the bad-input cases: the same command with good values runs
+    done = view(tmp_path, DEFERRED, "--frames", "2", "--screenshot", "shot.png",
+                RFW_VIEW_FORMAT="bgra8unorm")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["shot.png"]
