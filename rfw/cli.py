@@ -157,6 +157,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     cfg = apply_overrides(cfg, sets)
+    from dataclasses import replace
+
+    from .scene.names import resolve_scene  # --scene dragon: the cached (or fetched) GLB
+
+    cfg = replace(cfg, scene=resolve_scene(cfg.scene, fetch=args.fetch, file=cfg.source))
     backend = args.backend or backend_for(cfg)
     get_backend(backend)  # an unknown name: one line naming the installed ones
     if backend != "vk" and (args.validate or args.no_alias):
@@ -170,7 +175,7 @@ def _run(args: argparse.Namespace) -> int:
     clear_outputs(out, cfg.outputs)
     with _fuzzing(args):
         result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
-                        alias=not args.no_alias)
+                        alias=not args.no_alias, each_frame=_frame_images(args, cfg, out))
     formats = {r.name: r.format for r in result.executor.plan.resources}
     written = write_outputs(result, out, formats, exr=args.exr)
     if args.exr:  # 8-bit and integer outputs keep their exact values in the PNG
@@ -191,6 +196,15 @@ def _run(args: argparse.Namespace) -> int:
         print(f"validation: {checked['messages']} message(s)")
         return 1 if checked["messages"] else 0
     return 0
+
+
+def _frame_images(args: argparse.Namespace, cfg: typing.Any, out: Path) -> typing.Any:
+    # --save-every K: every K-th timed frame's outputs under OUT/frames (camera paths)
+    if not args.save_every:
+        return None
+    from .camera_path import frame_writer
+
+    return frame_writer(out, args.save_every, args.frames or cfg.frames)
 
 
 @contextlib.contextmanager
@@ -228,6 +242,15 @@ def cmd_scenes(args: argparse.Namespace) -> int:
     from .scene.fetch import cmd_scenes as run
 
     return run(args)
+
+
+def cmd_scenes_list(args: argparse.Namespace) -> int:
+    from .scene.fetch import default_cache
+    from .scene.names import scene_table
+
+    sys.stdout.write(scene_table(Path(args.cache).expanduser() if args.cache
+                                 else default_cache()))
+    return 0
 
 
 def cmd_meshlets(args: argparse.Namespace) -> int:
@@ -275,7 +298,8 @@ def parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
     run = sub.add_parser("run", help="render a config headless: images and per-pass timings")
     run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
-    run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...) or 'default'")
+    run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...), 'default', "
+                     "'stress:COUNT' or a fetched scene's name ('rfw scenes list')")
     run.add_argument("--size", type=argtypes.size, help="output size WxH")
     run.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES),
                      help="frames to time (after one warm-up)")
@@ -297,6 +321,12 @@ def parser() -> argparse.ArgumentParser:
                      "each float output; 8-bit outputs stay PNG only")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a setting, toggle a pass or pick a variant (repeatable)")
+    run.add_argument("--save-every", type=argtypes.count(1, MAX_FRAMES), metavar="K",
+                     help="also write timed frames 0, K, 2K, ... and the last as "
+                     "OUT/frames/<output>.<frame>.png (e.g. along a camera path)")
+    run.add_argument("--fetch", action="store_true",
+                     help="fetch a named scene (--scene dragon) that is not cached yet "
+                     "(also RFW_FETCH=1; 'rfw scenes list' names them)")
     run.add_argument("--out", default="out", help="output folder (default: out)")
     run.set_defaults(func=cmd_run)
     v = sub.add_parser("view", help="a live window: camera, pass toggles, timings")
@@ -322,6 +352,11 @@ def parser() -> argparse.ArgumentParser:
                        help="list the scenes, their sources and licenses, and what is cached")
     fetch.add_argument("--force", action="store_true", help="fetch even what is up to date")
     fetch.set_defaults(func=cmd_scenes)
+    slist = ssub.add_parser("list", help="built-in and fetchable scenes: cached or not, "
+                            "sizes, licenses (--scene NAME takes any of them)")
+    slist.add_argument("--cache", metavar="DIR",
+                       help="the cache folder (default: $RFW_CACHE, else ~/.cache/rfw/scenes)")
+    slist.set_defaults(func=cmd_scenes_list)
     meshlets = sub.add_parser("meshlets", help="inspect a mesh's meshlets")
     msub = meshlets.add_subparsers(dest="meshlets_command", required=True)
     show = msub.add_parser("show", help="meshlets in colour, bounding spheres and normal cones "

@@ -42,7 +42,7 @@ from .registry import get_pass
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames",
          "async_compute", "frames_in_flight")
 _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
-_CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar")
+_CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar", "gltf", "path")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
 MAX_SIZE = 16384  # pixels per side: beyond any device's 2D image limit we know of
 MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for (rfw.frame.frames_in_flight)
@@ -147,23 +147,77 @@ def _size_of(value: Any, source: str) -> tuple[int, int]:
     return w, h
 
 
-def _camera(value: Any, source: str) -> dict[str, Any]:
+def _camera(value: Any, source: str, prefix: str = "") -> dict[str, Any]:
+    """The ``camera`` table checked: vectors, yfov in degrees, near and far, ``gltf`` (a
+    scene camera's name or index) and ``path`` (:mod:`rfw.camera_path`). ``prefix``
+    (``"--set "``) goes before the key an error names."""
+    from .camera_path import check_path
+
     camera = _table(value, "camera", source)
     _check_keys(camera, _CAMERA_KEYS, "camera", source)
     out: dict[str, Any] = {}
     for key, v in camera.items():
-        where = f"camera.{key}"
+        where = f"{prefix}camera.{key}"
         if key in ("position", "target", "up"):
             if not (isinstance(v, list) and len(v) == 3):
                 raise _fail(source, f"must be three numbers [x, y, z], not {v!r}", where)
             out[key] = [check_number(x, where, file=source, element=where) for x in v]
         elif key == "yfov":
             out[key] = check_number(v, where, lo=0.01, hi=179.0, file=source, element=where)
+        elif key == "gltf":
+            if isinstance(v, bool) or not isinstance(v, str | int):
+                raise _fail(source, f"must be a camera's name or index, not {v!r}", where)
+            out[key] = v if isinstance(v, str) else check_number(
+                v, where, kind=int, lo=0, file=source, element=where)
+        elif key == "path":
+            out[key] = check_path(v, source, where)
         else:
             out[key] = check_number(v, where, lo=1e-6, hi=1e9, file=source, element=where)
     if out.get("znear", 0.0) >= out.get("zfar", math.inf):
-        raise _fail(source, "'znear' must be smaller than 'zfar'", "camera")
+        raise _fail(source, "'znear' must be smaller than 'zfar'", f"{prefix}camera")
     return out
+
+
+def _camera_value(text: str) -> Any:
+    """A ``--set camera.KEY=VALUE`` value: TOML (``[0, 1, 5]``, ``60``, ``"name"``,
+    ``{...}``), else numbers separated by commas (``0,1,5``), else the text."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        pass
+    parts = text.split(",")
+    if len(parts) > 1:
+        try:
+            return [float(p) for p in parts]
+        except ValueError:
+            pass
+    return text
+
+
+def _set_camera(cfg: Config, key: str, text: str) -> Config:
+    """``--set camera.KEY=VALUE`` (``camera.path=orbit``, ``camera.path.turns=0.5``,
+    ``camera.path=off`` to drop a path), checked with the whole camera table."""
+    camera = dict(cfg.camera or {})
+    parts = key.split(".")
+    value = _camera_value(text)
+    if len(parts) == 2 and parts[1] == "path" and str(value).lower() in ("off", "none"):
+        camera.pop("path", None)
+    elif len(parts) == 2:
+        camera[parts[1]] = value
+    elif len(parts) == 3 and parts[1] == "path":
+        path = dict(camera.get("path") or {})
+        if parts[2] != "kind" and "kind" not in path:  # keys make keyframes, else an orbit
+            path["kind"] = "keyframes" if parts[2] == "keys" else "orbit"
+        path[parts[2]] = value
+        camera["path"] = path
+    else:
+        raise _fail(cfg.source, f"cannot set '{key}': use camera.<key> or camera.path.<key> "
+                    f"(camera keys: {', '.join(_CAMERA_KEYS)})", f"--set {key}")
+    if parts[1] not in _CAMERA_KEYS:
+        raise _fail(cfg.source, f"unknown key '{parts[1]}'" + did_you_mean(parts[1],
+                                                                        _CAMERA_KEYS),
+                    f"--set {key}")
+    return replace(cfg, camera=_camera(camera, cfg.source, "--set "))
 
 
 def _pass_entry(t: Any, i: int, source: str) -> PassEntry:
@@ -437,11 +491,13 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
         elif key == "frames_in_flight":
             cfg = replace(cfg, frames_in_flight=_frames(
                 value, cfg.source, key="frames_in_flight", hi=MAX_FRAMES_IN_FLIGHT))
+        elif key == "camera" or key.startswith("camera."):
+            cfg = _set_camera(cfg, key, value)
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
                 known = [p.name for p in cfg.passes] + list(cfg.variants) + [
-                    "size", "scene", "frames", "async_compute", "frames_in_flight"]
+                    "size", "scene", "frames", "async_compute", "frames_in_flight", "camera"]
                 raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
                             + did_you_mean(head, known))
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept

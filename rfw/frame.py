@@ -209,16 +209,44 @@ def load_scene_for(cfg: Config, scene: Any = None) -> Any:
 
 
 def camera_for(cfg: Config, scene: Any) -> Any:
-    cam = scene.default_camera()
-    if cfg.camera:
-        from dataclasses import replace
+    """The static camera of ``cfg``: the scene's camera (``camera.gltf``: by name or index,
+    else its first, else one framing its bounds) with the ``camera`` table's keys over it
+    (yfov in degrees). A path (``camera.path``) starts from it: :mod:`rfw.camera_path`."""
+    from dataclasses import replace
 
-        values = dict(cfg.camera)
-        if "yfov" in values:
-            values["yfov"] = float(np.radians(values["yfov"]))
+    values = dict(cfg.camera or {})
+    values.pop("path", None)
+    chosen = values.pop("gltf", None)
+    cam = scene.default_camera() if chosen is None else gltf_camera(cfg, scene, chosen)
+    if "yfov" in values:
+        values["yfov"] = float(np.radians(values["yfov"]))
+    if values:
         cam = replace(cam, **{k: tuple(v) if isinstance(v, list) else v
                               for k, v in values.items()})
+    if not cam.znear < cam.zfar:  # one of them from the scene's camera
+        raise RfwError(f"znear {cam.znear:g} must be smaller than zfar {cam.zfar:g} (the "
+                       f"other from the scene's camera)", file=cfg.source, element="camera")
     return cam
+
+
+def gltf_camera(cfg: Config, scene: Any, chosen: str | int) -> Any:
+    """The scene camera ``camera.gltf`` names (a name, or an index into the scene's
+    cameras); anything else is one line listing the scene's cameras."""
+    cams = list(scene.cameras)
+    names = [c.name or f"#{i}" for i, c in enumerate(cams)]
+    listed = ", ".join(f"{i}: {n!r}" for i, n in enumerate(names)) or "none"
+    if isinstance(chosen, int):
+        if 0 <= chosen < len(cams):
+            return cams[chosen]
+        raise RfwError(f"camera index {chosen} is out of range: scene "
+                       f"{scene.source or scene.name!r} has {len(cams)} camera(s) ({listed})",
+                       file=cfg.source, element="camera.gltf")
+    for cam in cams:
+        if cam.name == chosen:
+            return cam
+    raise RfwError(f"scene {scene.source or scene.name!r} has no camera named {chosen!r} "
+                   f"(cameras: {listed})", file=cfg.source, element="camera.gltf",
+                   suggest=(chosen, [c.name for c in cams if c.name]))
 
 
 def pass_timings(order: Any, timings: dict[str, Any]) -> list[dict[str, Any]]:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
 from .backend import Devices, get_backend
+from .camera_path import path_for, run_path
 from .config import MAX_FRAMES, Config, build, pass_class, resolve_auto
 from .errors import RfwError, check_number
 from .fileio import FAILED_MARK, atomic_write, inside, write_run
@@ -33,7 +34,8 @@ EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
 def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
            device: Any = None, devices: Iterable[Any] = (), backend: str = "wgpu",
            validation: bool = False, alias: bool = True,
-           frames_in_flight: int | None = None) -> Result:
+           frames_in_flight: int | None = None,
+           each_frame: Callable[[int, Frame], None] | None = None) -> Result:
     """Build, compile and run ``cfg`` on ``backend`` (a name in the ``rfw.backends``
     entry-point group: ``wgpu``, ``vk`` or an installed one); returns images and timings
     (GPU ms from timestamps): the one frame driver of every backend.
@@ -54,7 +56,11 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     config's ``frames_in_flight``, else ``RFW_FRAMES_IN_FLIGHT``, else 2; 1 waits for every
     frame: :mod:`rfw.frame`). Images
     and timing samples are the same either way: the frames are drained before anything is
-    read, and the last timed frame's drain is part of its wall time."""
+    read, and the last timed frame's drain is part of its wall time.
+
+    A camera path (``camera.path``, :mod:`rfw.camera_path`) gives each timed frame its
+    camera (``timings["camera_path"]`` lists them); ``each_frame(k, frame)`` runs after timed
+    frame ``k`` (e.g. to read its images)."""
     run = get_backend(backend, file=cfg.source)
     check_outputs(cfg)
     if frames is not None:
@@ -71,15 +77,19 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         mix = pinned_elsewhere(cfg, backend)
         mixed, sides = prepare(build(cfg), backend, devs, alias=alias, mix=mix)
         scene = load_scene_for(cfg, scene)
+        path = path_for(cfg, scene)
         frame = start(mixed, sides, scene=scene, camera=camera_for(cfg, scene), size=cfg.size,
                       alias=alias)
         for ex in frame.executors.values():  # a backend without frames in flight waits
             if hasattr(ex, "keep_in_flight") and len(ex.in_flight) != in_flight:
                 ex.keep_in_flight(in_flight)
         n = frames or cfg.frames
-        frame.run(warmup)
-        frame.clear_timings()
-        frame.run(n)
+        if path is None and each_frame is None:
+            frame.run(warmup)
+            frame.clear_timings()
+            frame.run(n)
+        else:  # a camera per frame: rfw.camera_path drives the frames
+            cameras = run_path(frame, path, warmup=warmup, frames=n, each_frame=each_frame)
         frame.drain()  # run() has; said again for what reads results below
         images = {name: frame.read(name) for name in frame.plan.outputs}
         extras = {k: v for s in sides.values()  # e.g. what the frame allocated
@@ -99,6 +109,8 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     if mix:
         timings.update(_bridges(frame, timings["passes"]))
     timings["frames_in_flight"] = in_flight
+    if path is not None:
+        timings["camera_path"] = {"kind": path.kind, "frames": cameras}
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
     return Result(cfg, images, timings, frame if mix else frame.executors[backend])

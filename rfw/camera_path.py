@@ -1,0 +1,331 @@
+"""Camera paths: one camera per frame, from keyframes or an orbit (a turntable).
+
+A config's ``[camera.path]`` table (or ``--set camera.path=orbit``,
+``--set camera.path.turns=0.5``) gives the path; the static camera (the ``camera`` table
+over the scene's camera) is its base: what a keyframe or the orbit leaves unsaid.
+
+```toml
+[camera.path]
+kind = "keyframes"              # or "orbit"
+target_interpolation = "slerp"  # "linear" (default): the target moves on a straight line
+keys = [
+  { position = [0, 1, 5], target = [0, 0, 0] },          # t = 0
+  { t = 0.25, position = [3, 1, 4] },                     # target: the base camera's
+  { position = [5, 2, 0], target = [0, 0.5, 0], yfov = 40 },  # t = 1
+]
+```
+
+Keyframes: frame ``k`` of ``N`` sits at ``t = k / (N - 1)`` (the first frame is the first
+key, the last frame the last key, exactly); positions and fields of view interpolate
+linearly between the keys around ``t``, targets linearly or, with ``slerp``, by the view
+direction (spherical) and the distance to the target (linear).
+
+Orbit: around ``center`` (default: the base camera's target) at ``radius`` and ``height``
+(default: where the base camera is), starting at ``start`` degrees (default: the base
+camera's angle), ``turns`` turns over the run, looking at the center. Frame ``k`` of ``N``
+sits at ``t = k / N``: a whole turn does not repeat its first frame.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import RfwError, check_number, did_you_mean
+
+PATH_KINDS = ("keyframes", "orbit")
+PATH_KEYS = ("kind", "keys", "target_interpolation", "center", "radius", "height", "start",
+             "turns")
+KEY_KEYS = ("t", "position", "target", "yfov")
+TARGET_INTERPOLATIONS = ("linear", "slerp")
+MAX_KEYS = 10_000
+
+
+def _vector(value: Any, where: str, source: str | None) -> list[float]:
+    if not (isinstance(value, list) and len(value) == 3):
+        raise RfwError(f"must be three numbers [x, y, z], not {value!r}", file=source,
+                       element=where)
+    return [float(check_number(x, where, file=source, element=where)) for x in value]
+
+
+def check_path(value: Any, source: str | None, where: str = "camera.path") -> dict[str, Any]:
+    """``[camera.path]`` checked and normalised (plain values, ``kind`` always present); a
+    bad key or value is one error naming it (``camera.path.keys[1].position``)."""
+    if isinstance(value, str):  # --set camera.path=orbit
+        value = {"kind": value}
+    if not isinstance(value, dict):
+        raise RfwError(f"must be a table or one of {', '.join(PATH_KINDS)}, not {value!r}",
+                       file=source, element=where)
+    for key in value:
+        if key not in PATH_KEYS:
+            raise RfwError(f"unknown key '{key}'" + did_you_mean(key, PATH_KEYS),
+                           file=source, element=where)
+    kind = value.get("kind", "keyframes" if "keys" in value else "orbit")
+    if kind not in PATH_KINDS:
+        raise RfwError(f"'kind' must be one of {', '.join(PATH_KINDS)}, not {kind!r}"
+                       + did_you_mean(str(kind), PATH_KINDS), file=source,
+                       element=f"{where}.kind")
+    out: dict[str, Any] = {"kind": kind}
+    interp = value.get("target_interpolation", "linear")
+    if interp not in TARGET_INTERPOLATIONS:
+        raise RfwError(f"must be one of {', '.join(TARGET_INTERPOLATIONS)}, not {interp!r}",
+                       file=source, element=f"{where}.target_interpolation")
+    out["target_interpolation"] = interp
+    if kind == "keyframes":
+        stray = [k for k in ("center", "radius", "height", "start", "turns") if k in value]
+        if stray:
+            raise RfwError(f"'{stray[0]}' belongs to an orbit, not to keyframes", file=source,
+                           element=f"{where}.{stray[0]}")
+        out["keys"] = _keys(value.get("keys"), source, f"{where}.keys")
+        return out
+    if "keys" in value:
+        raise RfwError("an orbit has no keys (kind = \"keyframes\" has)", file=source,
+                       element=f"{where}.keys")
+    if "center" in value:
+        out["center"] = _vector(value["center"], f"{where}.center", source)
+    for key, lo in (("radius", 1e-6), ("height", -1e9), ("start", -1e6), ("turns", -1e6)):
+        if key in value:
+            out[key] = float(check_number(value[key], key, lo=lo, hi=1e9, file=source,
+                                          element=f"{where}.{key}"))
+    return out
+
+
+def _keys(keys: Any, source: str | None, where: str) -> list[dict[str, Any]]:
+    if not isinstance(keys, list) or not 2 <= len(keys) <= MAX_KEYS:
+        raise RfwError(f"must be a list of at least two keyframes (tables with position, "
+                       f"target, yfov, t), not {keys!r}"[:200], file=source, element=where)
+    out = []
+    for i, key in enumerate(keys):
+        kw = f"{where}[{i}]"
+        if not isinstance(key, dict):
+            raise RfwError(f"must be a table, not {key!r}", file=source, element=kw)
+        for k in key:
+            if k not in KEY_KEYS:
+                raise RfwError(f"unknown key '{k}'" + did_you_mean(k, KEY_KEYS), file=source,
+                               element=kw)
+        entry: dict[str, Any] = {}
+        if "t" in key:
+            entry["t"] = float(check_number(key["t"], "t", lo=0.0, hi=1.0, file=source,
+                                            element=f"{kw}.t"))
+        for k in ("position", "target"):
+            if k in key:
+                entry[k] = _vector(key[k], f"{kw}.{k}", source)
+        if "yfov" in key:
+            entry["yfov"] = float(check_number(key["yfov"], "yfov", lo=0.01, hi=179.0,
+                                               file=source, element=f"{kw}.yfov"))
+        out.append(entry)
+    times = key_times(out)
+    if times[0] != 0.0 or times[-1] != 1.0:
+        raise RfwError("the first keyframe's t must be 0 and the last one's 1", file=source,
+                       element=where)
+    if any(b <= a for a, b in itertools.pairwise(times)):
+        raise RfwError(f"keyframe times must increase, not {times}", file=source,
+                       element=where)
+    return out
+
+
+def key_times(keys: list[dict[str, Any]]) -> list[float]:
+    """Each key's t: its own, else evenly spaced over [0, 1] (by index)."""
+    n = len(keys)
+    return [k.get("t", i / (n - 1)) for i, k in enumerate(keys)]
+
+
+def _lerp(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
+    # (1 - u) a + u b: exactly a at u = 0 and exactly b at u = 1
+    return (1.0 - u) * a + u * b
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
+    """Unit vectors ``a`` to ``b`` along the great circle (linear when nearly parallel)."""
+    dot = float(np.clip(a @ b, -1.0, 1.0))
+    angle = math.acos(dot)
+    if angle < 1e-6:
+        v = _lerp(a, b, u)
+    else:
+        v = (math.sin((1 - u) * angle) * a + math.sin(u * angle) * b) / math.sin(angle)
+    return v / np.linalg.norm(v)
+
+
+@dataclass(frozen=True)
+class CameraPath:
+    """A checked ``[camera.path]`` over a base camera (:class:`rfw.scene.Camera`)."""
+
+    spec: dict[str, Any]
+    base: Any  # the static camera: what the path leaves unsaid
+
+    @property
+    def kind(self) -> str:
+        return self.spec["kind"]
+
+    def param(self, frame: int, frames: int) -> float:
+        """The path parameter t of frame ``frame`` (0-based) of ``frames``."""
+        if self.kind == "orbit":
+            return frame / frames
+        return frame / (frames - 1) if frames > 1 else 0.0
+
+    def at(self, t: float) -> Any:
+        """The camera at parameter ``t`` in [0, 1]."""
+        return self._orbit(t) if self.kind == "orbit" else self._keyframes(t)
+
+    def camera(self, frame: int, frames: int) -> Any:
+        return self.at(self.param(frame, frames))
+
+    def _orbit(self, t: float) -> Any:
+        base = self.base
+        s = self.spec
+        center = np.array(s.get("center", base.target), np.float64)
+        offset = np.array(base.position, np.float64) - center
+        radius = s.get("radius", float(math.hypot(offset[0], offset[2])) or 1.0)
+        height = s.get("height", float(offset[1]))
+        start = s.get("start", math.degrees(math.atan2(offset[0], offset[2])))
+        angle = math.radians(start) + 2.0 * math.pi * s.get("turns", 1.0) * t
+        eye = center + np.array([radius * math.sin(angle), height, radius * math.cos(angle)])
+        return replace(base, position=tuple(map(float, eye)),
+                       target=tuple(map(float, center)))
+
+    def _keyframes(self, t: float) -> Any:
+        keys = self.spec["keys"]
+        times = key_times(keys)
+        t = min(max(float(t), 0.0), 1.0)
+        i = max(0, min(len(keys) - 2, int(np.searchsorted(times, t, side="right")) - 1))
+        t0, t1 = times[i], times[i + 1]
+        u = (t - t0) / (t1 - t0)
+        a, b = self._key(keys[i]), self._key(keys[i + 1])
+        if u <= 0.0:
+            return a
+        if u >= 1.0:
+            return b
+        pa, pb = (np.array(c.position, np.float64) for c in (a, b))
+        ta, tb = (np.array(c.target, np.float64) for c in (a, b))
+        eye = _lerp(pa, pb, u)
+        if self.spec["target_interpolation"] == "slerp":
+            da, db = ta - pa, tb - pb
+        if self.spec["target_interpolation"] == "slerp" and np.linalg.norm(da) > 0 \
+                and np.linalg.norm(db) > 0:
+            la, lb = float(np.linalg.norm(da)), float(np.linalg.norm(db))
+            at = eye + _slerp(da / la, db / lb, u) * ((1 - u) * la + u * lb)
+        else:
+            at = _lerp(ta, tb, u)
+        return replace(a, position=tuple(map(float, eye)), target=tuple(map(float, at)),
+                       yfov=float((1 - u) * a.yfov + u * b.yfov))
+
+    def _key(self, key: dict[str, Any]) -> Any:
+        """A keyframe as a camera: the base camera with the key's fields."""
+        values: dict[str, Any] = {k: tuple(key[k]) for k in ("position", "target") if k in key}
+        if "yfov" in key:
+            values["yfov"] = float(np.radians(key["yfov"]))
+        return replace(self.base, **values)
+
+
+def path_for(cfg: Any, scene: Any) -> CameraPath | None:
+    """The camera path ``cfg`` asks for over its static camera, or None."""
+    from .frame import camera_for
+
+    spec = (cfg.camera or {}).get("path")
+    if not spec:
+        return None
+    return CameraPath(spec, camera_for(cfg, scene))
+
+
+def describe(camera: Any, t: float) -> dict[str, Any]:
+    """A frame's camera parameter as a record holds it (yfov in degrees)."""
+    return {"t": round(float(t), 9), "position": [float(v) for v in camera.position],
+            "target": [float(v) for v in camera.target],
+            "yfov": float(np.degrees(camera.yfov))}
+
+
+def _queued_writes(scene: Any) -> bool:
+    """Whether ``scene`` (a backend's upload) writes its camera through the queue: wgpu's
+    ``queue.write_buffer`` lands after every frame submitted before it, so frames in flight
+    keep their camera without a drain. Anything else (vk's host-mapped uniforms) is written
+    by the CPU at once and must wait for the frames that read it."""
+    from .backends.gpu_scene import GpuScene
+
+    return type(scene) is GpuScene
+
+
+def set_frame_camera(frame: Any, camera: Any) -> None:
+    """Render ``frame``'s next frame from ``camera`` (every backend's scene), draining the
+    frames in flight only where a backend's camera write would race them."""
+    if not all(_queued_writes(sc) for sc in frame.scenes):
+        frame.drain()
+    for sc in frame.scenes:
+        sc.camera = camera
+        sc.set_viewport(sc.size)
+
+
+def one_frame(frame: Any, *, last: bool) -> None:
+    """One frame of ``frame`` (:class:`rfw.frame.Frame`) without draining the frames in
+    flight unless ``last``, as ``Frame.run`` would drive it."""
+    if len(frame.executors) == 1 and not frame.mixed.bridges:
+        (ex,) = frame.executors.values()
+        ex.drain_after_frame = last
+        try:
+            ex.frame()
+        finally:
+            ex.drain_after_frame = False
+        frame.frame_index += 1
+        return
+    frame.drain_after_frame = last
+    try:
+        frame.frame()
+    finally:
+        frame.drain_after_frame = False
+
+
+def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
+             each_frame: Callable[[int, Any], None] | None = None) -> list[dict[str, Any]]:
+    """``warmup`` untimed frames from the path's first camera, then ``frames`` timed ones,
+    frame ``k`` from ``path.camera(k, frames)``; ``each_frame(k, frame)`` after frame k.
+    Returns each timed frame's camera (:func:`describe`), empty without a path."""
+    if path is not None:
+        set_frame_camera(frame, path.camera(0, frames))
+    frame.run(warmup)
+    frame.clear_timings()
+    cameras = []
+    for k in range(frames):
+        if path is not None:
+            cam = path.camera(k, frames)
+            if k:
+                set_frame_camera(frame, cam)
+            cameras.append(describe(cam, path.param(k, frames)))
+        one_frame(frame, last=k == frames - 1)
+        if each_frame is not None:
+            each_frame(k, frame)
+    return cameras
+
+
+FRAMES_DIR = "frames"  # per-frame images go here, inside --out
+
+
+def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any], None]:
+    """An ``each_frame`` callback writing every output of timed frames ``0, every, 2 *
+    every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits).
+    Older images of this pattern are removed first: a run leaves only its own frames."""
+    from PIL import Image
+
+    from .fileio import atomic_write, inside
+    from .render import to_png_array
+
+    folder = inside(out_dir, FRAMES_DIR)
+    if folder.is_dir():
+        for old in folder.glob("*.[0-9][0-9][0-9][0-9].png"):
+            old.unlink()
+
+    def write(k: int, frame: Any) -> None:
+        if k % every and k != frames - 1:
+            return
+        formats = {r.name: r.format for r in frame.plan.resources}
+        folder.mkdir(parents=True, exist_ok=True)
+        for name in frame.plan.outputs:
+            rgba = to_png_array(frame.read(name), formats[name])
+            atomic_write(inside(out_dir, f"{FRAMES_DIR}/{name}.{k:04d}.png"),
+                         lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+
+    return write
