@@ -74,7 +74,8 @@ def resolve_scene(text: str, *, fetch: bool = False, cache: Path | None = None,
 
 
 def _fetch_with_progress(name: str, cache: Path, *, file: str | None, element: str) -> None:
-    """Fetch one scene with a progress bar on stderr (a log gets its lines instead)."""
+    """Fetch one scene with a progress bar on stderr (a log gets its lines on stdout, so
+    stderr keeps to the one error line of a failure)."""
     from .fetch.cache import fetch
     from .fetch.download import FetchError
 
@@ -91,10 +92,10 @@ def _fetch_with_progress(name: str, cache: Path, *, file: str | None, element: s
         if bar is not None:
             bar.write(line, file=sys.stderr)
         else:
-            print(f"rfw: {line}", file=sys.stderr, flush=True)
+            print(f"rfw: {line}", flush=True)
 
     if bar is None:
-        print(f"rfw: fetching scene {name!r} into {cache} ...", file=sys.stderr, flush=True)
+        print(f"rfw: fetching scene {name!r} into {cache} ...", flush=True)
     try:
         results = fetch([name], cache, report=report)
     except FetchError as e:
