@@ -266,12 +266,28 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_new_pass(args: argparse.Namespace) -> int:
-    from .templates import new_pass
+    from .templates import new_package, new_pass
 
     kind = "raster" if args.raster else "compute"
+    if args.package:
+        if args.tests:
+            raise RfwError("--tests does not go with --package (its test is in DIR/tests)",
+                           element="new-pass")
+        for path in new_package(args.name, Path(args.package), kind=kind):
+            print(f"wrote {path}")
+        print(f"install it with: pip install --no-build-isolation {args.package}")
+        return 0
     for path in new_pass(args.name, Path(args.dir), kind=kind,
                          tests=Path(args.tests) if args.tests else None):
         print(f"wrote {path}")
+    return 0
+
+
+def cmd_passes(args: argparse.Namespace) -> int:
+    from .plugins import catalogue, format_catalogue
+
+    entries = catalogue(args.names)
+    print(json.dumps(entries, indent=2) if args.json else format_catalogue(entries), end="")
     return 0
 
 
@@ -385,7 +401,14 @@ def parser() -> argparse.ArgumentParser:
     kind.add_argument("--raster", action="store_true", help="a pass that draws the scene")
     new.add_argument("--dir", default="passes", help="where pass folders live (default: passes)")
     new.add_argument("--tests", help="where to put the test (default: beside the pass)")
+    new.add_argument("--package", metavar="DIR",
+                     help="write an installable package in DIR instead: pyproject.toml with the "
+                     "rfw.passes entry point, shaders as package data, tests/")
     new.set_defaults(func=cmd_new_pass)
+    lst = sub.add_parser("passes", help="installed passes: docstring, slots and settings")
+    lst.add_argument("names", nargs="*", metavar="PASS", help="only these (default: all)")
+    lst.add_argument("--json", action="store_true", help="one JSON list")
+    lst.set_defaults(func=cmd_passes)
     graph = sub.add_parser("graph", help="inspect frame graphs")
     gsub = graph.add_subparsers(dest="graph_command", required=True)
     plan = gsub.add_parser("plan", help="print order, memory, barriers and totals")

@@ -1,0 +1,140 @@
+"""examples/: each script run headless in a subprocess at 32x18, its output checked
+(issue 14, item 2)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+NUMBER = r"[-+]?\d+\.\d+"
+
+
+def example(name: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
+    # headless: no display, matplotlib's Agg
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MPLBACKEND")}
+    return subprocess.run([sys.executable, str(EXAMPLES / name), *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_every_example_is_tested():
+    tested = {"ab_setting.py", "sweep_plot.py", "plugin_pass.py"}
+    assert {p.name for p in EXAMPLES.glob("*.py")} == tested
+
+
+def test_ab_setting(tmp_path):
+    done = example("ab_setting.py", "lighting.ambient=0.2", "lighting.ambient=1.5",
+                   "--size", "32x18", "--frames", "2", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    rows = {m[1]: [float(v) for v in m.groups()[1:]] for m in re.finditer(
+        rf"^(\w+)\s+({NUMBER})\s+({NUMBER})\s+({NUMBER})\s+(?:{NUMBER}|-)$", done.stdout,
+        re.MULTILINE)}
+    assert list(rows) == ["gbuffer", "lighting", "tonemap"]
+    for a, b, diff in rows.values():  # the printed difference is B - A of the printed times
+        assert diff == pytest.approx(b - a, abs=0.002)  # each rounded to 0.001
+    total = re.search(rf"^total\s+({NUMBER})\s+({NUMBER})\s+({NUMBER})$", done.stdout,
+                      re.MULTILINE)
+    assert float(total[1]) == pytest.approx(sum(r[0] for r in rows.values()), abs=0.0025)
+    changed = re.search(rf"image tonemap\.ldr: mean \|B-A\| ({NUMBER}), ({NUMBER})% of pixels",
+                        done.stdout)
+    assert float(changed[1]) > 1.0 and float(changed[2]) > 50.0
+    # negative control: A against itself changes no pixel
+    same = example("ab_setting.py", "lighting.ambient=0.2", "lighting.ambient=0.2",
+                   "--size", "32x18", "--frames", "1", cwd=tmp_path)
+    assert same.returncode == 0, same.stderr
+    assert "image tonemap.ldr: mean |B-A| 0.0000, 0.0% of pixels changed" in same.stdout
+    assert list(tmp_path.iterdir()) == []  # it writes nothing
+
+
+def test_ab_setting_bad_setting_is_one_line(tmp_path):
+    done = example("ab_setting.py", "lighting.ambient=0.2", "lighting.ambiant=1",
+                   "--size", "32x18", "--frames", "1", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [
+        f"ab_setting: error: {ROOT / 'configs' / 'deferred.toml'}: pass 'lighting': unknown "
+        "setting 'ambiant' (did you mean 'ambient'?)"]
+
+
+def _line_colours(png: Path, n: int) -> list[int]:
+    # pixels of each of matplotlib's first n line colours (tab:blue, tab:orange, ...)
+    import matplotlib.colors as mc
+    from matplotlib import rcParams
+
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    counts = []
+    for c in rcParams["axes.prop_cycle"].by_key()["color"][:n]:
+        rgb = np.array([round(v * 255) for v in mc.to_rgb(c)])
+        counts.append(int((np.abs(img - rgb).max(axis=2) <= 2).sum()))
+    return counts
+
+
+def test_sweep_plot(tmp_path):
+    done = example("sweep_plot.py", "ssao.samples", "4", "16", "--size", "32x18",
+                   "--frames", "1", "--out", "sweep.png", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    header, *rows = [line.split() for line in done.stdout.splitlines()[:3]]
+    passes = ["shadow", "gbuffer", "ssao", "lighting", "tonemap", "fxaa"]
+    assert header == ["ssao.samples", *passes]
+    assert [r[0] for r in rows] == ["4", "16"]
+    assert all(float(v) >= 0 for r in rows for v in r[1:])
+    png = tmp_path / "sweep.png"
+    assert Image.open(png).size == (640, 400)
+    assert all(c > 20 for c in _line_colours(png, len(passes)))  # a line per pass
+    # negative control: the same axes without lines show none of those colours
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+    ax.set_xlabel("ssao.samples")
+    fig.savefig(tmp_path / "empty.png")
+    plt.close(fig)
+    assert _line_colours(tmp_path / "empty.png", len(passes)) == [0] * len(passes)
+
+
+def test_sweep_plot_bad_key_is_one_line(tmp_path):
+    done = example("sweep_plot.py", "ssao.sample", "4", "--size", "32x18", "--frames", "1",
+                   cwd=tmp_path)
+    assert done.returncode == 2
+    assert len(done.stderr.splitlines()) == 1
+    assert "pass 'ssao': unknown setting 'sample' (did you mean 'samples'?)" in done.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_plugin_pass(tmp_path):
+    done = example("plugin_pass.py", "--size", "32x18", "--out", "out", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "max |inverted - (255 - color)| = 0" in done.stdout
+    out = tmp_path / "out"
+    assert sorted(p.name for p in out.iterdir()) == ["flat.color.png", "invert.inverted.png",
+                                                     "timings.json"]
+    color = np.asarray(Image.open(out / "flat.color.png")).astype(int)
+    inverted = np.asarray(Image.open(out / "invert.inverted.png")).astype(int)
+    assert np.array_equal(inverted[..., :3], 255 - color[..., :3])
+    assert np.array_equal(inverted[..., 3], color[..., 3])
+    # negative control: amount=0 leaves the color as it is, so the same check fails there
+    done = example("plugin_pass.py", "--size", "32x18", "--out", "zero", "--set",
+                   "invert.amount=0", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    kept = np.asarray(Image.open(tmp_path / "zero" / "invert.inverted.png")).astype(int)
+    assert np.array_equal(kept, color)
+    assert not np.array_equal(kept[..., :3], 255 - color[..., :3])
+
+
+def test_plugin_pass_bad_setting_is_one_line(tmp_path):
+    done = example("plugin_pass.py", "--size", "32x18", "--out", "out", "--set",
+                   "invert.amount=2", cwd=tmp_path)
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("plugin_pass: error: <python: plugin_demo>")
+    assert "'amount'" in lines[0]
+    assert not (tmp_path / "out").exists()
