@@ -1,4 +1,6 @@
-"""``rfw new-pass NAME``: a working pass folder, its GLSL shader and its test, from templates."""
+"""``rfw new-pass NAME``: a working pass folder, its GLSL shader and its test, from templates;
+``--package DIR`` makes it an installable distribution (the ``rfw.passes`` entry point, the
+shaders as package data, the test beside it)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,10 @@ from .graph.errors import GraphError
 
 _COMPUTE_PY = '''"""{title}: TODO say what it computes (this docstring is the catalogue entry)."""
 
+from typing import Annotated
+
 from rfw import ComputePass, Settings, Tex2D, register_pass
+from rfw.passes import Range
 
 
 @register_pass("{name}")
@@ -23,7 +28,7 @@ class {cls}(ComputePass):
     outputs = {{"dst": Tex2D("rgba16float", size_of="src", desc="output color")}}
 
     class Params(Settings):
-        gain: float = 1.0  # multiplies the input
+        gain: Annotated[float, Range(0.0, 16.0)] = 1.0  # multiplies the input
 
     def record(self, ctx) -> None:
         ctx.dispatch(threads=ctx.extent("dst"), t_src=ctx.sampled("src"),
@@ -146,20 +151,87 @@ def test_draws_the_base_color():
 '''
 
 
-def new_pass(name: str, folder: Path, *, kind: str = "compute",
-             tests: Path | None = None) -> list[Path]:
-    """Write ``folder/<name>/`` (module, shader, ``__init__``) and a test; returns the files."""
+_PYPROJECT = '''[build-system]
+requires = ["setuptools>=61"]
+build-backend = "setuptools.build_meta"
+
+[project]
+name = "{dist}"
+version = "0.1.0"
+description = "{title}: an rfw pass"
+requires-python = ">=3.11"
+# rfw itself is not listed: install this into the environment that has rfw
+
+[project.entry-points."rfw.passes"]
+# rfw imports this module to find the pass; @register_pass("{name}") does the rest
+{name} = "{package}.{name}"
+
+[tool.setuptools]
+packages = ["{package}"]
+
+[tool.setuptools.package-data]
+# the shaders are found next to the module, so they must be installed with it
+{package} = ["*.glsl", "*.wgsl"]
+
+[tool.pytest.ini_options]
+testpaths = ["tests"]
+'''
+
+_README = '''# {dist}
+
+{title}: an rfw pass, `use = "{name}"` in a config.
+
+    pip install --no-build-isolation .   # into the environment that has rfw
+    rfw passes {name}                    # its slots and settings
+    python -m pytest tests               # its test
+'''
+
+
+def _check_name(name: str) -> None:
     if not re.fullmatch(r"[a-z][a-z0-9_]*", name) or keyword.iskeyword(name):
         raise GraphError(f"pass name '{name}' must be a snake_case identifier",
                          element="new-pass")
-    target = inside(folder, name)  # every file below is checked to stay in its folder
+
+
+def _title(name: str) -> str:
+    return name.replace("_", " ").capitalize()
+
+
+def new_package(name: str, root: Path, *, kind: str = "compute") -> list[Path]:
+    """Write an installable distribution in ``root``: ``pyproject.toml`` (entry point
+    ``rfw.passes``, shaders as package data), ``rfw_<name>/`` with the pass, ``tests/`` with
+    its test and a README; returns the files. ``root`` must not exist or be empty."""
+    _check_name(name)
+    if root.exists() and (not root.is_dir() or any(root.iterdir())):
+        raise GraphError("already exists and is not an empty folder: not overwritten",
+                         file=str(root), element="--package")
+    package = f"rfw_{name}"
+    fields = {"name": name, "package": package, "dist": f"rfw-{name.replace('_', '-')}",
+              "title": _title(name)}
+    files = new_pass(name, root, kind=kind, tests=root / "tests", package=package)
+    extra = {inside(root, "pyproject.toml"): _PYPROJECT.format(**fields),
+             inside(root, "README.md"): _README.format(**fields)}
+    for path, text in extra.items():
+        atomic_write(path, lambda f, t=text: f.write(t.encode("utf-8")))
+    return [*extra, *files]
+
+
+def new_pass(name: str, folder: Path, *, kind: str = "compute",
+             tests: Path | None = None, package: str | None = None) -> list[Path]:
+    """Write ``folder/<name>/`` (module, shader, ``__init__``) and a test; returns the files.
+    ``package`` names the folder (an import package) instead of ``<name>``."""
+    _check_name(name)
+    target = inside(folder, package or name)  # every file below is checked to stay in it
     if target.exists():
         raise GraphError("already exists: not overwritten", file=str(target))
     cls = "".join(w.upper() if w in ("ssao", "fxaa", "taa") else w.capitalize()
                   for w in name.split("_")) + "Pass"
-    title = name.replace("_", " ").capitalize()
-    module = f"{folder.name}.{name}.{name}" if (folder / "__init__.py").exists() \
-        else f"{name}.{name}"
+    title = _title(name)
+    if package is not None:
+        module = f"{package}.{name}"
+    else:
+        module = f"{folder.name}.{name}.{name}" if (folder / "__init__.py").exists() \
+            else f"{name}.{name}"
     fields = {"name": name, "cls": cls, "title": title, "module": module}
     py, test = (_COMPUTE_PY, _COMPUTE_TEST) if kind == "compute" else (_RASTER_PY, _RASTER_TEST)
     shaders = {f"{name}.comp.glsl": _COMPUTE_GLSL} if kind == "compute" else \
