@@ -87,15 +87,18 @@ def test_float_outputs_written_bit_for_bit(hdr_run):
 
 
 def test_write_exr_keeps_every_float32_bit(tmp_path):
-    # specials and subnormals survive: the file is the array
-    a = np.array([[[0.0, -0.0, np.inf, -np.inf]], [[1e-40, 3.4e38, np.pi, -1.5]]],
-                 np.float32)
+    # specials (signed zeros, infinities, NaNs) and subnormals survive: the file is the array
+    a = np.array([[[0.0, -0.0, np.inf, -np.inf]], [[1e-40, 3.4e38, np.pi, -1.5]],
+                  [[np.nan, -np.nan, 65504.0, 6e-8]]], np.float32)
     write_exr(tmp_path / "a.exr", a)
     b = read_exr(tmp_path / "a.exr")
     assert b.dtype == np.float32 and np.array_equal(bits(a), bits(b))
     # an EXR written as half loses float32 precision: the same check sees it
     with np.errstate(over="ignore"):  # 3.4e38 becomes inf in half
         write_exr(tmp_path / "h.exr", a.astype(np.float16))
+        # and half NaNs, infinities and the largest half survive too
+        write_exr(tmp_path / "h16.exr", a[2:].astype(np.float16))
+    assert np.array_equal(bits(a[2:].astype(np.float16)), bits(read_exr(tmp_path / "h16.exr")))
     assert not np.array_equal(bits(a), bits(read_exr(tmp_path / "h.exr").astype(np.float32)))
 
 
