@@ -16,6 +16,7 @@ from typing import Any
 from ..errors import check_identifier
 from ..fileio import inside
 from .images import compare, load_png, psnr, save_png
+from .path_chart import path_charts
 from .runner import load_results
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
 
@@ -173,6 +174,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     _environment(doc, records, rfw)
     _frame_table(doc, rfw)
     charts = _charts(out_dir, rfw)
+    charts += path_charts(out_dir, rfw)  # runs along a camera path: GPU ms per frame
     if charts:
         doc.h(2, "Charts")
         for c in charts:

@@ -4,7 +4,8 @@
         [--frames N] [--warmup N] [--backend NAME] --out DIR
 
 Writes ``DIR/record.json`` (per pass and per frame: GPU ms from timestamps, CPU record ms;
-whole-frame wall ms; memory, culling and ray counters where the run has them) and
+whole-frame wall ms; memory, culling and ray counters where the run has them; along a
+camera path, each frame's camera and, where there are culling counters, each frame's) and
 ``DIR/image.png`` (the config's first output). A failure writes ``{"error": ...}`` and
 exits 1, so the runner can report it instead of dropping the variant.
 """
@@ -25,7 +26,7 @@ from .runner import gpu_clocks
 
 # timings.json keys copied into the record as they are, where a run has them
 EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light",
-              "frames_in_flight")
+              "frames_in_flight", "camera_path")
 
 
 class FrameClock:
@@ -131,10 +132,29 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
         record["memory"] = {"plan_transient_bytes": plan.transient_bytes,
                             "unaliased_bytes": plan.unaliased_bytes, "alias": None,
                             "source": "plan"}
+    if "camera_path" in timings and timings.get("culling"):
+        record["culling_frames"] = culling_along_path(cfg, frames=frames, backend=backend)
     formats = {r.name: r.format for r in plan.resources}
     first = next(iter(result.images))
     record["output"] = first
     return record, to_png_array(result.images[first], formats[first])
+
+
+def culling_along_path(cfg: Any, *, frames: int, backend: str) -> list[Any]:
+    """The culling counters of each frame of ``cfg``'s camera path, from an untimed replay
+    of the path (reading them back waits for each frame, which the timed run must not)."""
+    from ..backend import get_backend
+    from ..render import render
+
+    be = get_backend(backend)
+    counters: list[Any] = []
+
+    def read(k: int, frame: Any) -> None:
+        frame.drain()
+        counters.append(be.collect(frame.executors[backend]).get("culling"))
+
+    render(cfg, frames=frames, warmup=1, backend=backend, each_frame=read)
+    return counters
 
 
 def main(argv: list[str] | None = None) -> int:
