@@ -89,6 +89,8 @@ def _outputs_note(args: argparse.Namespace, c: CompiledGraph) -> str | None:
     args.output = [suggested_output(c)]
     try:
         kept = _compile_file(args)
+    except GraphError:  # the note then goes without what --output would save
+        kept = None
     finally:
         args.output = None
     return outputs_note(graph, c, kept)

@@ -45,18 +45,21 @@ def dangling_outputs(graph: Graph, c: CompiledGraph) -> tuple[str, ...]:
     return tuple(n for n in c.outputs if n in plans and not plans[n].external)
 
 
+# names an application gives the image it presents (Raptor: final, taa_output, svgf_output)
+_PRESENTED = re.compile(r"final|output|present|swapchain|backbuffer|ldr", re.I)
+
+
 def suggested_output(c: CompiledGraph) -> str | None:
-    """The image the frame most likely presents: the output written last in pass order."""
+    """The image the frame most likely presents: an image output named like one, written
+    last in pass order; else the image output written last."""
     rank = {name: i for i, name in enumerate(c.order)}
     plans = {r.name: r for r in c.resources}
-    # a described image the plan allocates first, an application-owned one next
     images = [n for n in c.outputs if n in plans and plans[n].kind == "image"]
-    described = [n for n in images if plans[n].format and not plans[n].external]
-    pool = described or images or list(c.outputs)
+    pool = images or [n for n in c.outputs if n in plans]
     if not pool:
         return None
-    return max(pool, key=lambda n: (rank.get(plans[n].producer or "", -1)
-                                    if n in plans else -1, -pool.index(n)))
+    return max(pool, key=lambda n: (bool(_PRESENTED.search(n)),
+                                    rank.get(plans[n].producer or "", -1), -pool.index(n)))
 
 
 def outputs_note(graph: Graph, c: CompiledGraph, kept: CompiledGraph | None = None) -> str | None:
@@ -71,9 +74,10 @@ def outputs_note(graph: Graph, c: CompiledGraph, kept: CompiledGraph | None = No
     if kept is not None:
         saved = (f" (transient {_mib(c.transient_bytes)} -> {_mib(kept.transient_bytes)}, "
                  f"{len(c.order) - len(kept.order)} of {len(c.order)} passes culled)")
-    return (f"note: no outputs declared, so {len(dangling)} resources nothing reads became "
-            f"outputs and live to the end of the frame: {', '.join(dangling)}; keep only what "
-            f"you present with --output {pick}{saved}")
+    some = f"{len(dangling)} resources nothing reads became outputs and live" \
+        if len(dangling) > 1 else "1 resource nothing reads became an output and lives"
+    return (f"note: no outputs declared, so {some} to the end of the frame: "
+            f"{', '.join(dangling)}; keep only what you present with --output {pick}{saved}")
 
 
 def dag_svg(c: CompiledGraph) -> str:

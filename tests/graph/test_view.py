@@ -136,6 +136,18 @@ def test_raptor_graph_names_its_dangling_outputs(tmp_path):
     assert len(notes) == 1, stdout
     assert "depth, final" in notes[0] and "--output final" in notes[0]
     assert "--output final" in text and "depth, final" in text
+    # the suggestion is the presented image, and the bytes it quotes are its plan's
+    done = rfw("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), cwd=tmp_path)
+    [note] = [line for line in done.stdout.splitlines() if line.startswith("note:")]
+    assert "1 resource nothing reads became an output and lives" in note
+    assert ": visibility_motion_vectors; " in note and "--output taa_output (" in note
+    before, after = map(float, re.search(r"transient ([\d.]+) MiB -> ([\d.]+) MiB",
+                                         note).groups())
+    for extra, quoted in (((), before), (("--output", "taa_output"), after)):
+        plan = rfw("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), "--json", *extra,
+                   cwd=tmp_path)
+        assert f"{json.loads(plan.stdout)['transient_bytes'] / 2**20:.2f}" == f"{quoted:.2f}"
+    assert after < before
     # a graph given its output, and an rfw config (outputs declared), get no note
     for graph, extra in ((RAPTOR, ("--output", "final")), (CONFIG, ())):
         done = rfw("graph", "plan", graph, *extra, cwd=tmp_path)
