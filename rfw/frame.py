@@ -169,6 +169,13 @@ class Result:
                            element="outputs")
         return name
 
+    def __repr__(self) -> str:
+        t = self.timings
+        outputs = ", ".join(f"{n} {a.shape[1]}x{a.shape[0]} {self.formats.get(n, a.dtype)}"
+                            for n, a in self.images.items())
+        return (f"<rfw.Result {t['config']!r} on {t['device']}, {t['frames']} frames: "
+                f"{outputs}; gpu {t['gpu_ms_total']:.3f} ms>")
+
     def _repr_png_(self) -> bytes:
         return self.png()
 

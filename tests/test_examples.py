@@ -26,8 +26,8 @@ def example(name: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_every_example_is_tested():
-    tested = {"ab_setting.py", "sweep_plot.py", "plugin_pass.py"}
-    assert {p.name for p in EXAMPLES.glob("*.py")} == tested
+    tested = {"ab_setting.py", "sweep_plot.py", "plugin_pass.py", "api_tour.ipynb"}
+    assert {p.name for p in EXAMPLES.iterdir() if p.suffix in (".py", ".ipynb")} == tested
 
 
 def test_ab_setting(tmp_path):
@@ -138,3 +138,34 @@ def test_plugin_pass_bad_setting_is_one_line(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("plugin_pass: error: <python: plugin_demo>")
     assert "'amount'" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_notebook_runs_and_shows_results(tmp_path):
+    # executed in a real kernel, as Jupyter would: each result displays as PNG and HTML
+    import base64
+    import io
+
+    import nbclient
+    import nbformat
+
+    import rfw
+
+    nb = nbformat.read(EXAMPLES / "api_tour.ipynb", as_version=4)
+    assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")  # kept clean
+    nbclient.NotebookClient(nb, timeout=240, kernel_name="python3",
+                            resources={"metadata": {"path": str(EXAMPLES)}}).execute()
+    results = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+               if o.output_type == "execute_result"]
+    assert results[1]["data"]["text/plain"] == "(1, 1)"  # one device, one scene load
+    shown = [o["data"] for o in results if "image/png" in o["data"]]
+    assert len(shown) == 2
+    for data in shown:
+        assert data["text/plain"].startswith("<rfw.Result 'deferred' on ")
+        assert "<td>gbuffer</td>" in data["text/html"] and "base64," in data["text/html"]
+    a, b = (np.asarray(Image.open(io.BytesIO(base64.b64decode(d["image/png"]))))
+            for d in shown)
+    # the first display is the picture rfw renders for that config; the second (exposure
+    # 2.5) is not: the negative control
+    ref = rfw.run(ROOT / "configs" / "deferred.toml", size=(32, 18), frames=1)
+    assert np.array_equal(a, ref.images["tonemap.ldr"])
+    assert not np.array_equal(b, ref.images["tonemap.ldr"])
