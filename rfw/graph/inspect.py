@@ -136,12 +136,12 @@ def _q(s: str) -> str:
 _LEGEND = (
     '<<table border="0" cellborder="1" cellspacing="0" cellpadding="4">'
     '<tr><td colspan="2"><b>legend</b></td></tr>'
-    '<tr><td bgcolor="lightblue">pass</td><td>box, in execution order top to bottom</td></tr>'
+    '<tr><td bgcolor="lightblue">pass</td><td>box; data flows top to bottom</td></tr>'
     '<tr><td bgcolor="palegreen">transient</td><td>lives within the frame (aliasable)</td></tr>'
     '<tr><td bgcolor="lightgoldenrod">kept</td><td>external, history or persistent</td></tr>'
     '<tr><td>solid edge</td><td>writes (pass to resource) or reads (resource to pass)</td></tr>'
-    '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: read back in place'
-    '</td></tr>'
+    '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: written back in '
+    'place</td></tr>'
     '<tr><td>dashed edge</td><td>orders only, no data</td></tr></table>>')
 
 
@@ -149,7 +149,8 @@ def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str
     """Passes as boxes, resources as ellipses; dashed edges order without data. Top to
     bottom by default (a long frame stays readable), with a legend node."""
     lines = [f"digraph {_q(c.name)} {{", f"  rankdir={rankdir};", "  newrank=true;",
-             "  node [fontname=Helvetica];", "  edge [fontname=Helvetica];"]
+             "  nodesep=0.2;", "  ranksep=0.35;", "  node [fontname=Helvetica];",
+             "  edge [fontname=Helvetica];"]
     if legend:
         lines.append(f"  legend [shape=plaintext, fontsize=10, label={_LEGEND}];")
     for name in c.order:
@@ -157,8 +158,13 @@ def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str
                      f"label={_q(name)}];")
     for r in c.resources:
         color = "palegreen" if r.transient else "lightgoldenrod"
-        label = f"{r.name}\\n{r.format or r.kind} {r.width}x{r.height}" if r.kind == "image" \
-            else f"{r.name}\\n{r.bytes} B"
+        if r.kind == "image" and r.format:
+            fmt = r.format.removeprefix("VK_FORMAT_")  # Raptor's names: shorter boxes
+            label = f"{r.name}\\n{fmt} {r.width}x{r.height}"
+        elif r.kind in ("image", "buffer") and r.bytes:
+            label = f"{r.name}\\n{r.kind} {r.bytes} B"
+        else:  # undescribed: the application owns and sizes it (Raptor's externals)
+            label = f"{r.name}\\napplication-owned {r.kind}"
         lines.append(f"  {_q('res:' + r.name)} [shape=ellipse, style=filled, "
                      f"fillcolor={color}, label=\"{label}\"];")
     for name in c.order:
@@ -166,10 +172,11 @@ def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str
             p, r = _q("pass:" + name), _q("res:" + a.resource)
             if a.role == "order":
                 lines.append(f"  {r} -> {p} [style=dashed];")
+            elif a.role == "modify":  # in place: the pass ranks below what it reads back
+                lines.append(f"  {r} -> {p};")
+                lines.append(f"  {p} -> {r} [color=gray, constraint=false];")
             elif a.writes:
                 lines.append(f"  {p} -> {r};")
-                if a.role == "modify":
-                    lines.append(f"  {r} -> {p} [color=gray];")
             else:
                 lines.append(f"  {r} -> {p};")
     lines.append("}")
