@@ -182,7 +182,7 @@ def to_html(c: CompiledGraph, *, note: str | None = None) -> str:
     body = [f"<h1>graph {_e(c.name)} at {c.size[0]}x{c.size[1]}</h1>"]
     if note:
         body.append(f'<p class="note">{_e(note)}</p>')
-    body += ["<h2>passes (top to bottom in execution order)</h2>",
+    body += ["<h2>passes (data flows top to bottom)</h2>",
              f'<div class="scroll">{dag_svg(c)}</div>',
              "<h2>memory timeline</h2>",
              "<p>x: passes in execution order; y: bytes in the heap (offset grows downwards); "
