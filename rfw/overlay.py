@@ -118,7 +118,6 @@ class Overlay:
         self._timings()
         self._frame_graph()
         self._memory()
-        self._passes()
         self._variants()
         if v.status:
             imgui.text_wrapped(v.status)
@@ -128,22 +127,30 @@ class Overlay:
         imgui.end()
 
     def _timings(self) -> None:
-        imgui, ex = self.imgui, self.viewer.executor
-        if not imgui.begin_table("timings", 3, imgui.TableFlags_.borders_inner_v):
+        """A row per pass of the config: its checkbox (key 1-9) and its GPU and CPU ms."""
+        imgui, v = self.imgui, self.viewer
+        if not imgui.begin_table("passes", 3, imgui.TableFlags_.borders_inner_v):
             return
-        for head in ("pass", "GPU ms", "CPU ms"):
+        for head in ("pass (keys 1-9)", "GPU ms", "CPU ms"):
             imgui.table_setup_column(head)
         imgui.table_headers_row()
-        for name, t in ex.timings.items():
-            gpu, cpu = median_ms(t.gpu_ms), median_ms(t.cpu_ms)
+        for i, entry in enumerate(v.cfg.passes):
             imgui.table_next_row()
             imgui.table_next_column()
-            imgui.text(name)
+            changed, on = imgui.checkbox(f"{i + 1} {entry.name}##pass", entry.enabled)
+            self._rect(f"pass:{entry.name}")
+            if changed:  # applied after this frame's submit: it may replace the executor
+                v.later(v.set_pass, entry.name, on)
+            t = v.executor.timings.get(entry.name)
+            if t is None:  # disabled, or culled: nothing reads it
+                self.lines.append(f"{entry.name} off")
+                continue
+            gpu, cpu = median_ms(t.gpu_ms), median_ms(t.cpu_ms)
             imgui.table_next_column()
             imgui.text("-" if gpu is None else f"{gpu:.3f}")
             imgui.table_next_column()
             imgui.text("-" if cpu is None else f"{cpu:.3f}")
-            self.lines.append(f"{name} gpu {'-' if gpu is None else f'{gpu:.3f}'} "
+            self.lines.append(f"{entry.name} gpu {'-' if gpu is None else f'{gpu:.3f}'} "
                               f"cpu {'-' if cpu is None else f'{cpu:.3f}'}")
         imgui.end_table()
 
@@ -155,7 +162,7 @@ class Overlay:
         top = float(values.max()) * 1.1
         text = f"frame {values[-1]:.1f} ms (max {values.max():.1f})"
         imgui.plot_lines("##frame", values, overlay_text=text, scale_min=0.0, scale_max=top,
-                         graph_size=(260, 48))
+                         graph_size=(260, 40))
         self._rect("frame_graph")
         self.lines.append(f"graph: {text}")
 
@@ -168,15 +175,6 @@ class Overlay:
         culling = v.culling()
         self._text("culling: " + (", ".join(f"{k} {val}" for k, val in culling.items())
                                   if culling else "no counters on this backend"))
-
-    def _passes(self) -> None:
-        imgui, v = self.imgui, self.viewer
-        imgui.separator_text("passes (keys 1-9)")
-        for i, entry in enumerate(v.cfg.passes):
-            changed, on = imgui.checkbox(f"{i + 1} {entry.name}##pass", entry.enabled)
-            self._rect(f"pass:{entry.name}")
-            if changed:
-                v.set_pass(entry.name, on)
 
     def _variants(self) -> None:
         imgui, v = self.imgui, self.viewer
@@ -195,4 +193,4 @@ class Overlay:
                 self._rect(f"variant:{group}={option}")
                 if clicked and not chosen:
                     v.group = gi
-                    v.choose(group, option)
+                    v.later(v.choose, group, option)

@@ -99,6 +99,7 @@ class Viewer:
         self._capture_next = False
         self._error: str | None = None  # the frame error said last (said once)
         self._last_draw: float | None = None
+        self._later: list[tuple[Any, tuple]] = []
         self._blit = self._blit_pipeline()
         self._rebuild(cfg)
         self.overlay = Overlay(self, self.canvas, self.device.device, self.format) \
@@ -173,6 +174,11 @@ class Viewer:
                 self._capture_next = True
         elif key.lower() in "wasdqe":
             self._move(key.lower())
+
+    def later(self, action: Any, *args: Any) -> None:
+        """Run ``action(*args)`` once the frame being drawn is submitted (the overlay's
+        clicks: a change replaces the executor whose images the frame still reads)."""
+        self._later.append((action, args))
 
     def set_pass(self, name: str, enabled: bool) -> bool:
         """Switch pass ``name`` on or off (keys 1-9, the overlay's checkboxes)."""
@@ -270,6 +276,9 @@ class Viewer:
                 self._error, self.status = None, ""
                 self.say("frames render again")
             self._present(capture=(last and self.screenshot is not None) or self._capture_next)
+            while self._later:
+                action, args = self._later.pop(0)
+                action(*args)
             self.frame_count += 1
             if self.report_every and self.frame_count % self.report_every == 0:
                 self.report()

@@ -1,0 +1,183 @@
+"""``rfw view``'s overlay and error handling, driven headless under Xvfb through the viewer's
+``frames``/``script`` hooks: a small driver script runs a real window in a subprocess, clicks
+through the canvas's own events, and prints what the overlay showed as JSON."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from .conftest import ROOT
+
+pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
+                                reason="needs xvfb-run (scripts/setup-system.sh installs it)")
+
+DEFERRED = ROOT / "configs" / "deferred.toml"
+
+# the driver: a Viewer with a hook before each draw; HOOK is the test's part
+DRIVER = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, {tmp!r})
+{pre}
+from rfw.config import apply_overrides, load_config
+from rfw.frame import load_scene_for
+from rfw.view import Viewer
+
+cfg = apply_overrides(load_config({config!r}), {sets!r})
+v = Viewer(cfg, scene=load_scene_for(cfg), frames={frames}, report_every=0,
+           overlay={overlay}, screenshot=Path({shot!r}))
+draws = [0]
+events = []
+out = {{}}
+
+def click(x, y, kind):
+    v.canvas.submit_event({{"event_type": kind, "x": x, "y": y, "button": 1,
+                           "buttons": (1,) if kind == "pointer_down" else (),
+                           "modifiers": (), "ntouches": 0, "touches": {{}}}})
+
+def centre(name):
+    x0, y0, x1, y1 = v.overlay.rects[name]
+    return (x0 + x1) / 2, (y0 + y1) / 2
+
+draw = v.draw
+def hooked():
+    n = draws[0]
+{hook}
+    draws[0] += 1
+    draw()
+v.draw = hooked
+v.run()
+out["draws"] = draws[0]
+out["frames"] = v.frame_count
+if v.overlay is not None:
+    out["lines"] = v.overlay.lines
+    out["rects"] = v.overlay.rects
+print("RESULT " + json.dumps(out))
+"""
+
+
+def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int = 8,
+          overlay: bool = True, pre: str = "") -> tuple[dict, list[str], str]:
+    script = tmp / "driver.py"
+    script.write_text(DRIVER.format(tmp=str(tmp), config=str(config), sets=list(sets),
+                                    frames=frames, overlay=overlay, pre=pre, shot=str(tmp / "shot.png"),
+                                    hook=textwrap.indent(textwrap.dedent(hook), "    ")))
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable,
+                           str(script)], capture_output=True, text=True, timeout=180, env=env,
+                          cwd=tmp, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr and "Validation Error" not in done.stderr
+    lines = done.stdout.splitlines()
+    [result] = [line for line in lines if line.startswith("RESULT ")]
+    return json.loads(result[len("RESULT "):]), lines, done.stderr
+
+
+def run_png(tmp: Path, size: str, *sets: str) -> np.ndarray:
+    out = tmp / "run"
+    done = subprocess.run(
+        [sys.executable, "-m", "rfw.cli", "run", str(DEFERRED), "--size", size, "--frames", "1",
+         "--out", str(out), *(a for s in sets for a in ("--set", s))],
+        capture_output=True, text=True, timeout=180, cwd=tmp, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return np.asarray(Image.open(out / "tonemap.ldr.png").convert("RGBA")).astype(int)
+
+
+def test_overlay_shows_timings_memory_and_toggles_passes_with_the_mouse(tmp_path):
+    # frame 3: a click on the image beside the overlay (no change: the negative control);
+    # frame 5: a click on the shadow pass's checkbox turns the pass on
+    result, lines, _ = drive(tmp_path, """
+        if n == 3:
+            x1, y1 = v.overlay.rects["window"][2:]
+            click(x1 + 20, y1 + 10, "pointer_down")
+        if n == 4:
+            x1, y1 = v.overlay.rects["window"][2:]
+            click(x1 + 20, y1 + 10, "pointer_up")
+        if n == 5:
+            click(*centre("pass:shadow"), "pointer_move")
+            click(*centre("pass:shadow"), "pointer_down")
+        if n == 6:
+            click(*centre("pass:shadow"), "pointer_up")
+    """, sets=["size=640x480"], frames=60)  # GPU times are read back 32 frames at a time
+    graphs = [x for x in lines if x.startswith("graph:")]
+    assert graphs == ["graph: gbuffer -> lighting -> tonemap (off: shadow)",
+                      "graph: shadow -> gbuffer -> lighting -> tonemap"]
+    shown = result["lines"]
+    # one row per pass of the plan, with numbers for GPU and CPU ms
+    rows = [x.split() for x in shown if x.split()[0] in ("shadow", "gbuffer", "lighting",
+                                                          "tonemap") and "gpu" in x]
+    assert [r[0] for r in rows] == ["shadow", "gbuffer", "lighting", "tonemap"]
+    for r in rows:
+        assert r[1] == "gpu" and float(r[2]) >= 0 and r[3] == "cpu" and float(r[4]) > 0
+    assert any(x.startswith("memory: transients") and "MiB" in x for x in shown)
+    assert any("textures held" in x for x in shown)
+    assert any(x.startswith("culling:") for x in shown)
+    assert any(x.startswith("graph: frame") for x in shown)  # the frame-time graph
+    # the overlay covers its window only: elsewhere the presented pixels are rfw run's
+    shot = np.asarray(Image.open(tmp_path / "shot.png")).astype(int)
+    expected = run_png(tmp_path, "640x480", "shadow.enabled=true")
+    x0, y0, x1, y1 = (round(c) for c in result["rects"]["window"])
+    outside = np.ones(shot.shape[:2], bool)
+    outside[max(0, y0 - 1):y1 + 2, max(0, x0 - 1):x1 + 2] = False
+    assert np.abs(shot - expected)[outside].max() <= 1
+    # negative control: inside its window the overlay is drawn (differs from the image)
+    assert np.abs(shot - expected)[~outside].max() > 32
+
+
+def test_variant_buttons_and_groups_listed(tmp_path):
+    config = ROOT / "configs" / "deferred_ssao_shadows.toml"
+    result, lines, _ = drive(tmp_path, """
+        if n == 3:
+            click(*centre("variant:shadows=off"), "pointer_move")
+            click(*centre("variant:shadows=off"), "pointer_down")
+        if n == 4:
+            click(*centre("variant:shadows=off"), "pointer_up")
+    """, config=config, sets=["size=640x480"], frames=8)
+    assert [x for x in lines if x.startswith("variants:")] == [
+        "variants: ao=on, >shadows=off, view=final"]  # the clicked group is V's now
+    listed = [x for x in result["lines"] if x[:2] in ("> ", "  ") and "[" in x]
+    # every group is on screen with its options, the one in force in brackets
+    assert listed == ["  ao: [on] off", "> shadows: on [off]",
+                      "  view: [final] ao normals depth overdraw"]
+
+
+def test_broken_shader_is_said_once(tmp_path):
+    shader = (ROOT / "passes" / "tonemap" / "tonemap.comp.glsl").read_text()
+    (tmp_path / "tonemap.comp.glsl").write_text(shader)
+    (tmp_path / "hot_tonemap.py").write_text(textwrap.dedent('''
+        from passes.tonemap.tonemap import TonemapPass
+        from rfw import register_pass
+
+        @register_pass("hot_tonemap")
+        class HotTonemapPass(TonemapPass):
+            """The tonemap pass with its shader in the test's folder."""
+    '''))
+    config = tmp_path / "hot.toml"
+    config.write_text(DEFERRED.read_text().replace('name = "tonemap"',
+                                                   'name = "tonemap"\nuse = "hot_tonemap"'))
+    broken = shader.replace("void main", "oops_undeclared; void main", 1)
+    assert broken != shader
+    # draws 0-2 render; 3-8 find the shader broken (R reloads it at once); 9- render again
+    result, lines, _ = drive(tmp_path, f"""
+        if n == 3:
+            Path({str(tmp_path / "tonemap.comp.glsl")!r}).write_text({broken!r})
+            v.key("r")
+        if n == 9:
+            Path({str(tmp_path / "tonemap.comp.glsl")!r}).write_text({shader!r})
+            v.key("r")
+    """, config=config, sets=["size=32x18"], frames=12, overlay=False, pre="import hot_tonemap")
+    skipped = [x for x in lines if x.startswith("frame skipped")]
+    assert len(skipped) == 1 and "pass 'tonemap'" in skipped[0], lines
+    assert "tonemap.comp.glsl:" in skipped[0]  # the file and line of the error
+    assert result["draws"] == 12 and result["frames"] == 12 - 6  # six draws were broken
+    assert lines.index(skipped[0]) < lines.index("frames render again")
