@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -283,7 +284,8 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
              each_frame: Callable[[int, Any], None] | None = None) -> list[dict[str, Any]]:
     """``warmup`` untimed frames from the path's first camera, then ``frames`` timed ones,
     frame ``k`` from ``path.camera(k, frames)``; ``each_frame(k, frame)`` after frame k.
-    Returns each timed frame's camera (:func:`describe`), empty without a path."""
+    Returns each timed frame's camera (:func:`describe`, with ``write_ms``: the host time of
+    writing it, waits for frames in flight included), empty without a path."""
     if path is not None:
         set_frame_camera(frame, path.camera(0, frames))
     frame.run(warmup)
@@ -292,9 +294,12 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
     for k in range(frames):
         if path is not None:
             cam = path.camera(k, frames)
+            start = time.perf_counter()
             if k:
                 set_frame_camera(frame, cam)
-            cameras.append(describe(cam, path.param(k, frames)))
+            # the write's wait for frames in flight (vk) is part of the frame's wall time
+            cameras.append({**describe(cam, path.param(k, frames)),
+                            "write_ms": (time.perf_counter() - start) * 1e3})
         one_frame(frame, last=k == frames - 1)
         if each_frame is not None:
             each_frame(k, frame)

@@ -34,7 +34,9 @@ def test_bench_records_each_frame_of_an_orbit(tmp_path):
         assert len({tuple(c["position"]) for c in cams["frames"]}) == 4  # each its own view
         for p in r["passes"]:
             assert len(p["gpu_ms"]) == 4 and all(ms > 0 for ms in p["gpu_ms"])
-    assert records[0]["camera_path"] == records[1]["camera_path"]  # the same path each run
+    views = [[{k: v for k, v in c.items() if k != "write_ms"} for c in r["camera_path"]["frames"]]
+             for r in records]
+    assert views[0] == views[1]  # the same path each run
     report = (tmp_path / "b" / "report.md").read_text()
     charts = sorted(p.name for p in (tmp_path / "b" / "charts").glob("path_*.png"))
     assert charts == ["path_0_flat_wgpu.png"]
@@ -58,6 +60,10 @@ def test_meshlet_culling_counters_along_the_path(tmp_path):
     assert all(f["meshlets_drawn"] <= f["meshlets_total"] for f in frames)
     report = (tmp_path / "m" / "report.md").read_text()
     assert "charts/path_0_" in report
+    # each frame's wall time counts its camera write (on vk: the wait for frames in flight)
+    writes = [c["write_ms"] for c in r["camera_path"]["frames"]]
+    assert writes[0] == pytest.approx(0.0, abs=1.0) and all(w >= 0 for w in writes)
+    assert all(w >= c for w, c in zip(r["frame"]["wall_ms"], writes, strict=True))
 
 
 def test_meshlet_path_under_validation(tmp_path):
