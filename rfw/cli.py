@@ -233,10 +233,18 @@ def cmd_view(args: argparse.Namespace) -> int:
     sets = list(args.set or [])
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
-    view(Path(args.config or DEFAULT_CONFIG), sets, scene=args.scene, frames=args.frames,
+    view(Path(args.config or DEFAULT_CONFIG), sets, scene=_scene_name(args.scene),
+         frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
          screenshot=Path(args.screenshot) if args.screenshot else None)
     return 0
+
+
+def _scene_name(scene: str | None) -> str | None:
+    # --scene dragon: the cached GLB (fetched first only when RFW_FETCH=1 allows)
+    from .scene.names import resolve_scene
+
+    return resolve_scene(scene, element="--scene") if scene else None
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:

@@ -141,3 +141,12 @@ def test_scenes_list(tmp_path):
     assert "boxtextured" in other.stdout
     row = next(ln for ln in other.stdout.splitlines() if ln.startswith("boxtextured"))
     assert row.split()[3] == "no"  # control: another cache has nothing
+
+
+def test_view_takes_names_too(tmp_path):
+    # refused before any window opens: one line, as rfw run says it
+    done = cli("view", str(FLAT), "--scene", "dragn", "--frames", "1", cache=tmp_path / "c")
+    one_line(done, "--scene", "did you mean 'dragon'?")
+    done = cli("view", str(FLAT), "--scene", "boxtextured", "--frames", "1",
+               cache=tmp_path / "c")
+    one_line(done, "'boxtextured' is not fetched yet", "rfw scenes fetch boxtextured")
