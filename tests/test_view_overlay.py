@@ -21,6 +21,11 @@ from .conftest import ROOT
 pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
                                 reason="needs xvfb-run (scripts/setup-system.sh installs it)")
 
+
+def xvfb() -> list[str]:
+    # -a searches from a per-worker number: two pytest-xdist workers do not race for :99
+    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800), "-s", "-screen 0 640x480x24"]
+
 DEFERRED = ROOT / "configs" / "deferred.toml"
 
 # the driver: a Viewer with a hook before each draw; HOOK is the test's part
@@ -73,7 +78,7 @@ def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int
                                     frames=frames, overlay=overlay, pre=pre, shot=str(tmp / "shot.png"),
                                     hook=textwrap.indent(textwrap.dedent(hook), "    ")))
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    done = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable,
+    done = subprocess.run([*xvfb(), sys.executable,
                            str(script)], capture_output=True, text=True, timeout=180, env=env,
                           cwd=tmp, check=False)
     assert done.returncode == 0, done.stdout + done.stderr

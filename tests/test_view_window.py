@@ -18,6 +18,11 @@ from .conftest import ROOT
 pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
                                 reason="needs xvfb-run (scripts/setup-system.sh installs it)")
 
+
+def xvfb() -> list[str]:
+    # -a searches from a per-worker number: two pytest-xdist workers do not race for :99
+    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800), "-s", "-screen 0 640x480x24"]
+
 SIZE = "48x27"
 DEFERRED = str(ROOT / "configs" / "deferred.toml")
 SSAO = str(ROOT / "configs" / "deferred_ssao_shadows.toml")
@@ -32,7 +37,7 @@ def _env(**extra: str) -> dict[str, str]:
 
 def view(tmp: Path, config: str, *args: str, **env: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        ["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable, "-m", "rfw.cli",
+        [*xvfb(), sys.executable, "-m", "rfw.cli",
          "view", config, "--size", SIZE, *args],
         capture_output=True, text=True, timeout=180, env=_env(**env), cwd=tmp, check=False)
 
