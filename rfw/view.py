@@ -100,6 +100,7 @@ class Viewer:
         self._error: str | None = None  # the frame error said last (said once)
         self._last_draw: float | None = None
         self._later: list[tuple[Any, tuple]] = []
+        self._tried: dict[str, str] = {}  # variant group -> the option V tried last
         self._blit = self._blit_pipeline()
         self._rebuild(cfg)
         self.overlay = Overlay(self, self.canvas, self.device.device, self.format) \
@@ -158,8 +159,12 @@ class Viewer:
                 return
             group = groups[self.group]
             options = [k for k in self.cfg.variants[group] if k != "default"]
-            now = self.chosen(group)
-            self.choose(group, options[(options.index(now) + 1) % len(options)])
+            # after a refused option the next V tries the one after it, not it again
+            start = self._tried.get(group, self.chosen(group))
+            option = options[(options.index(start) + 1) % len(options)]
+            self._tried[group] = option
+            if self.choose(group, option):
+                self._tried.pop(group)
         elif key.lower() == "r":
             self.executor.shaders.programs.clear()
             self.say("shaders reloaded")
