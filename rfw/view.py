@@ -274,16 +274,21 @@ class Viewer:
         last = self.frames_left is not None and self.frames_left <= 1
         try:
             self.executor.frame()
+            ok = True
         except RfwError as e:  # e.g. a shader edited into an error: keep the window up
             self._failed(f"frame skipped: {e}")
-        else:
-            if self._error is not None:
-                self._error, self.status = None, ""
-                self.say("frames render again")
-            self._present(capture=(last and self.screenshot is not None) or self._capture_next)
-            while self._later:
-                action, args = self._later.pop(0)
-                action(*args)
+            ok = False
+        if ok and self._error is not None:
+            self._error, self.status = None, ""
+            self.say("frames render again")
+        # a failed frame shows the last image, and the overlay with the error and its
+        # checkboxes (a click can switch the broken pass off)
+        self._present(capture=ok and ((last and self.screenshot is not None)
+                                      or self._capture_next))
+        while self._later:
+            action, args = self._later.pop(0)
+            action(*args)
+        if ok:
             self.frame_count += 1
             if self.report_every and self.frame_count % self.report_every == 0:
                 self.report()
@@ -327,6 +332,8 @@ class Viewer:
         parts = []
         for name, t in self.executor.timings.items():
             recent = t.gpu_ms[-30:] or t.cpu_ms[-30:]
+            if not recent:  # no frame of this graph has finished yet
+                continue
             parts.append(f"{name} {statistics.median(recent):.2f}")
         line = f"frame {self.frame_count} gpu ms: " + ", ".join(parts)
         self.canvas.set_title(f"rfw: {self.cfg.name} | {line}")

@@ -177,12 +177,16 @@ def test_broken_shader_is_said_once(tmp_path):
         if n == 3:
             Path({str(tmp_path / "tonemap.comp.glsl")!r}).write_text({broken!r})
             v.key("r")
+        if n == 8:  # what the overlay showed on draw 7, a broken one
+            out["broken"] = list(v.overlay.lines)
         if n == 9:
             Path({str(tmp_path / "tonemap.comp.glsl")!r}).write_text({shader!r})
             v.key("r")
-    """, config=config, sets=["size=32x18"], frames=12, overlay=False, pre="import hot_tonemap")
+    """, config=config, sets=["size=32x18"], frames=12, pre="import hot_tonemap")
     skipped = [x for x in lines if x.startswith("frame skipped")]
     assert len(skipped) == 1 and "pass 'tonemap'" in skipped[0], lines
     assert "tonemap.comp.glsl:" in skipped[0]  # the file and line of the error
     assert result["draws"] == 12 and result["frames"] == 12 - 6  # six draws were broken
     assert lines.index(skipped[0]) < lines.index("frames render again")
+    # broken frames still show the window, with the error in the overlay; fixed, it is gone
+    assert skipped[0] in result["broken"] and skipped[0] not in result["lines"]
