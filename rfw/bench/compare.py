@@ -1,7 +1,10 @@
-"""``rfw bench compare OLD NEW``: per-pass changes beyond the noise.
+"""``rfw bench compare OLD NEW [--out DIR]``: per-pass changes beyond the noise.
 
 A change is flagged when the 95% CIs of the two medians do not overlap *and* the relative
-change of the median exceeds the threshold; slower is a regression, faster an improvement."""
+change of the median exceeds the threshold; slower is a regression, faster an improvement.
+With ``--out`` it also writes ``compare.md`` and a self-contained ``compare.html`` there: every
+change with its significance, and each variant's NEW image against its OLD one (PSNR, FLIP,
+difference image with its legend)."""
 
 from __future__ import annotations
 
@@ -9,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..fileio import inside
 from .runner import load_results
 from .summary import VariantSummary, summarize_results
 
@@ -73,9 +77,14 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
 
 
 def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression: bool = False,
-            show_all: bool = False) -> int:
-    """Print the flagged changes; returns the exit code (1 on a regression when asked)."""
-    found, notes = changes(load_results(old), load_results(new))
+            show_all: bool = False, out: Path | None = None) -> int:
+    """Print the flagged changes (and write ``compare.md``/``.html`` into ``out``); returns
+    the exit code (1 on a regression when asked)."""
+    old_records, new_records = load_results(old), load_results(new)
+    found, notes = changes(old_records, new_records)
+    if out is not None:
+        md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold)
+        print(f"wrote {md}, {page}")
     flagged = [(c, c.verdict(threshold)) for c in found]
     rows = [(c, v) for c, v in flagged if show_all or v != "same"]
     print(f"rfw bench compare: {old} -> {new} (threshold {threshold:.0%}, CIs must not "
@@ -96,3 +105,64 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
     print(f"{regressions} regression(s), {improvements} improvement(s), "
           f"{len(flagged) - regressions - improvements} unchanged of {len(flagged)} compared")
     return 1 if fail_on_regression and regressions else 0
+
+
+def _run_folder(path: Path) -> Path:
+    return path if path.is_dir() else path.parent
+
+
+def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
+                  new_records: list[dict[str, Any]], out: Path, *,
+                  threshold: float = 0.05) -> tuple[Path, Path]:
+    """``out/compare.md`` and ``out/compare.html``: per-pass changes with significance and
+    the image differences between the two runs (images copied into ``out/images``)."""
+    from .images import compare as compare_images
+    from .images import diff_legend, load_png, save_png
+    from .report import Cells, Doc, Img, change_text, ci, db, ms
+
+    out.mkdir(parents=True, exist_ok=True)
+    found, notes = changes(old_records, new_records)
+    doc = Doc()
+    doc.h(1, "rfw bench compare")
+    doc.table(["what", "value"], [["OLD", f"`{old}`"], ["NEW", f"`{new}`"],
+                                  ["threshold", f"{threshold:.0%}"]])
+    doc.bullets(notes)
+    doc.h(2, "Per pass")
+    doc.p("Medians and 95% CIs of OLD and NEW. `change`: `*` where the CIs do not overlap, "
+          "`(n.s.)` where they do (within the noise); `verdict`: a significant change larger "
+          "than the threshold.")
+    rows = [[c.variant, c.what, c.metric, ms(c.old), ci(c.old), ms(c.new), ci(c.new),
+             change_text(c.old, c.new), c.verdict(threshold)] for c in found]
+    doc.table(["variant", "pass", "metric", "OLD ms", "OLD 95% CI", "NEW ms", "NEW 95% CI",
+               "change", "verdict"], rows)
+    olds = {v.label: v for v in summarize_results(old_records) if v.ok and v.image}
+    news = {v.label: v for v in summarize_results(new_records) if v.ok and v.image}
+    both = [k for k in olds if k in news]
+    if both:
+        doc.h(2, "Images")
+        doc.p("Each variant's NEW image against its OLD one: |OLD - NEW|, max over RGB, "
+              "colour-mapped from black (0) to the largest difference (legend below).")
+        table = []
+        for n, label in enumerate(both):
+            a = load_png(inside(_run_folder(old), olds[label].image))
+            b = load_png(inside(_run_folder(new), news[label].image))
+            files = {k: Path("images") / f"{n}_{k}.png" for k in ("old", "new", "diff",
+                                                               "legend")}
+            save_png(inside(out, files["old"]), a)
+            save_png(inside(out, files["new"]), b)
+            cells: list[Any] = [label, Img(str(files["old"]), "old"),
+                                Img(str(files["new"]), "new")]
+            if a.shape != b.shape:
+                table.append([*cells, "other size", "-"])
+                continue
+            c = compare_images(a, b)
+            save_png(inside(out, files["diff"]), c["diff"])
+            diff_legend(inside(out, files["legend"]), c["diff_max"])
+            table.append([*cells, Cells([Img(str(files["diff"]), "diff"),
+                                         Img(str(files["legend"]), "legend", 160)]),
+                          db(c["psnr"])])
+        doc.table(["variant", "OLD", "NEW", "difference", "PSNR"], table)
+    md, page = out / "compare.md", out / "compare.html"
+    md.write_text(doc.markdown(), encoding="utf-8")
+    page.write_text(doc.html("rfw bench compare", out), encoding="utf-8")
+    return md, page

@@ -1,5 +1,6 @@
 """Image differences for the report: PSNR, FLIP (NVIDIA's perceptual error; SSIM where the
-``flip-evaluator`` package is missing) and magnified difference images."""
+``flip-evaluator`` package is missing) and colour-mapped difference images, auto-scaled to
+their largest difference and drawn with a legend."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-DIFF_GAIN = 8  # abs diff x8 so a one-step difference of an 8-bit channel shows
+DIFF_CMAP = "inferno"  # perceptually ordered, black at zero: unchanged pixels stay dark
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
@@ -30,12 +31,44 @@ def psnr(reference: np.ndarray, test: np.ndarray, *, peak: float = 255.0) -> flo
     return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
 
 
-def diff_image(reference: np.ndarray, test: np.ndarray, *, gain: int = DIFF_GAIN) -> np.ndarray:
-    """8-bit RGB of ``|reference - test| * gain`` (max over channels shown grey)."""
+def diff_image(reference: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, int]:
+    """``|reference - test|`` (max over RGB) colour-mapped, and the scale's top: the largest
+    difference, so it neither saturates (a change of 200 stays apart from one of 100) nor
+    vanishes (a one-step change takes the map's top colour). Zero maps to black."""
     a, b = _rgb(reference).astype(np.int16), _rgb(test).astype(np.int16)
-    d = np.abs(a - b).max(axis=2) * gain
-    d = np.clip(d, 0, 255).astype(np.uint8)
-    return np.repeat(d[..., None], 3, axis=2)
+    if a.shape != b.shape:
+        raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
+    d = np.abs(a - b).max(axis=2)
+    top = int(d.max())
+    return colorize(d / max(top, 1)), top
+
+
+def colorize(x: np.ndarray) -> np.ndarray:
+    """Values in [0, 1] as 8-bit RGB through ``DIFF_CMAP``; exactly 0 is black."""
+    from matplotlib import colormaps
+
+    rgb = colormaps[DIFF_CMAP](np.clip(x, 0.0, 1.0))[..., :3]
+    rgb[x <= 0] = 0.0
+    return (rgb * 255 + 0.5).astype(np.uint8)
+
+
+def diff_legend(path: Path, top: int) -> None:
+    """A colour bar for a difference image: 0 to ``top`` 8-bit steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import Normalize
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(2.6, 0.55))
+    norm = Normalize(0, max(top, 1))
+    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=DIFF_CMAP), cax=ax,
+                 orientation="horizontal")
+    ax.set_title(f"|difference|, 8-bit steps (max {top})", fontsize=7)
+    ax.tick_params(labelsize=6)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
 
 
 def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray] | None:
@@ -65,7 +98,8 @@ def ssim(reference: np.ndarray, test: np.ndarray) -> float | None:
 
 def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
     """PSNR plus FLIP (or SSIM) and the difference images of ``test`` against ``reference``."""
-    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": diff_image(reference, test)}
+    diff, top = diff_image(reference, test)
+    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": diff, "diff_max": top}
     f = flip(reference, test)
     if f is not None:
         out["flip"], out["flip_map"] = f

@@ -1,12 +1,15 @@
 """``report.md`` and ``report.html`` from a ``results.jsonl``: tables, charts, images, peers.
 
 The two files say the same: a small document model is rendered to Markdown and to HTML.
-Images (outputs, differences, charts) are PNG files beside the reports, linked relatively,
-so the folder is the unit to keep or upload.
+Images (outputs, differences, charts) are PNG files beside the reports; ``report.md`` links
+them relatively, ``report.html`` embeds them as data URIs, so that one file can be sent or
+attached on its own. ``results.csv`` (beside ``results.jsonl``) holds the summary numbers.
 """
 
 from __future__ import annotations
 
+import base64
+import csv
 import html
 import math
 from dataclasses import dataclass
@@ -15,7 +18,7 @@ from typing import Any
 
 from ..errors import check_identifier
 from ..fileio import inside
-from .images import compare, load_png, psnr, save_png
+from .images import compare, diff_legend, load_png, psnr, save_png
 from .path_chart import path_charts
 from .runner import load_results
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
@@ -28,7 +31,12 @@ class Img:
     width: int = 240
 
 
-Cell = Any  # str | float | Img | None
+@dataclass
+class Cells:
+    items: list[Any]  # Img or str, stacked in one table cell
+
+
+Cell = Any  # str | float | Img | Cells | None
 
 
 class Doc:
@@ -72,7 +80,9 @@ class Doc:
                 out.append("\n".join(lines))
         return "\n\n".join(out) + "\n"
 
-    def html(self, title: str) -> str:
+    def html(self, title: str, base: Path) -> str:
+        """One self-contained page: every image (paths relative to ``base``) is embedded."""
+        base = Path(base)
         out = [f"<!doctype html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
                f"<style>{CSS}</style></head><body>"]
         for kind, value in self.blocks:
@@ -83,19 +93,22 @@ class Doc:
             elif kind == "ul":
                 out.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in value) + "</ul>")
             elif kind == "img":
-                out.append(f"<p>{_html_img(value, full=True)}</p>")
+                out.append(f"<p>{_html_img(value, base, full=True)}</p>")
             else:
                 headers, rows = value
-                out.append("<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in headers)
+                # a wide table scrolls inside its box instead of widening the page
+                out.append("<div class='wide'><table><tr>"
+                           + "".join(f"<th>{_e(h)}</th>" for h in headers)
                            + "</tr>" + "".join("<tr>" + "".join(
-                               f"<td>{_html_cell(c)}</td>" for c in r) + "</tr>" for r in rows)
-                           + "</table>")
+                               f"<td>{_html_cell(c, base)}</td>" for c in r) + "</tr>" for r in rows)
+                           + "</table></div>")
         out.append("</body></html>")
         return "\n".join(out) + "\n"
 
 
 CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1400px}"
-       "table{border-collapse:collapse;margin:0.5em 0 1.5em}"
+       ".wide{max-width:100%;overflow-x:auto;margin:0.5em 0 1.5em}"
+       "table{border-collapse:collapse}img{max-width:100%;height:auto}"
        "td,th{border:1px solid #ccc;padding:3px 8px;text-align:right;vertical-align:top}"
        "th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}"
        "img{image-rendering:pixelated}code{background:#f3f3f3;padding:0 3px}")
@@ -118,20 +131,29 @@ def _bold(text: str) -> str:
 
 
 def _md_cell(c: Cell) -> str:
+    if isinstance(c, Cells):
+        return " ".join(_md_cell(i) for i in c.items)
     if isinstance(c, Img):
         return f"![{c.alt}]({c.path})"
     return "-" if c is None else str(c).replace("|", "\\|").replace("\n", " ")
 
 
-def _html_img(img: Img, *, full: bool = False) -> str:
-    style = "max-width:100%" if full else f"width:{img.width}px"
-    return (f"<a href='{_e(img.path)}'><img src='{_e(img.path)}' alt='{_e(img.alt)}' "
-            f"style='{style}'></a>")
+def data_uri(path: Path) -> str:
+    """A PNG file as a ``data:`` URI."""
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
 
 
-def _html_cell(c: Cell) -> str:
+def _html_img(img: Img, base: Path, *, full: bool = False) -> str:
+    style = "max-width:100%" if full else f"width:{img.width}px;max-width:100%"
+    return (f"<img src='{data_uri(inside(base, img.path))}' alt='{_e(img.alt)}' "
+            f"title='{_e(img.path)}' style='{style}'>")
+
+
+def _html_cell(c: Cell, base: Path) -> str:
+    if isinstance(c, Cells):
+        return "<br>".join(_html_cell(i, base) for i in c.items)
     if isinstance(c, Img):
-        return _html_img(c)
+        return _html_img(c, base)
     return "-" if c is None else _inline(str(c))
 
 
@@ -183,12 +205,97 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     _images(doc, out_dir, rfw, reference)
     _counters(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
+    _devices(doc, rfw)
     _failures(doc, variants)
     _method(doc, records)
     md, page = out_dir / "report.md", out_dir / "report.html"
     md.write_text(doc.markdown(), encoding="utf-8")
-    page.write_text(doc.html("rfw benchmark"), encoding="utf-8")
+    page.write_text(doc.html("rfw benchmark", out_dir), encoding="utf-8")
+    write_csv(out_dir / "results.csv", variants)
     return md, page
+
+
+CSV_FIELDS = ("variant", "kind", "device", "backend", "pass", "metric", "n", "runs", "median",
+              "ci_lo", "ci_hi", "p5", "p95", "mean")
+
+
+def write_csv(path: Path, variants: list[VariantSummary]) -> Path:
+    """One row per variant, device, pass (``frame`` for whole frames) and metric: the
+    summary numbers of the report (ms), for plotting elsewhere."""
+    rows = []
+    for v in variants:
+        for dev, part in _by_device(v):
+            for metric, s in part.frame.items():
+                if isinstance(s, dict):
+                    rows.append(_csv_row(part, dev, "frame", metric, s))
+            for p in part.passes:
+                for metric in ("gpu_ms", "cpu_ms"):
+                    if p.get(metric):
+                        rows.append(_csv_row(part, dev, p["name"], metric, p[metric]))
+    with path.open("w", encoding="utf-8", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(CSV_FIELDS)
+        w.writerows(rows)
+    return path
+
+
+def _csv_row(v: VariantSummary, device: str, name: str, metric: str,
+             s: dict[str, Any]) -> list[Any]:
+    return [v.label, v.kind, device, v.get("backend", ""), name, metric, s["n"], s["runs"],
+            *(round(s[k], 6) for k in ("median", "ci_lo", "ci_hi", "p5", "p95", "mean"))]
+
+
+def device_of(record: dict[str, Any]) -> str:
+    """The device a run measured: its adapter, with the Ray node and GPU where it ran as a
+    Ray task (several identical GPUs stay apart)."""
+    name = str(record.get("device") or "?")
+    where = record.get("ray") or {}
+    if where:
+        gpus = ",".join(str(g) for g in where.get("gpu_ids") or [])
+        name += f" @ {where.get('host', '?')}" + (f" GPU {gpus}" if gpus else "")
+    return name
+
+
+def _by_device(v: VariantSummary) -> list[tuple[str, VariantSummary]]:
+    """``v`` split by device (the whole of ``v`` when all its runs had one)."""
+    devices = list(dict.fromkeys(device_of(r) for r in v.records))
+    if len(devices) <= 1:
+        return [(devices[0] if devices else "", v)]
+    out = []
+    for d in devices:
+        part = summarize_results([r for r in v.records if device_of(r) == d])
+        out.append((d, part[0]))
+    return out
+
+
+def _devices(doc: Doc, rfw: list[VariantSummary]) -> None:
+    """Per-device tables side by side: one column group per device, one row per variant and
+    pass; shown when the runs measured more than one device."""
+    done = [v for v in rfw if v.ok]
+    split = {v.label: dict(_by_device(v)) for v in done}
+    devices = list(dict.fromkeys(d for parts in split.values() for d in parts))
+    if len(devices) < 2:
+        return
+    doc.h(2, "Per device")
+    doc.p("The same variants measured on each device (GPU ms, median and 95% CI); "
+          "`-`: not run there.")
+    headers = ["variant", "pass"]
+    for d in devices:
+        headers += [f"{d}: GPU ms", f"{d}: 95% CI"]
+    rows = []
+    for v in done:
+        names = ["frame", *(p["name"] for p in v.passes)]
+        for name in names:
+            row: list[Cell] = [v.label, name]
+            for d in devices:
+                part = split[v.label].get(d)
+                s = None
+                if part is not None:
+                    s = part.frame.get("gpu_ms") if name == "frame" else next(
+                        (p["gpu_ms"] for p in part.passes if p["name"] == name), None)
+                row += [ms(s), ci(s)]
+            rows.append(row)
+    doc.table(headers, rows)
 
 
 def _clocks(records: list[dict[str, Any]]) -> str:
@@ -259,11 +366,12 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
         m = v.get("memory") or {}
         gpu, wall, cpu = v.frame.get("gpu_ms"), v.frame.get("wall_ms"), v.frame.get("cpu_ms")
         alloc = m.get("transient_allocated_bytes", m.get("plan_transient_bytes"))
-        rows.append([v.label, v.get("backend"), ms(gpu), ci(gpu), spread(gpu), ms(wall),
-                     spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
+        devices = ", ".join(dict.fromkeys(device_of(r) for r in v.records))
+        rows.append([v.label, devices, v.get("backend"), ms(gpu), ci(gpu), spread(gpu),
+                     ms(wall), spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
                      + (" (plan)" if m.get("source") == "plan" else "")])
-    doc.table(["variant", "backend", "GPU ms", "95% CI", "p5-p95", "wall ms", "wall p5-p95",
-               "CPU record ms", "transient MiB aliased / not"], rows)
+    doc.table(["variant", "device", "backend", "GPU ms", "95% CI", "p5-p95", "wall ms",
+               "wall p5-p95", "CPU record ms", "transient MiB aliased / not"], rows)
 
 
 def _pass_tables(doc: Doc, rfw: list[VariantSummary]) -> None:
@@ -301,18 +409,25 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
     labels = [v.label for v in done]
     height = max(2.5, 0.45 * len(done) + 1.5)
     fig, axes = plt.subplots(1, 2, figsize=(14, height), sharey=True)
-    for ax, metric, title in ((axes[0], "gpu_ms", "GPU ms per pass (median)"),
-                              (axes[1], "cpu_ms", "CPU record ms per pass (median)")):
+    for ax, metric, title in ((axes[0], "gpu_ms", "GPU ms per pass (median, 95% CI)"),
+                              (axes[1], "cpu_ms", "CPU record ms per pass (median, 95% CI)")):
+        ax.set_title(title)
         left = [0.0] * len(done)
         for n in names:
-            widths = []
+            widths, err = [], [[], []]
             for v in done:
                 p = next((p for p in v.passes if p["name"] == n), None)
                 s = p and p[metric]
                 widths.append(s["median"] if s else 0.0)
+                lo, hi = stacked_error(s)
+                err[0].append(lo)
+                err[1].append(hi)
             ax.barh(labels, widths, left=left, color=colors[n], label=n)
-            left = [a + b for a, b in zip(left, widths, strict=True)]
-        ax.set_title(title)
+            # each segment's CI drawn at its right end, where its median ends the stack
+            ends = [a + b for a, b in zip(left, widths, strict=True)]
+            ax.errorbar(ends, labels, xerr=err, fmt="none", ecolor="black", elinewidth=0.8,
+                        capsize=2)
+            left = ends
         ax.set_xlabel("ms")
     axes[0].invert_yaxis()  # shared: the first variant on top, as in the tables
     axes[1].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
@@ -336,6 +451,29 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
     plt.close(fig)
     return [Img("charts/passes.png", "stacked per-pass medians"),
             Img("charts/distributions.png", "frame time distributions")]
+
+
+def stacked_error(s: dict[str, Any] | None) -> tuple[float, float]:
+    """The error bar of one stacked segment: distances from its median down to the CI's low
+    end and up to its high end (zero for no samples)."""
+    if not s:
+        return 0.0, 0.0
+    return max(0.0, s["median"] - s["ci_lo"]), max(0.0, s["ci_hi"] - s["median"])
+
+
+def significant(a: dict[str, Any] | None, b: dict[str, Any] | None) -> bool:
+    """Whether two medians differ beyond the noise: their 95% CIs do not overlap."""
+    if not a or not b:
+        return False
+    return a["ci_hi"] < b["ci_lo"] or b["ci_hi"] < a["ci_lo"]
+
+
+def change_text(ref: dict[str, Any] | None, own: dict[str, Any] | None) -> str:
+    """``+15.0% *`` when the CIs do not overlap, ``+15.0% (n.s.)`` when they do."""
+    if not ref or not own or not ref["median"]:
+        return "-"
+    mark = " *" if significant(ref, own) else " (n.s.)"
+    return f"{own['median'] / ref['median'] - 1:+.1%}{mark}"
 
 
 def _pick_reference(rfw: list[VariantSummary], reference: str | int | None) -> VariantSummary:
@@ -376,7 +514,10 @@ def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
             name = check_identifier("variant id", v.records[0].get("variant_id"))
             diff = Path("images") / f"{name}.diff.png"
             save_png(inside(out_dir, diff), c["diff"])
-            row.update(psnr=c["psnr"], diff=str(diff), flip=c.get("flip"), ssim=c.get("ssim"))
+            legend = Path("images") / f"{name}.diff_legend.png"
+            diff_legend(inside(out_dir, legend), c["diff_max"])
+            row.update(psnr=c["psnr"], diff=str(diff), legend=str(legend),
+                       diff_max=c["diff_max"], flip=c.get("flip"), ssim=c.get("ssim"))
             if "flip_map" in c:
                 fmap = Path("images") / f"{name}.flip.png"
                 save_png(inside(out_dir, fmap), c["flip_map"])
@@ -393,26 +534,31 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
     doc.h(2, "Images")
     has_flip = any(r.get("flip") is not None for r in rows)
     doc.p(f"Reference: **{ref.label}**; image differences next to the time differences "
-          "(frame GPU ms, median). Difference: |reference - variant| x 8, max over RGB. "
+          "(frame GPU ms, median). Difference: |reference - variant|, max over RGB, "
+          "colour-mapped from black (0) to the largest difference of that image (its legend "
+          "below it). `vs reference`: `*` where the 95% CIs of the two medians do not overlap, "
+          "`(n.s.)` where they do (not a result). "
           + ("FLIP: NVIDIA's perceptual error (LDR, 67 pixels per degree; 0 = identical), "
              "magma error map." if has_flip else "SSIM from scikit-image (FLIP is not "
                                                  "installed)."))
     headers = ["variant", "image", "difference", *(["FLIP map"] if has_flip else []), "PSNR",
                "FLIP" if has_flip else "SSIM", "GPU ms", "vs reference"]
-    ref_ms = (ref.frame.get("gpu_ms") or {}).get("median")
+    ref_gpu = ref.frame.get("gpu_ms")
     table = []
     for r in rows:
         label = r["variant"].label
-        own_ms = (r["variant"].frame.get("gpu_ms") or {}).get("median")
+        own_gpu = r["variant"].frame.get("gpu_ms")
+        own_ms = (own_gpu or {}).get("median")
         cells: list[Cell] = [label, Img(r["image"], label)]
-        cells.append(Img(r["diff"], "diff") if r.get("diff") else "other size")
+        cells.append(Cells([Img(r["diff"], "diff"), Img(r["legend"], "legend", 160)])
+                     if r.get("diff") else "other size")
         if has_flip:
             cells.append(Img(r["flip_map"], "flip") if r.get("flip_map") else "-")
         cells.append(db(r.get("psnr")))
         metric = r.get("flip") if has_flip else r.get("ssim")
         cells.append("-" if metric is None else f"{metric:.4f}")
         cells.append("-" if own_ms is None else f"{own_ms:.3f}")
-        cells.append("-" if own_ms is None or not ref_ms else f"{own_ms / ref_ms - 1:+.1%}")
+        cells.append("reference" if r["variant"] is ref else change_text(ref_gpu, own_gpu))
         table.append(cells)
     doc.table(headers, table)
 

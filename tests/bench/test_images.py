@@ -31,13 +31,15 @@ def test_psnr_known_value_and_alpha_ignored():
     assert abs(psnr(a, b) - 20 * math.log10(255)) < 1e-9
 
 
-def test_diff_image_magnifies_and_flip_sees_a_change():
+def test_diff_image_scales_to_its_largest_difference_and_flip_sees_a_change():
     a = _image(1)
     b = a.copy()
     b[5, 7, 1] ^= 3
-    d = diff_image(a, b)
-    assert d.shape == (18, 32, 3) and d[5, 7, 0] == 3 * 8 and d.sum() == 3 * 8 * 3
+    d, top = diff_image(a, b)
+    assert top == 3 and d.shape == (18, 32, 3)
+    # the one changed pixel takes the map's top colour; every other pixel stays black
+    assert d[5, 7].min() > 100 and np.count_nonzero(d.any(axis=2)) == 1
     c = compare(a, b)
-    assert 0 < c["psnr"] < math.inf
+    assert 0 < c["psnr"] < math.inf and c["diff_max"] == 3
     if "flip" in c:
         assert c["flip"] > 0 and c["flip_map"].shape == (18, 32, 3)
