@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import re
 import struct
 import typing
 from pathlib import Path
@@ -225,13 +226,35 @@ def _to_float(value: Any, where: str) -> float:
 
 
 def Tex2D(format: str | None = None, *, size_of: str | None = None,
-          scale: float = 1.0, **kw: Any) -> Slot:
-    """A 2D texture slot; ``size_of`` names another slot of the same pass."""
+          format_of: str | None = None, scale: float = 1.0, **kw: Any) -> Slot:
+    """A 2D texture slot; ``size_of`` and ``format_of`` name another slot of the same pass
+    whose resource's size (times ``scale``) or format this output takes."""
+    if format_of is not None:
+        kw["format_of"] = format_of
     if size_of is not None:
         kw["size"] = SizeRule.like(size_of, scale)
     elif scale != 1.0:
         kw["size"] = SizeRule.output(scale)
     return _slot("texture", format, kw)
+
+
+# GLSL's storage image qualifiers: <channels><bits><kind> of the WebGPU name
+_GLSL_KIND = {"unorm": "", "snorm": "_snorm", "uint": "ui", "sint": "i", "float": "f"}
+_GLSL_PACKED = {"rgb10a2unorm": "rgb10_a2", "rgb10a2uint": "rgb10_a2ui",
+                "rg11b10ufloat": "r11f_g11f_b10f"}
+
+
+def storage_format(format: str) -> str:
+    """The GLSL layout qualifier of a storage image of ``format`` (``rgba8unorm`` ->
+    ``rgba8``): a shader whose output follows its input (``format_of``) gets it as a
+    define, ``ctx.dispatch(..., defines={"DST_FORMAT": storage_format(ctx.format("dst"))})``."""
+    m = re.fullmatch(r"(r|rg|rgba)(8|16|32)(unorm|snorm|uint|sint|float)", format)
+    if m and not (m[2] == "32" and m[3] in ("unorm", "snorm")):
+        return f"{m[1]}{m[2]}{_GLSL_KIND[m[3]]}"
+    if format in _GLSL_PACKED:
+        return _GLSL_PACKED[format]
+    raise GraphError(f"format {format} has no GLSL storage image qualifier (a storage "
+                     "output needs a plain r/rg/rgba format, not sRGB or bgra)")
 
 
 class Pass:

@@ -84,6 +84,7 @@ def catalogue(names: list[str] | None = None) -> list[dict]:
 def _slot_info(name: str, spec: object) -> dict:
     size = getattr(spec, "size", None)
     return {"name": name, "type": spec.type, "format": spec.format,  # type: ignore[attr-defined]
+            "format_of": getattr(spec, "format_of", None),
             "size": None if size is None else size.describe(),
             "optional": getattr(spec, "optional", False),
             "desc": getattr(spec, "desc", "")}
@@ -98,7 +99,8 @@ def format_catalogue(entries: list[dict]) -> str:
         lines.append(f"    {e['doc'] or '(no docstring)'}")
         for direction, slots in (("in ", e["inputs"]), ("out", e["outputs"])):
             for s in slots:
-                fmt = s["format"] or ("any" if direction == "in " else "-")
+                fmt = s["format"] or (f"format of {s['format_of']}" if s.get("format_of")
+                                      else "any" if direction == "in " else "-")
                 size = f", {s['size']}" if s["size"] else ""
                 opt = ", optional" if s["optional"] else ""
                 desc = f": {s['desc']}" if s["desc"] else ""

@@ -16,7 +16,7 @@ _COMPUTE_PY = '''"""{title}: TODO say what it computes (this docstring is the ca
 from typing import Annotated
 
 from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.passes import Range
+from rfw.passes import Range, storage_format
 
 
 @register_pass("{name}")
@@ -25,14 +25,17 @@ class {cls}(ComputePass):
 
     shader = "{name}.comp.glsl"  # resolved next to this file
     inputs = {{"src": Tex2D(desc="input color")}}
-    outputs = {{"dst": Tex2D("rgba16float", size_of="src", desc="output color")}}
+    # the input's size and format (sRGB: its linear twin, as storage images cannot be sRGB)
+    outputs = {{"dst": Tex2D(format_of="src", size_of="src", desc="output color")}}
 
     class Params(Settings):
         gain: Annotated[float, Range(0.0, 16.0)] = 1.0  # multiplies the input
 
     def record(self, ctx) -> None:
+        # the shader's storage format is dst's: a define, so one file serves every format
         ctx.dispatch(threads=ctx.extent("dst"), t_src=ctx.sampled("src"),
-                     o_dst=ctx.storage("dst"), u_params=self.params)
+                     o_dst=ctx.storage("dst"), u_params=self.params,
+                     defines={{"DST_FORMAT": storage_format(ctx.format("dst"))}})
 '''
 
 _COMPUTE_GLSL = '''#version 460
@@ -40,10 +43,14 @@ _COMPUTE_GLSL = '''#version 460
 // SPIR-V runs on --backend wgpu and --backend vk, bindings matched by name
 #extension GL_EXT_samplerless_texture_functions : require  // texelFetch on texture2D
 
+#ifndef DST_FORMAT  // the pass defines dst's format (its input's)
+#define DST_FORMAT rgba16f
+#endif
+
 layout(local_size_x = 8, local_size_y = 8) in;
 
 layout(set = 0, binding = 0) uniform texture2D t_src;
-layout(set = 0, binding = 1, rgba16f) uniform writeonly image2D o_dst;
+layout(set = 0, binding = 1, DST_FORMAT) uniform writeonly image2D o_dst;
 layout(set = 0, binding = 2, std140) uniform Params {{
     float gain;
 }} u_params;  // Settings.pack() writes the std140 layout

@@ -69,6 +69,7 @@ def _bridge(resource: str, spec: Slot, src: str, dst: str) -> PassDecl:
         read = Slot("buffer", usage=frozenset({"transfer_src"}))
     else:
         out = Slot("texture", spec.format, size=SizeRule.like(resource), mips=spec.mips,
+                   format_of="src" if spec.format_of else None,
                    layers=spec.layers, usage=frozenset({"transfer_dst"}),
                    desc=f"{resource} copied from {src}")
         read = Slot("texture", usage=frozenset({"transfer_src"}))

@@ -86,6 +86,7 @@ class Slot:
     read_only: bool = False  # depth test without depth writes
     stages: frozenset[str] = frozenset()  # override the shader stages the pass reads in
     optional: bool = False  # an input the pass can do without (configs drop it when unfed)
+    format_of: str | None = None  # outputs: take the format of this slot's resource
     desc: str = ""
 
     def with_(self, **changes: Any) -> Slot:
@@ -113,7 +114,8 @@ def Storage(format: str | None = None, **kw: Any) -> Slot:
 
 
 def Attachment(format: str | None = None, **kw: Any) -> Slot:
-    """Color attachment; as an input it is loaded and written (blending, in-place)."""
+    """Color attachment; as an input it is loaded and written (blending, in-place).
+    ``format_of="src"`` instead of a format: the format of slot ``src``'s resource."""
     return _slot("attachment", format, kw)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from .accesses import derive_accesses, slot_where
 from .errors import did_you_mean
+from .format_of import resolve_formats_of
 from .formats import UnknownFormatError, format_info
 from .graph import Graph, PassDecl
 from .plan import IMPLIED_CAPS, STATS, Access, Declared, _Problems
@@ -25,6 +26,7 @@ def validate(graph: Graph, caps: frozenset[str] | None, strict: bool) -> Declare
     _check_settings(passes, problems)
     # 1b: one declaration per resource
     resources = _declare_resources(graph, passes, problems)
+    resolve_formats_of(passes, resources, problems)  # format_of="<slot>" outputs
     problems.raise_if_any()
     # 1c: slots become accesses with states; 1d: steps inside passes, their parts of them
     accesses, history = derive_accesses(passes, resources, problems)
@@ -102,7 +104,7 @@ def _resource_from(name: str, spec: Slot, p: PassDecl | None, b: Binding | None,
     kind = {"buffer": "buffer", "accel": "accel"}.get(spec.type, "image")
     external = spec.external
     # an external resource may stay undescribed: the application owns and sizes it
-    if kind == "image" and spec.format is None and not external:
+    if kind == "image" and spec.format is None and not external and spec.format_of is None:
         problems.lenient(f"{where}: image '{name}' has no format")
         external = True
     elif kind == "image" and spec.format is not None:

@@ -83,7 +83,7 @@ def test_installed_pass_is_listed(installed, tmp_path):
         "my_glow  (compute; rfw_my_glow.my_glow)",
         "    Scales the color of ``src`` by ``gain``: replace with your technique.",
         "    in  src (texture any): input color",
-        "    out dst (texture rgba16float, like src): output color",
+        "    out dst (texture format of src, like src): output color",
         "    set gain: float = 1.0 in 0..16"]
     # negative control: not installed, not found (one line, a suggestion-free error)
     done = rfw("passes", "my_glow", cwd=tmp_path)
