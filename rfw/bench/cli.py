@@ -1,7 +1,8 @@
 """The ``rfw bench`` arguments and what they run (kept light: argparse only at import).
 
     rfw bench CONFIG... [options]        run the matrix, write results.jsonl and the reports
-    rfw bench compare OLD NEW [options]  per-pass changes beyond the noise
+        [--executor ray [--ray-address ADDR]]  its runs as Ray tasks, one per GPU
+    rfw bench compare OLD NEW [--out D]  per-pass changes beyond the noise (D: md/html)
     rfw bench report DIR [--reference]   re-write the reports from DIR/results.jsonl
 
 Relative paths (configs, scenes, ``--out``, folders to compare) mean what they mean in the
@@ -51,7 +52,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="order of variants within a repeat (default rotate)")
     p.add_argument("--seed", type=int, default=0, help="seed of --order shuffle")
     p.add_argument("--timeout", type=float, default=600, help="seconds per run (default 600)")
-    p.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local: one run after another here (default); ray: the runs as Ray "
+                        "tasks, one per GPU (one per CPU where there is none)")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="with --executor ray: an existing cluster (auto, HOST:6379, "
+                        "ray://HOST:10001); default: a local Ray instance rfw starts and stops")
+    p.add_argument("--out", help="output folder (default out/bench); compare: where "
+                   "compare.md and compare.html go (default: print only)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--threshold", type=float, default=0.05,
                    help="compare: relative change that counts (default 0.05)")
@@ -73,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
             raise GraphError("usage: rfw bench compare OLD NEW (folders or results.jsonl)")
         threshold = check_number(args.threshold, "--threshold", lo=0.0)
         return compare(Path(rest[0]), Path(rest[1]), threshold=threshold,
-                       fail_on_regression=args.fail_on_regression, show_all=args.all)
+                       fail_on_regression=args.fail_on_regression, show_all=args.all,
+                       out=_out_dir(args.out) if args.out else None)
     if head == "report":
         from .report import main_report
 
@@ -93,13 +102,16 @@ def run(args: argparse.Namespace) -> int:
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
                      seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)
     _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
-    out = _out_dir(args.out)
+    if args.ray_address is not None and args.executor != "ray":
+        raise RfwError("--ray-address needs --executor ray", element="--ray-address")
+    out = _out_dir(args.out or "out/bench")
     print(f"rfw bench: {len(plan.jobs)} variant(s) x {plan.repeat} repeat(s) at "
           f"{plan.size[0]}x{plan.size[1]}, {plan.frames} frames (+{plan.warmup} warm-up) "
           f"-> {out}")
     for note in plan.notes:
         print(f"  note: {note}")
-    results = run_plan(plan, out, progress=not args.no_progress)
+    results = run_plan(plan, out, progress=not args.no_progress, executor=args.executor,
+                       ray_address=args.ray_address)
     return _finish(out, results, args.reference)
 
 

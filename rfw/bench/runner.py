@@ -330,9 +330,10 @@ def _command(job: Job, plan: Plan, out: Path) -> list[str]:
     return cmd
 
 
-def run_one(job: Job, plan: Plan, out: Path) -> dict[str, Any]:
+def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None) -> dict[str, Any]:
     """Run one job in a fresh process, in the caller's working directory (relative paths in
-    ``--set`` mean what they mean to ``rfw run``); its record (``error`` set when it failed)."""
+    ``--set`` mean what they mean to ``rfw run``) or ``cwd``; its record (``error`` set when
+    it failed)."""
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("record.json", "image.png", "log.txt"):  # a failed run shows no old image
         (out / stale).unlink(missing_ok=True)
@@ -341,7 +342,7 @@ def run_one(job: Job, plan: Plan, out: Path) -> dict[str, Any]:
         [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
     try:
         done = subprocess.run(_command(job, plan, out), capture_output=True, text=True,
-                              timeout=plan.timeout, check=False, env=env)
+                              timeout=plan.timeout, check=False, env=env, cwd=cwd)
     except subprocess.TimeoutExpired:
         (out / "image.png").unlink(missing_ok=True)
         return {"error": f"timed out after {plan.timeout:g} s",
@@ -379,16 +380,41 @@ def pass_stats(record: dict[str, Any]) -> None:
             record["frame_stats"]["gpu_ms"] = summarize(record["gpu_ms"])
 
 
-def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True) -> Path:
+EXECUTORS = ("local", "ray")
+
+
+def _local_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path):
+    """``(seq, run folder, record)`` of each scheduled run, one process after another."""
+    for seq, (r, _, job) in enumerate(schedule):
+        run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
+        yield seq, run_dir, run_one(job, plan, run_dir)
+
+
+def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True, executor: str = "local",
+             ray_address: str | None = None) -> Path:
     """Run every job of ``plan``; appends one JSON line per run to ``out_dir/results.jsonl``
-    (written afresh) and returns its path."""
+    (written afresh) and returns its path.
+
+    ``executor``: ``local`` runs one process after another here; ``ray`` runs them as Ray
+    tasks, one per GPU (:mod:`rfw.bench.ray_executor`), on a local Ray instance or the
+    cluster at ``ray_address``. Records are written in schedule order either way."""
+    if executor not in EXECUTORS:
+        raise RfwError(f"unknown executor '{executor}' ({', '.join(EXECUTORS)})",
+                       element="--executor", suggest=(executor, EXECUTORS))
     env = environment()  # a bad RFW_COMMIT fails here, before any folder or run
+    schedule = plan.schedule()
+    if executor == "ray":
+        from .ray_executor import ray_runs
+
+        # connects (or starts Ray) now: a bad address fails before any folder or run
+        runs = ray_runs(schedule, plan, out_dir, address=ray_address)
+    else:
+        runs = _local_runs(schedule, plan, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results = out_dir / "results.jsonl"
     meta = {"size": list(plan.size), "frames": plan.frames, "warmup": plan.warmup,
             "peer_frames": plan.peer_frames or plan.frames,
             "repeats": plan.repeat, "order": plan.order, "notes": plan.notes}
-    schedule = plan.schedule()
     bar = None
     if progress and sys.stderr.isatty():  # a log (CI) gets one line per run instead
         try:
@@ -399,11 +425,10 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True) -> Path:
         except ImportError:
             bar = None
     with results.open("w", encoding="utf-8") as f:
-        for seq, (r, pos, job) in enumerate(schedule):
+        for seq, run_dir, record in runs:
+            r, pos, job = schedule[seq]
             if bar is not None:
                 bar.set_postfix_str(f"{job.label} #{r + 1}", refresh=True)
-            run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
-            record = run_one(job, plan, run_dir)
             pass_stats(record)
             if job.kind == "peer":
                 record["peer_kind"] = record.get("kind")

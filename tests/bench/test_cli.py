@@ -99,6 +99,13 @@ BAD = {
     "compare missing": (["compare", "old", "new"], "no results.jsonl here"),
     "compare threshold": (["compare", ".", ".", "--threshold", "-1"], "'--threshold' must be"),
     "report garbage": (["report", "."], "line 1: not JSON"),
+    "--ray-address alone": (["fwd.toml", "--ray-address", "auto"],
+                            "--ray-address: --ray-address needs --executor ray"),
+    "dead ray address": (["fwd.toml", "--executor", "ray", "--ray-address", "127.0.0.1:1"],
+                         "--ray-address: nothing answers at 127.0.0.1:1"),
+    "bad ray address": (["fwd.toml", "--executor", "ray", "--ray-address", "nohost"],
+                        "expected auto, HOST:PORT or ray://HOST:PORT"),
+    "bad executor": (["fwd.toml", "--executor", "dask"], "--executor: invalid choice"),
 }
 
 

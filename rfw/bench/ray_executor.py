@@ -1,0 +1,133 @@
+"""``rfw bench --executor ray``: the matrix's runs as Ray tasks, one per GPU.
+
+Each scheduled run becomes one task that asks Ray for one GPU (``num_gpus=1``) where the
+cluster has GPUs, else for one CPU (a CPU-only machine with lavapipe, as the tests run it).
+A task runs the usual worker process (:func:`rfw.bench.runner.run_one`) in a scratch folder of
+its node and returns the record, image and log, which are written under ``--out`` here: the
+nodes need the same rfw install and the same config and scene paths, not a shared disk.
+Every record notes where it ran (``ray``: node, host, GPU ids), which the report's device
+column and per-device tables read.
+
+Without ``--ray-address`` a local Ray instance is started and stopped by rfw; with one, the
+tasks go to that cluster (``auto``, ``ray://HOST:10001`` or ``HOST:6379``), which is left
+running.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from ..errors import RfwError
+from ..fileio import atomic_write, inside
+from .runner import ROOT, Job, Plan, run_one
+
+INSTALL = "pip install 'rfw[scale]' (or: pip install ray)"
+
+
+def _import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise RfwError(f"--executor ray needs Ray, which is not installed: {INSTALL}",
+                       element="--executor") from None
+    return ray
+
+
+CONNECT_TIMEOUT_S = 5.0  # Ray itself retries a dead address for minutes
+
+
+def check_address(address: str) -> None:
+    """Refuse an address nothing answers at, in seconds (``auto`` is left to Ray)."""
+    if address == "auto":
+        return
+    hostport = address.removeprefix("ray://")
+    host, colon, port = hostport.rpartition(":")
+    if not colon or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise RfwError(f"expected auto, HOST:PORT or ray://HOST:PORT, not {address!r}",
+                       element="--ray-address")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S
+                                 ).close()
+    except OSError as e:
+        raise RfwError(f"nothing answers at {hostport} ({e.strerror or type(e).__name__})",
+                       element="--ray-address") from None
+
+
+def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
+    """One run on whichever node Ray picked: the record, the image's bytes and the log."""
+    import ray
+
+    scratch = Path(tempfile.mkdtemp(prefix="rfw-bench-"))
+    try:
+        record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None)
+        image, log = scratch / "image.png", scratch / "log.txt"
+        ctx = ray.get_runtime_context()
+        record["executor"] = "ray"
+        record["ray"] = {"node": ctx.get_node_id(), "host": socket.gethostname(),
+                         "gpu_ids": [str(g) for g in ray.get_gpu_ids()]}
+        return {"record": record,
+                "image": image.read_bytes() if image.is_file() else None,
+                "log": log.read_text(errors="replace") if log.is_file() else ""}
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,
+             address: str | None = None) -> Iterator[tuple[int, Path, dict[str, Any]]]:
+    """Connect to (or start) Ray now, so a missing Ray or a bad address fails before any run;
+    the returned iterator submits every run at once and yields ``(seq, run folder, record)``
+    in schedule order as the runs finish, then disconnects (and stops a local instance)."""
+    ray = _import_ray()
+    start_local = not address
+    if address:
+        check_address(address)
+    try:
+        if start_local:
+            # "local": a fresh instance even where RAY_ADDRESS names another
+            ray.init(address="local", include_dashboard=False, log_to_driver=False,
+                     logging_level="ERROR",
+                     runtime_env={"env_vars": {"PYTHONPATH": str(ROOT)}})
+        else:
+            ray.init(address=address, log_to_driver=False, logging_level="ERROR")
+    except Exception as e:  # ConnectionError, ValueError, RuntimeError: all mean the address
+        message = " ".join(str(e).split())[:200] or type(e).__name__
+        raise RfwError(f"could not {'start' if start_local else 'connect to'} Ray: {message}",
+                       element=f"--ray-address {address}" if address else "--executor ray"
+                       ) from None
+    return _runs(ray, schedule, plan, out_dir)
+
+
+def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
+          out_dir: Path) -> Iterator[tuple[int, Path, dict[str, Any]]]:
+    try:
+        gpus = ray.cluster_resources().get("GPU", 0)
+        # one GPU per task where there are GPUs; on a CPU-only cluster one CPU per task
+        resources = {"num_gpus": 1, "num_cpus": 0} if gpus else {"num_cpus": 1}
+        task = ray.remote(max_retries=0, **resources)(run_task)
+        cwd = os.getcwd()
+        refs = [task.remote(job, plan, cwd) for _, _, job in schedule]
+        for seq, ref in enumerate(refs):  # schedule order: the report's order stays the same
+            r, _, job = schedule[seq]
+            run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
+            run_dir.mkdir(parents=True, exist_ok=True)
+            for stale in ("record.json", "image.png", "log.txt"):
+                (run_dir / stale).unlink(missing_ok=True)
+            try:
+                done = ray.get(ref)
+            except Exception as e:  # the task itself died (node lost, worker killed)
+                why = " ".join(str(e).split())[:300] or type(e).__name__
+                yield seq, run_dir, {"error": f"ray task failed: {why}", "executor": "ray"}
+                continue
+            (run_dir / "log.txt").write_text(done["log"])
+            if done["image"] is not None:
+                data = done["image"]
+                atomic_write(run_dir / "image.png", lambda f, data=data: f.write(data))
+            yield seq, run_dir, done["record"]
+    finally:
+        ray.shutdown()  # stops the instance rfw started; only disconnects from a cluster

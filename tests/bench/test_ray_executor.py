@@ -1,0 +1,65 @@
+"""``rfw bench --executor ray`` (issue 14, item 9) on a local Ray instance, CPU only (lavapipe):
+one small test, as Ray's start-up is slow."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .test_paper_report import relative_refs
+
+TINY = ["--size", "32x18", "--frames", "2", "--warmup", "1", "--repeat", "1", "--no-progress"]
+
+
+def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-P", "-m", "rfw.cli", "bench", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=300, check=False)
+
+
+def _raylets() -> int:
+    n = 0
+    for cmd in Path("/proc").glob("[0-9]*/cmdline"):
+        with contextlib.suppress(OSError):  # a process that ended meanwhile
+            n += b"raylet" in cmd.read_bytes()
+    return n
+
+
+def test_ray_executor_runs_the_matrix_as_tasks_and_merges_one_report(tmp_path):
+    before = _raylets()
+    t = time.perf_counter()
+    done = _bench(tmp_path, "forward", "flat", "--executor", "ray", "--out", "ray", *TINY)
+    wall = time.perf_counter() - t
+    print(f"rfw bench --executor ray, 2 runs: {wall:.1f} s")  # kept small; never asserted
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    out = tmp_path / "ray"
+    recs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    assert [r["variant"] for r in recs] == ["forward@wgpu", "flat@wgpu"]  # schedule order
+    for r in recs:
+        assert not r.get("error"), r.get("error")
+        assert r["executor"] == "ray"
+        assert r["ray"]["node"] and r["ray"]["host"] and r["ray"]["gpu_ids"] == []  # CPU only
+        assert (out / r["image"]).is_file() and (out / r["image"]).stat().st_size > 0
+        assert r["passes"] and len(r["frame"]["wall_ms"]) == 2
+    # one report with a device column naming where each variant ran
+    device = f"{recs[0]['device']} @ {recs[0]['ray']['host']}"
+    md = (out / "report.md").read_text()
+    assert f"| forward@wgpu | {device} | wgpu |" in md
+    assert "## Images" in md and "flat_wgpu.diff.png" in md
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert {r["device"] for r in rows} == {device}
+    assert relative_refs((out / "report.html").read_text()) == []
+    assert _raylets() <= before  # the local instance rfw started is stopped
+    # negative control: the default executor runs here, with no Ray in its records
+    local = _bench(tmp_path, "flat", "--out", "local", *TINY)
+    assert local.returncode == 0, local.stderr
+    (rec,) = [json.loads(x) for x in (tmp_path / "local" / "results.jsonl").read_text()
+              .splitlines()]
+    assert "ray" not in rec and "executor" not in rec
+    assert f"| flat@wgpu | {rec['device']} | wgpu |" in (tmp_path / "local" / "report.md"
+                                                         ).read_text()
