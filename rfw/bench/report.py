@@ -414,19 +414,22 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
         ax.set_title(title)
         left = [0.0] * len(done)
         for n in names:
-            widths, err = [], [[], []]
-            for v in done:
+            widths, err, has = [], [[], []], []
+            for i, v in enumerate(done):
                 p = next((p for p in v.passes if p["name"] == n), None)
                 s = p and p[metric]
                 widths.append(s["median"] if s else 0.0)
-                lo, hi = stacked_error(s)
-                err[0].append(lo)
-                err[1].append(hi)
+                if s:  # a variant without this pass gets no bar
+                    lo, hi = stacked_error(s)
+                    err[0].append(lo)
+                    err[1].append(hi)
+                    has.append(i)
             ax.barh(labels, widths, left=left, color=colors[n], label=n)
             # each segment's CI drawn at its right end, where its median ends the stack
             ends = [a + b for a, b in zip(left, widths, strict=True)]
-            ax.errorbar(ends, labels, xerr=err, fmt="none", ecolor="black", elinewidth=0.8,
-                        capsize=2)
+            if has:
+                ax.errorbar([ends[i] for i in has], [labels[i] for i in has], xerr=err,
+                            fmt="none", ecolor="black", elinewidth=0.8, capsize=2)
             left = ends
         ax.set_xlabel("ms")
     axes[0].invert_yaxis()  # shared: the first variant on top, as in the tables

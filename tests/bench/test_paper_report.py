@@ -195,17 +195,19 @@ def test_stacked_chart_error_bars_are_the_pass_cis(tmp_path, monkeypatch):
 
     monkeypatch.setattr(Axes, "errorbar", spy)
     out = write_results(tmp_path / "b", {"d@wgpu": {"passes": {"g": 10.0, "l": 2.0},
-                                                    "noise": 0.1}})
+                                                    "noise": 0.1},
+                                         "f@wgpu": {"passes": {"g": 5.0}, "noise": 0.1}})
     write_report(out)
     v = summarize_results([json.loads(x) for x in
                            (out / "results.jsonl").read_text().splitlines()])[0]
     gpu = [c for c in calls if c[0].startswith("GPU")]
     assert len(gpu) == 2  # one per stacked pass
+    assert len(gpu[0][1]) == 2 and len(gpu[1][1]) == 1  # f has no 'l': no bar for it
     left = 0.0
     for (_, x, err), p in zip(gpu, v.passes, strict=True):
         s = p["gpu_ms"]
         left += s["median"]
-        assert x == [pytest.approx(left)]  # at the segment's end
+        assert x[0] == pytest.approx(left)  # at the segment's end
         assert err[:, 0] == pytest.approx([s["median"] - s["ci_lo"], s["ci_hi"] - s["median"]])
         assert err.min() > 0  # negative control of a bar that draws nothing
 
