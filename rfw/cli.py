@@ -294,7 +294,7 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
 
 
 def cmd_passes(args: argparse.Namespace) -> int:
-    from .plugins import catalogue, format_catalogue
+    from .catalogue import catalogue, format_catalogue
 
     entries = catalogue(args.names)
     print(json.dumps(entries, indent=2) if args.json else format_catalogue(entries), end="")
