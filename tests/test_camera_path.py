@@ -194,6 +194,10 @@ def test_path_renders_each_frame_from_its_camera(tmp_path):
     run(tmp_path / "b", "--set", f"camera.position={B[0]}", "--set", f"camera.target={B[1]}")
     assert np.array_equal(image(tmp_path / "a" / "flat.color.png"), frames[0])
     assert np.array_equal(image(tmp_path / "b" / "flat.color.png"), frames[-1])
+    # frames in flight (no --save-every: nothing drains between frames on wgpu) end on the
+    # same last frame
+    run(tmp_path / "p3", "--frames", "4", config=cfg)
+    assert np.array_equal(image(tmp_path / "p3" / "flat.color.png"), frames[-1])
     # control: a keyframe shifted by a little renders differently
     run(tmp_path / "s", "--set", "camera.position=[9.2, 2.5, 2.0]", "--set",
         f"camera.target={B[1]}")
