@@ -63,3 +63,15 @@ def test_ray_executor_runs_the_matrix_as_tasks_and_merges_one_report(tmp_path):
     assert "ray" not in rec and "executor" not in rec
     assert f"| flat@wgpu | {rec['device']} | wgpu |" in (tmp_path / "local" / "report.md"
                                                          ).read_text()
+
+
+def test_without_ray_installed_one_line_and_nothing_written(tmp_path, monkeypatch, capsys):
+    from rfw.cli import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
+    out = tmp_path / "o"
+    assert main(["bench", "flat", "--executor", "ray", "--out", str(out), *TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["rfw: error: --executor: --executor ray needs Ray, which is not installed: "
+                   "pip install 'rfw[scale]' (or: pip install ray)"]
+    assert not out.exists()
