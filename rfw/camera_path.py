@@ -224,14 +224,13 @@ class CameraPath:
         return replace(self.base, **values)
 
 
-def path_for(cfg: Any, scene: Any) -> CameraPath | None:
-    """The camera path ``cfg`` asks for over its static camera, or None."""
-    from .frame import camera_for
-
+def path_for(cfg: Any, base: Any) -> CameraPath | None:
+    """The camera path ``cfg`` asks for over its static camera ``base``
+    (``rfw.frame.camera_for``), or None."""
     spec = (cfg.camera or {}).get("path")
     if not spec:
         return None
-    return CameraPath(spec, camera_for(cfg, scene))
+    return CameraPath(spec, base)
 
 
 def describe(camera: Any, t: float) -> dict[str, Any]:
@@ -315,8 +314,7 @@ def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any],
     Older images of this pattern are removed first: a run leaves only its own frames."""
     from PIL import Image
 
-    from .fileio import atomic_write, inside
-    from .render import to_png_array
+    from .fileio import atomic_write, inside, to_png_array
 
     folder = inside(out_dir, FRAMES_DIR)
     if folder.is_dir():

@@ -77,9 +77,9 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         mix = pinned_elsewhere(cfg, backend)
         mixed, sides = prepare(build(cfg), backend, devs, alias=alias, mix=mix)
         scene = load_scene_for(cfg, scene)
-        path = path_for(cfg, scene)
-        frame = start(mixed, sides, scene=scene, camera=camera_for(cfg, scene), size=cfg.size,
-                      alias=alias)
+        camera = camera_for(cfg, scene)
+        path = path_for(cfg, camera)
+        frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size, alias=alias)
         for ex in frame.executors.values():  # a backend without frames in flight waits
             if hasattr(ex, "keep_in_flight") and len(ex.in_flight) != in_flight:
                 ex.keep_in_flight(in_flight)
