@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from functools import partial
 from pathlib import Path
 
 from .. import argtypes
@@ -110,8 +111,12 @@ def run(args: argparse.Namespace) -> int:
           f"-> {out}")
     for note in plan.notes:
         print(f"  note: {note}")
-    results = run_plan(plan, out, progress=not args.no_progress, executor=args.executor,
-                       ray_address=args.ray_address)
+    executor = None  # one process after another, here
+    if args.executor == "ray":
+        from .ray_executor import ray_runs
+
+        executor = partial(ray_runs, address=args.ray_address)
+    results = run_plan(plan, out, progress=not args.no_progress, executor=executor)
     return _finish(out, results, args.reference)
 
 

@@ -41,12 +41,11 @@ def path_params(variant: Any) -> list[float]:
     return [float(c["t"]) for c in variant.get("camera_path")["frames"]]
 
 
-def path_charts(out_dir: Path, variants: list[Any]) -> list[Any]:
+def path_charts(out_dir: Path, variants: list[Any], img: Any) -> list[Any]:
     """One chart per variant that ran along a camera path, ``charts/path_<variant>.png``:
     GPU ms per frame per pass against the path parameter, and below it the culling
-    counters per frame when the runs have them. Returns the report's ``Img`` entries."""
-    from .report import Img
-
+    counters per frame when the runs have them. Returns ``img(path, alt)`` entries (the
+    report's ``Img``)."""
     along = [v for v in variants if on_path(v)]
     if not along:
         return []
@@ -87,5 +86,5 @@ def path_charts(out_dir: Path, variants: list[Any]) -> list[Any]:
         name = f"path_{i}_{re.sub(r'[^A-Za-z0-9._-]+', '_', v.label).strip('_') or 'run'}.png"
         fig.savefig(folder / name, dpi=100)
         plt.close(fig)
-        out.append(Img(f"charts/{name}", f"GPU ms per frame along the camera path: {v.label}"))
+        out.append(img(f"charts/{name}", f"GPU ms per frame along the camera path: {v.label}"))
     return out

@@ -196,7 +196,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     _environment(doc, records, rfw)
     _frame_table(doc, rfw)
     charts = _charts(out_dir, rfw)
-    charts += path_charts(out_dir, rfw)  # runs along a camera path: GPU ms per frame
+    charts += path_charts(out_dir, rfw, Img)  # runs along a camera path: GPU ms per frame
     if charts:
         doc.h(2, "Charts")
         for c in charts:

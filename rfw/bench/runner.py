@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -95,11 +96,14 @@ def resolve_config(name: str) -> Path:
 
 def resolve_scene(scene: str | None) -> str | None:
     """``None``/``default`` as they are, a scene file as an absolute path (from the working
-    directory); a missing file fails here, before any run."""
+    directory), a fetched scene's name as its cached GLB (``rfw.scene.names``); a missing
+    file or an unknown or unfetched name fails here, before any run."""
     if scene is None or scene == "default":
         return scene
     from ..scene import is_builtin, stress_count  # numpy and the loaders: when one is named
+    from ..scene.names import resolve_scene as by_name
 
+    scene = by_name(scene, element="--scene")  # a fetched scene's name: its cached GLB
     if is_builtin(scene) and not Path(scene).exists():  # stress, stress:COUNT
         if scene != "courtyard":
             stress_count(scene)  # a bad count fails here, before any run
@@ -380,7 +384,6 @@ def pass_stats(record: dict[str, Any]) -> None:
             record["frame_stats"]["gpu_ms"] = summarize(record["gpu_ms"])
 
 
-EXECUTORS = ("local", "ray")
 
 
 def _local_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path):
@@ -390,26 +393,19 @@ def _local_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path)
         yield seq, run_dir, run_one(job, plan, run_dir)
 
 
-def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True, executor: str = "local",
-             ray_address: str | None = None) -> Path:
+def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
+             executor: Callable[..., Iterator[tuple[int, Path, dict]]] | None = None) -> Path:
     """Run every job of ``plan``; appends one JSON line per run to ``out_dir/results.jsonl``
     (written afresh) and returns its path.
 
-    ``executor``: ``local`` runs one process after another here; ``ray`` runs them as Ray
-    tasks, one per GPU (:mod:`rfw.bench.ray_executor`), on a local Ray instance or the
-    cluster at ``ray_address``. Records are written in schedule order either way."""
-    if executor not in EXECUTORS:
-        raise RfwError(f"unknown executor '{executor}' ({', '.join(EXECUTORS)})",
-                       element="--executor", suggest=(executor, EXECUTORS))
+    ``executor(schedule, plan, out_dir)`` yields ``(seq, run folder, record)`` per run;
+    None runs one process after another here. ``rfw bench --executor ray`` passes
+    :func:`rfw.bench.ray_executor.ray_runs` (Ray tasks, one per GPU). Records are written
+    in schedule order either way."""
     env = environment()  # a bad RFW_COMMIT fails here, before any folder or run
     schedule = plan.schedule()
-    if executor == "ray":
-        from .ray_executor import ray_runs
-
-        # connects (or starts Ray) now: a bad address fails before any folder or run
-        runs = ray_runs(schedule, plan, out_dir, address=ray_address)
-    else:
-        runs = _local_runs(schedule, plan, out_dir)
+    # Ray connects (or starts) now: a bad address fails before any folder or run
+    runs = (executor or _local_runs)(schedule, plan, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results = out_dir / "results.jsonl"
     meta = {"size": list(plan.size), "frames": plan.frames, "warmup": plan.warmup,

@@ -94,6 +94,8 @@ BAD = {
     "--reference typo": (["fwd.toml", "--reference", "fwd@wgpv"], "did you mean 'fwd@wgpu'"),
     "--reference index": (["fwd.toml", "--reference", "4"], "'--reference' must be between"),
     "missing scene": (["fwd.toml", "--scene", "none.glb"], "none.glb: --scene: scene file not"),
+    # a name goes through rfw.scene.names, as rfw run's --scene does
+    "unknown scene name": (["fwd.toml", "--scene", "dragn"], "did you mean 'dragon'"),
     "bad backend pin": (["fwd.toml@gl"], "expected CONFIG@wgpu or CONFIG@vk"),
     "--out is a file": (["fwd.toml", "--out", "fwd.toml"], "fwd.toml: --out: not a folder"),
     "compare missing": (["compare", "old", "new"], "no results.jsonl here"),
