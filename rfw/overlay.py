@@ -73,6 +73,11 @@ class Overlay:
                                  "pointer_up", order=-99)
         canvas.add_event_handler(self._on_wheel, "wheel", order=-99)
 
+    def close(self) -> None:
+        if self.context is not None:
+            self.imgui.destroy_context(self.context)
+            self.context = None
+
     # input --------------------------------------------------------------------------------
     def _on_pointer(self, event: dict) -> None:
         self.io.add_mouse_pos_event(event["x"], event["y"])

@@ -345,6 +345,8 @@ class Viewer:
         self.close()
 
     def close(self) -> None:
+        if self.overlay is not None:
+            self.overlay.close()  # what it showed last stays readable
         if self.executor is not None:
             self.executor.destroy()
             self.executor = None

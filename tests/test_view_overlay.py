@@ -6,25 +6,19 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
-import pytest
 from PIL import Image
 
 from .conftest import ROOT
+from .view_xvfb import needs_xvfb, under_xvfb
 
-pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
-                                reason="needs xvfb-run (scripts/setup-system.sh installs it)")
+pytestmark = needs_xvfb
 
-
-def xvfb() -> list[str]:
-    # -a searches from a per-worker number: two pytest-xdist workers do not race for :99
-    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800), "-s", "-screen 0 640x480x24"]
 
 DEFERRED = ROOT / "configs" / "deferred.toml"
 
@@ -78,9 +72,7 @@ def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int
                                     frames=frames, overlay=overlay, pre=pre, shot=str(tmp / "shot.png"),
                                     hook=textwrap.indent(textwrap.dedent(hook), "    ")))
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    done = subprocess.run([*xvfb(), sys.executable,
-                           str(script)], capture_output=True, text=True, timeout=180, env=env,
-                          cwd=tmp, check=False)
+    done = under_xvfb([sys.executable, str(script)], env=env, cwd=tmp)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "Traceback" not in done.stderr and "Validation Error" not in done.stderr
     lines = done.stdout.splitlines()

@@ -4,7 +4,6 @@ image, toggles are transactional, every variant group is reachable, bad input is
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -14,14 +13,10 @@ import pytest
 from PIL import Image
 
 from .conftest import ROOT
+from .view_xvfb import needs_xvfb, under_xvfb
 
-pytestmark = pytest.mark.skipif(shutil.which("xvfb-run") is None,
-                                reason="needs xvfb-run (scripts/setup-system.sh installs it)")
+pytestmark = needs_xvfb
 
-
-def xvfb() -> list[str]:
-    # -a searches from a per-worker number: two pytest-xdist workers do not race for :99
-    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800), "-s", "-screen 0 640x480x24"]
 
 SIZE = "48x27"
 DEFERRED = str(ROOT / "configs" / "deferred.toml")
@@ -36,10 +31,8 @@ def _env(**extra: str) -> dict[str, str]:
 
 
 def view(tmp: Path, config: str, *args: str, **env: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [*xvfb(), sys.executable, "-m", "rfw.cli",
-         "view", config, "--size", SIZE, *args],
-        capture_output=True, text=True, timeout=180, env=_env(**env), cwd=tmp, check=False)
+    return under_xvfb([sys.executable, "-m", "rfw.cli", "view", config, "--size", SIZE, *args],
+                      env=_env(**env), cwd=tmp)
 
 
 def run_png(tmp: Path, config: str, *sets: str) -> np.ndarray:
@@ -109,6 +102,18 @@ def test_every_variant_group_is_reachable(tmp_path):
     assert max_diff(seen, run_png(tmp_path, SSAO, "ao=off", "shadows=off", "view=normals")) <= 1
     # negative control: the final view (what a stuck V would leave) is told apart
     assert max_diff(seen, run_png(tmp_path, SSAO, "ao=off", "shadows=off")) > 1
+
+
+def test_h_hides_the_overlay(tmp_path):
+    expected = run_png(tmp_path, DEFERRED)
+    done = view(tmp_path, DEFERRED, "--frames", "3", "--keys", "h",
+                "--screenshot", "hidden.png")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert max_diff(np.asarray(Image.open(tmp_path / "hidden.png")).astype(int), expected) <= 1
+    # negative control: without H the overlay covers the small window's pixels
+    done = view(tmp_path, DEFERRED, "--frames", "3", "--screenshot", "shown.png")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert max_diff(np.asarray(Image.open(tmp_path / "shown.png")).astype(int), expected) > 32
 
 
 @pytest.mark.parametrize(("args", "env", "names"), [
