@@ -13,18 +13,28 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
     """Write ``path`` through ``write(file)`` into a temporary file beside it, then rename:
     readers and failures never see half a file. The file gets the permissions ``open()``
     would give it (mkstemp's are 0600); an OSError names ``path``, not the temporary file."""
+    def named(tmp: str) -> None:
+        with open(tmp, "wb") as f:
+            write(f)
+
+    atomic_file(path, named)
+
+
+def atomic_file(path: str | Path, write: Callable[[str], object]) -> None:
+    """:func:`atomic_write` for a writer that takes a file name (``write(tmp_name)``), as
+    OpenEXR's does."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        os.close(fd)
     except OSError as e:
         raise OSError(e.errno, e.strerror, str(path)) from None
     try:
+        write(tmp)
         umask = os.umask(0)
         os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as f:
-            write(f)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except OSError as e:
         Path(tmp).unlink(missing_ok=True)
@@ -72,27 +82,12 @@ def write_exr(path: str | Path, image: Any) -> None:
     channels = {c: np.ascontiguousarray(image[..., i])
                 for i, c in enumerate(EXR_CHANNELS[image.shape[2]])}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    path = Path(path)
-    # OpenEXR writes to a file name: a temporary one beside it, then renamed
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        os.close(fd)
-    except OSError as e:
-        raise OSError(e.errno, e.strerror, str(path)) from None
-    try:
+
+    def write(tmp: str) -> None:  # OpenEXR writes to a file name
         with OpenEXR.File(header, channels) as f:
             f.write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except OSError as e:
-        Path(tmp).unlink(missing_ok=True)
-        raise OSError(e.errno, e.strerror, str(path)) from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+
+    atomic_file(path, write)
 
 
 def read_exr(path: str | Path) -> Any:
