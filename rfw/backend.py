@@ -121,6 +121,35 @@ MEMBERS = ("name", "auto_variants", "host_writes_depth", "make_device", "owns", 
 _loaded: dict[str, Backend] = {}
 
 
+GPU_ENV = "RFW_GPU"  # which GPU of the machine a backend opens (rfw bench --executor ray)
+
+
+def gpu_choice() -> int | None:
+    """``RFW_GPU``: the index of the device to open among the machine's GPUs (or, with
+    none, its CPU devices), in the driver's order; None when unset. A Ray task of
+    ``rfw bench --executor ray`` sets it to the GPU Ray gave it, so each task opens its own.
+    Anything but a whole number from 0 is a one-line error naming it."""
+    import os
+
+    raw = os.environ.get(GPU_ENV, "").strip()
+    if not raw:
+        return None
+    if not raw.isdigit():
+        raise RfwError(f"must be a device index (0, 1, ...), not {raw!r}", element=GPU_ENV)
+    return int(raw)
+
+
+def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:
+    """Device ``index`` of ``devices`` ((kind, device) in the driver's order; kind ``gpu``
+    or ``cpu``): counted among the GPUs, or among the CPU devices where there is no GPU."""
+    kind = "gpu" if any(k == "gpu" for k, _ in devices) else "cpu"
+    pool = [d for k, d in devices if k == kind]
+    if index >= len(pool):
+        raise RfwError(f"asks for device {index}, and this machine has {len(pool)} "
+                       f"{kind.upper()} device(s): {found}", element=GPU_ENV)
+    return pool[index]
+
+
 def installed() -> list[str]:
     """The names registered in the ``rfw.backends`` group, built-ins first."""
     return order({ep.name for ep in entry_points(ENTRY_POINT_GROUP)})

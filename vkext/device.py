@@ -14,6 +14,7 @@ from collections import Counter
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
+from rfw.backend import gpu_choice, pick_gpu
 from rfw.errors import RfwError
 
 from .consts import IMPORT_ERROR, VALUE_RETURNING, call_api, const, ffi, lib, vk
@@ -436,8 +437,12 @@ class VkDevice:
         if not candidates:
             raise VkUnavailableError("no Vulkan 1.3 device with a graphics+compute queue; found: "
                                      + (", ".join(seen) or "no devices"))
-        _, _, self.physical_device, self.name, self.queue_family = min(
-            candidates, key=lambda c: (c[0], c[1]))
+        pick = min(candidates, key=lambda c: (c[0], c[1]))
+        index = gpu_choice()
+        if index is not None:  # RFW_GPU: that GPU, in the driver's order
+            pick = pick_gpu([("cpu" if c[0] == 3 else "gpu", c) for c in
+                             sorted(candidates, key=lambda c: c[1])], index, ", ".join(seen))
+        _, _, self.physical_device, self.name, self.queue_family = pick
 
     @staticmethod
     def _queue_family(pd: Any) -> int | None:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import wgpu
 
+from ..backend import gpu_choice, pick_gpu
 from ..context import check_sampler
 from ..errors import naming
 from ..frame import InFlight, frames_in_flight, run_frames
@@ -58,7 +59,15 @@ class Device:
     """A wgpu adapter and device with what rfw needs to know about them."""
 
     def __init__(self, *, power_preference: str = "high-performance"):
-        self.adapter = wgpu.gpu.request_adapter_sync(power_preference=power_preference)
+        index = gpu_choice()
+        if index is None:
+            self.adapter = wgpu.gpu.request_adapter_sync(power_preference=power_preference)
+        else:  # RFW_GPU: that GPU among the Vulkan adapters, in the driver's order
+            adapters = [a for a in wgpu.gpu.enumerate_adapters_sync()
+                        if a.info.get("backend_type") == "Vulkan"]
+            self.adapter = pick_gpu(
+                [("cpu" if a.info.get("adapter_type") == "CPU" else "gpu", a) for a in adapters],
+                index, ", ".join(a.info.get("device", "?") for a in adapters) or "none")
         if self.adapter is None:
             raise RuntimeError("no wgpu adapter found (is a Vulkan driver installed?)")
         self.features = tuple(f for f in WANTED_FEATURES if f in self.adapter.features)

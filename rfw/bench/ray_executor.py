@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from ..backend import GPU_ENV
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
 from .runner import ROOT, Job, Plan, run_one
@@ -64,18 +65,27 @@ def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
     import ray
 
     scratch = Path(tempfile.mkdtemp(prefix="rfw-bench-"))
+    gpus = [str(g) for g in ray.get_gpu_ids()]
+    before = os.environ.get(GPU_ENV)
+    if gpus:  # the worker opens the GPU Ray gave this task, not the machine's first one
+        os.environ[GPU_ENV] = str(int(gpus[0]))
     try:
         record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None)
         image, log = scratch / "image.png", scratch / "log.txt"
         ctx = ray.get_runtime_context()
         record["executor"] = "ray"
         record["ray"] = {"node": ctx.get_node_id(), "host": socket.gethostname(),
-                         "gpu_ids": [str(g) for g in ray.get_gpu_ids()]}
+                         "gpu_ids": gpus}
         return {"record": record,
                 "image": image.read_bytes() if image.is_file() else None,
                 "log": log.read_text(errors="replace") if log.is_file() else ""}
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        if gpus:  # a Ray worker process runs task after task
+            if before is None:
+                os.environ.pop(GPU_ENV, None)
+            else:
+                os.environ[GPU_ENV] = before
 
 
 def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,

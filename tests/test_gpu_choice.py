@@ -1,0 +1,58 @@
+"""RFW_GPU (rfw.backend.gpu_choice): which of the machine's devices a backend opens, as a Ray
+task of ``rfw bench --executor ray`` sets it to the GPU Ray gave it. Here (lavapipe, one CPU
+device) index 0 renders what the default does on both backends, and index 1 is refused in
+one line; the choice among several GPUs is checked on a fake device list."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from rfw.backend import pick_gpu
+from rfw.errors import RfwError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(tmp: Path, backend: str, gpu: str | None, out: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "RFW_GPU"}
+    if gpu is not None:
+        env["RFW_GPU"] = gpu
+    return subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
+                           "flat.toml"), "--size", "32x18", "--backend", backend, "--out",
+                           str(tmp / out)], env=env, capture_output=True, text=True,
+                          timeout=300, check=False)
+
+
+@pytest.mark.parametrize("backend", ["wgpu", "vk"])
+def test_the_chosen_device_renders_and_a_missing_one_is_one_line(tmp_path, backend):
+    default = _run(tmp_path, backend, None, "default")
+    chosen = _run(tmp_path, backend, "0", "zero")
+    assert default.returncode == 0 and chosen.returncode == 0, chosen.stderr
+    a = np.asarray(Image.open(tmp_path / "default" / "flat.color.png"))
+    b = np.asarray(Image.open(tmp_path / "zero" / "flat.color.png"))
+    assert np.array_equal(a, b)
+    for bad, says in (("1", "asks for device 1, and this machine has 1 CPU device(s)"),
+                      ("gpu0", "must be a device index (0, 1, ...), not 'gpu0'")):
+        done = _run(tmp_path, backend, bad, f"bad{bad}")
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2, done.stderr
+        assert len(lines) == 1 and "RFW_GPU" in lines[0] and says in lines[0], done.stderr
+        assert "Traceback" not in done.stderr
+        assert not (tmp_path / f"bad{bad}").exists()
+
+
+def test_gpus_are_counted_before_cpu_devices_in_the_drivers_order():
+    devices = [("cpu", "llvmpipe"), ("gpu", "H200 #0"), ("gpu", "H200 #1")]
+    assert pick_gpu(devices, 0, "") == "H200 #0"
+    assert pick_gpu(devices, 1, "") == "H200 #1"
+    with pytest.raises(RfwError, match="has 2 GPU device"):
+        pick_gpu(devices, 2, "")
+    # negative control: without GPUs, the CPU devices are what is counted
+    assert pick_gpu([("cpu", "llvmpipe")], 0, "") == "llvmpipe"
