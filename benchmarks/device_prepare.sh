@@ -41,7 +41,7 @@ wheels=(
     wgpu==0.32.0 rendercanvas==2.7.2 cffi==2.1.1 pycparser==3.12
     vulkan==1.3.275.1 glfw==2.11.0 trimesh==5.2.0 tomli-w==1.2.0
     pygltflib==1.16.5 dataclasses-json==0.6.7 marshmallow==3.26.2 deprecated==1.3.1
-    flip-evaluator==1.7 embreex==4.4.0.post1 rtoml==0.14.0
+    flip-evaluator==1.7 embreex==4.4.0.post1 rtoml==0.14.0 openexr==3.5.3
     # the raster peers (benchmarks/peers: moderngl, pygfx) and what they need; pyvista's VTK
     # (566 MiB installed) cannot travel in a device call
     moderngl==5.13.0 glcontext==3.1.0 pygfx==0.17.0 pylinalg==0.6.8 freetype-py==2.5.1

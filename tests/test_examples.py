@@ -145,8 +145,10 @@ def test_notebook_runs_and_shows_results(tmp_path):
     import base64
     import io
 
-    import nbclient
-    import nbformat
+    # the test extra installs them; a GPU machine without them (device_env.sh) skips
+    nbclient = pytest.importorskip("nbclient")
+    nbformat = pytest.importorskip("nbformat")
+    pytest.importorskip("ipykernel")
 
     import rfw
 

@@ -93,10 +93,10 @@ def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,
     """Connect to (or start) Ray now, so a missing Ray or a bad address fails before any run;
     the returned iterator submits every run at once and yields ``(seq, run folder, record)``
     in schedule order as the runs finish, then disconnects (and stops a local instance)."""
+    if address:  # needs no Ray: a bad address says so wherever Ray is missing too
+        check_address(address)
     ray = _import_ray()
     start_local = not address
-    if address:
-        check_address(address)
     try:
         if start_local:
             # "local": a fresh instance even where RAY_ADDRESS names another
