@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local: one run after another here (default); ray: the runs as Ray "
                         "tasks, one per GPU (one per CPU where there is none)")
-    p.add_argument("--ray-address", metavar="ADDR",
+    p.add_argument("--ray-address", metavar="ADDR", type=ray_address,
                    help="with --executor ray: an existing cluster (auto, HOST:6379, "
                         "ray://HOST:10001); default: a local Ray instance rfw starts and stops")
     p.add_argument("--out", help="output folder (default out/bench); compare: where "
@@ -67,6 +67,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fail-on-regression", action="store_true",
                    help="compare: exit 1 when a regression is flagged")
     p.add_argument("--all", action="store_true", help="compare: list unchanged entries too")
+    p.add_argument("--allow-mismatch", action="store_true",
+                   help="compare: compare runs whose size, frames, warm-up, scene or settings "
+                        "differ (the report says what differs at its top)")
+
+
+def ray_address(text: str) -> str:
+    """An argparse type: ``auto``, ``HOST:PORT`` or ``ray://HOST:PORT``, checked while the
+    arguments are parsed (before anything is printed); whether anything answers there is
+    checked when Ray connects."""
+    if text == "auto":
+        return text
+    if text.startswith(("http://", "https://")):
+        raise argparse.ArgumentTypeError(
+            f"expected auto, HOST:PORT or ray://HOST:PORT, not {text!r} (the dashboard's http "
+            "address is not the cluster's)")
+    host, colon, port = text.removeprefix("ray://").rpartition(":")
+    if not colon or not host or "/" in host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(
+            f"expected auto, HOST:PORT or ray://HOST:PORT, not {text!r}")
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
         threshold = check_number(args.threshold, "--threshold", lo=0.0)
         return compare(Path(rest[0]), Path(rest[1]), threshold=threshold,
                        fail_on_regression=args.fail_on_regression, show_all=args.all,
-                       out=_out_dir(args.out) if args.out else None)
+                       out=_out_dir(args.out) if args.out else None,
+                       allow_mismatch=args.allow_mismatch)
     if head == "report":
         from .report import main_report
 
@@ -98,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     from .runner import make_plan, run_plan
 
     peers = _peers(args.peers)
+    _check_peer_camera(peers, args.set, args.vary)
     plan = make_plan(args.configs, scenes=args.scene, size=args.size, frames=args.frames,
                      warmup=args.warmup, repeat=args.repeat, backends=args.backend,
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
@@ -105,6 +127,10 @@ def run(args: argparse.Namespace) -> int:
     _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
     if args.ray_address is not None and args.executor != "ray":
         raise RfwError("--ray-address needs --executor ray", element="--ray-address")
+    if args.ray_address is not None and args.ray_address != "auto":
+        from .ray_executor import check_address
+
+        check_address(args.ray_address)  # nothing answering there: said before the header
     out = _out_dir(args.out or "out/bench")
     print(f"rfw bench: {len(plan.jobs)} variant(s) x {plan.repeat} repeat(s) at "
           f"{plan.size[0]}x{plan.size[1]}, {plan.frames} frames (+{plan.warmup} warm-up) "
@@ -126,6 +152,20 @@ def _out_dir(text: str) -> Path:
     if out.exists() and not out.is_dir():
         raise RfwError("not a folder", file=text, element="--out")
     return out
+
+
+def _check_peer_camera(peers: list[str], sets: list[str] | None,
+                       vary: list[str] | None) -> None:
+    # peers render their own default camera: a camera.* setting would make their numbers and
+    # images those of another view while the report claims the same one
+    if not peers:
+        return
+    for flag, items in (("--set", sets or []), ("--vary", vary or [])):
+        for item in items:
+            key = item.partition("=")[0].strip()
+            if key == "camera" or key.startswith("camera."):
+                raise RfwError(f"peers render their default camera, not {flag} {key}: drop "
+                               "--peers or the camera setting", element="--peers")
 
 
 def _check_reference(reference: str | None, labels: list[str]) -> None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import RfwError
 from ..fileio import inside
 from .runner import load_results
 from .summary import VariantSummary, summarize_results
@@ -76,12 +77,58 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
     return out, notes
 
 
+# what a run's record says about how it was measured: two runs differing here measured
+# different work, so their time differences are not changes of the code
+PLAN_FIELDS = {"size": "size", "frames": "frames", "warmup": "warmup", "scene": "scene",
+               "settings": "settings"}
+
+
+def _plan_of(record: dict[str, Any]) -> dict[str, Any]:
+    out = {k: record.get(k) for k in PLAN_FIELDS}
+    if isinstance(out["settings"], list):
+        out["settings"] = sorted(map(str, out["settings"]))
+    return out
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, list) and len(value) == 2 and all(isinstance(x, int) for x in value):
+        return f"{value[0]}x{value[1]}"
+    if isinstance(value, list):
+        return "[" + ", ".join(map(str, value)) + "]"
+    return str(value)
+
+
+def mismatches(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[str]:
+    """One line per variant in both sets whose plan (size, frames, warm-up, scene, settings)
+    differs between OLD and NEW, naming what differs."""
+    first_old = {r.get("variant"): _plan_of(r) for r in reversed(old) if not r.get("error")}
+    first_new = {r.get("variant"): _plan_of(r) for r in reversed(new) if not r.get("error")}
+    out = []
+    for label in [k for k in first_old if k in first_new]:
+        a, b = first_old[label], first_new[label]
+        diff = [f"{PLAN_FIELDS[k]} {_show(a[k])} vs {_show(b[k])}" for k in PLAN_FIELDS
+                if a[k] != b[k]]
+        if diff:
+            out.append(f"{label}: measured differently: {'; '.join(diff)}")
+    return out
+
+
 def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression: bool = False,
-            show_all: bool = False, out: Path | None = None) -> int:
+            show_all: bool = False, out: Path | None = None,
+            allow_mismatch: bool = False) -> int:
     """Print the flagged changes (and write ``compare.md``/``.html`` into ``out``); returns
-    the exit code (1 on a regression when asked)."""
+    the exit code (1 on a regression when asked). OLD and NEW measured differently (size,
+    frames, warm-up, scene or settings) are refused unless ``allow_mismatch``; then every
+    report says so at its top."""
     old_records, new_records = load_results(old), load_results(new)
+    differ = mismatches(old_records, new_records)
+    if differ and not allow_mismatch:
+        more = f" (and {len(differ) - 1} more variant(s))" if len(differ) > 1 else ""
+        raise RfwError(f"{differ[0]}{more}: their times are not comparable; pass "
+                       "--allow-mismatch to compare anyway", element="bench compare")
     found, notes = changes(old_records, new_records)
+    for line in differ:
+        print(f"MISMATCH: {line}")
     if out is not None:
         md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold)
         print(f"wrote {md}, {page}")
@@ -124,6 +171,12 @@ def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
     found, notes = changes(old_records, new_records)
     doc = Doc()
     doc.h(1, "rfw bench compare")
+    differ = mismatches(old_records, new_records)
+    if differ:
+        doc.p("**Mismatch: OLD and NEW were not measured the same way** (compared with "
+              "`--allow-mismatch`); the time differences below mix that with any change of "
+              "the code.")
+        doc.bullets(differ)
     doc.table(["what", "value"], [["OLD", f"`{old}`"], ["NEW", f"`{new}`"],
                                   ["threshold", f"{threshold:.0%}"]])
     doc.bullets(notes)

@@ -122,6 +122,9 @@ def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
         task = ray.remote(max_retries=0, **resources)(run_task)
         cwd = os.getcwd()
         refs = [task.remote(job, plan, cwd) for _, _, job in schedule]
+        # what the report's "How this was measured" says about the runs in flight
+        cluster = {"gpus": gpus, "cpus": ray.cluster_resources().get("CPU", 0),
+                   "submitted": len(refs)}
         for seq, ref in enumerate(refs):  # schedule order: the report's order stays the same
             r, _, job = schedule[seq]
             run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
@@ -138,6 +141,7 @@ def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
             if done["image"] is not None:
                 data = done["image"]
                 atomic_write(run_dir / "image.png", lambda f, data=data: f.write(data))
+            done["record"]["ray_cluster"] = cluster
             yield seq, run_dir, done["record"]
     finally:
         ray.shutdown()  # stops the instance rfw started; only disconnects from a cluster

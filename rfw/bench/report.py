@@ -268,6 +268,11 @@ def _by_device(v: VariantSummary) -> list[tuple[str, VariantSummary]]:
     return out
 
 
+def mixed_devices(v: VariantSummary) -> bool:
+    """Whether ``v``'s runs measured more than one device (its pooled numbers mix them)."""
+    return len({device_of(r) for r in v.records}) > 1
+
+
 def _devices(doc: Doc, rfw: list[VariantSummary]) -> None:
     """Per-device tables side by side: one column group per device, one row per variant and
     pass; shown when the runs measured more than one device."""
@@ -367,6 +372,8 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
         gpu, wall, cpu = v.frame.get("gpu_ms"), v.frame.get("wall_ms"), v.frame.get("cpu_ms")
         alloc = m.get("transient_allocated_bytes", m.get("plan_transient_bytes"))
         devices = ", ".join(dict.fromkeys(device_of(r) for r in v.records))
+        if mixed_devices(v):  # its pooled numbers mix devices: the per-device table has them
+            devices = f"mixed: see Per device ({devices})"
         rows.append([v.label, devices, v.get("backend"), ms(gpu), ci(gpu), spread(gpu),
                      ms(wall), spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
                      + (" (plan)" if m.get("source") == "plan" else "")])
@@ -561,7 +568,14 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
         metric = r.get("flip") if has_flip else r.get("ssim")
         cells.append("-" if metric is None else f"{metric:.4f}")
         cells.append("-" if own_ms is None else f"{own_ms:.3f}")
-        cells.append("reference" if r["variant"] is ref else change_text(ref_gpu, own_gpu))
+        if r["variant"] is ref:
+            cells.append("reference")
+        elif mixed_devices(r["variant"]) or mixed_devices(ref):
+            # pooled over devices: no significance mark, the per-device table compares
+            change = change_text(ref_gpu, own_gpu).removesuffix(" *").removesuffix(" (n.s.)")
+            cells.append(f"{change} (mixed devices: see Per device)")
+        else:
+            cells.append(change_text(ref_gpu, own_gpu))
         table.append(cells)
     doc.table(headers, table)
 
@@ -727,9 +741,7 @@ def _failures(doc: Doc, variants: list[VariantSummary]) -> None:
 def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
     doc.h(2, "How this was measured")
     doc.bullets([
-        "Every run is its own process (`python -m rfw.bench.worker`): load the config, build "
-        "the scene, render warm-up frames, then the timed frames; nothing is shared between "
-        "runs but the shader cache on disk.",
+        _how_runs_ran(records),
         "GPU ms are timestamp queries around each pass (wgpu timestamp queries; "
         "`vkCmdWriteTimestamp2` on vk); CPU record ms is the host time of the pass's "
         "`record()`; wall ms is a whole frame, submit and the wait for its frame-in-flight "
@@ -741,6 +753,29 @@ def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
         "`rfw bench compare OLD NEW`.",
         "Timings are never asserted by the tests; on lavapipe the 'GPU' is the CPU.",
     ])
+
+
+def _how_runs_ran(records: list[dict[str, Any]]) -> str:
+    """The first bullet of "How this was measured": one process after another here, or Ray
+    tasks running concurrently (``--executor ray``)."""
+    worker = ("load the config, build the scene, render warm-up frames, then the timed "
+              "frames; nothing is shared between runs but the shader cache on disk")
+    rays = [r for r in records if r.get("executor") == "ray"]
+    if not rays:
+        return ("Every run is its own process (`python -m rfw.bench.worker`), one after "
+                f"another on this machine: {worker}.")
+    cluster = next((r["ray_cluster"] for r in rays if r.get("ray_cluster")), {})
+    gpus, cpus = cluster.get("gpus") or 0, cluster.get("cpus") or 0
+    submitted = cluster.get("submitted") or len(rays)
+    per_task = "one GPU" if gpus else "one CPU (the cluster has no GPU)"
+    slots = int(gpus or cpus) or submitted
+    hosts = len({(r.get("ray") or {}).get("host") for r in rays})
+    return (f"Runs went through Ray (`--executor ray`), concurrently: all {submitted} runs "
+            f"were submitted at once as Ray tasks asking for {per_task} each, so up to "
+            f"{min(submitted, slots)} ran at the same time (cluster resources: "
+            f"{gpus:g} GPU, {cpus:g} CPU; {hosts} host(s)). Each task ran its run in its own "
+            f"process (`python -m rfw.bench.worker`): {worker}. Runs sharing a machine "
+            "could slow each other down: compare devices in the per-device table.")
 
 
 def main_report(out_dir: str, reference: str | None = None) -> int:

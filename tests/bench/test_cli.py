@@ -122,6 +122,7 @@ def test_bad_arguments_are_one_line(elsewhere, case):
     assert done.returncode == 2, done.stderr
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
     assert expected in lines[0]
+    assert done.stdout == ""  # refused before the "rfw bench: N variant(s)" header
     assert sorted(p.name for p in elsewhere.iterdir()) == before  # nothing written
 
 

@@ -231,7 +231,9 @@ def test_per_device_tables_side_by_side(tmp_path):
     assert float(d[3]) == pytest.approx(10.0, rel=0.05) and float(d[5]) == pytest.approx(
         10.0, rel=0.05)
     assert float(e[3]) == pytest.approx(5.0, rel=0.05) and e[5].strip() == "-"  # not on A
-    assert "| d@wgpu | GPU B, GPU A | wgpu |" in md  # the device column
+    # the device column: d's pooled row mixes devices and says so, e's does not
+    assert "| d@wgpu | mixed: see Per device (GPU B, GPU A) | wgpu |" in md
+    assert "| e@wgpu | GPU B | wgpu |" in md
     # negative control: one device, no per-device section
     one = write_results(tmp_path / "one", {"d@wgpu": {"passes": {"g": 10.0}}})
     assert rfw("report", str(one)).returncode == 0

@@ -1,0 +1,217 @@
+"""Fixes from a review of ``rfw bench``, through the CLI in a subprocess: peers refuse a
+camera they would not render, a bad ``--ray-address`` is refused before anything is printed,
+``compare`` refuses runs measured differently unless told, and the Ray executor's report
+says how its runs ran and marks rows pooled over devices."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from .synthetic import record
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-P", "-m", "rfw.cli", "bench", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=120, check=False)
+
+
+def one_error_line(done: subprocess.CompletedProcess, *expected: str) -> str:
+    """Exit 2, nothing on stdout, one ``rfw: error:`` line holding every ``expected``."""
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stdout == "", done.stdout
+    assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
+    assert "Traceback" not in done.stderr
+    for e in expected:
+        assert e in lines[0], lines[0]
+    return lines[0]
+
+
+def listing(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. peers render their default camera: a camera setting with --peers is refused
+
+
+@pytest.mark.parametrize("camera", [["--set", "camera.path=orbit", "--set", "camera.yfov=20"],
+                                    ["--set", "camera.yfov=20"],
+                                    ["--vary", "camera.yfov=20,40"]])
+def test_peers_with_a_camera_setting_are_refused(tmp_path, camera):
+    done = bench(tmp_path, str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--frames",
+                 "2", "--repeat", "1", "--peers", "moderngl", *camera, "--out", "X")
+    key = camera[1].partition("=")[0]
+    one_error_line(done, "--peers:", key, "default camera")
+    assert listing(tmp_path) == []
+
+
+def test_peer_camera_check_is_only_for_camera_keys_with_peers(tmp_path):
+    # negative controls: a later check (--reference) is reached, so the camera one let
+    # these through: a non-camera key with peers, a camera key without peers
+    flat = str(ROOT / "configs" / "flat.toml")
+    for args, later in (
+            (["--peers", "moderngl", "--set", "flat.ambient=0.5"], "--reference 'nosuch'"),
+            (["--set", "camera.yfov=20"], "--reference 'nosuch'"),
+            (["--peers", "moderngl", "--set", "cameraman=1"], "no pass or variant 'cameraman'")):
+        done = bench(tmp_path, flat, "--size", "32x18", *args, "--reference", "nosuch",
+                     "--out", "X")
+        line = one_error_line(done, later)
+        assert "--peers" not in line
+    assert listing(tmp_path) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. --ray-address syntax: checked while parsing, before the "rfw bench: N variant(s)" header
+
+
+@pytest.mark.parametrize("address, expected", [
+    ("localhost", "expected auto, HOST:PORT or ray://HOST:PORT, not 'localhost'"),
+    ("127.0.0.1:99999", "not '127.0.0.1:99999'"),
+    ("ray://:10001", "not 'ray://:10001'"),
+    ("http://127.0.0.1:8265", "(the dashboard's http address is not the cluster's)"),
+    ("https://head:8265", "(the dashboard's http address is not the cluster's)"),
+])
+def test_bad_ray_address_syntax_is_one_line_before_any_output(tmp_path, address, expected):
+    done = bench(tmp_path, str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                 "--ray-address", address, "--out", "X")
+    one_error_line(done, "--ray-address", expected)
+    assert listing(tmp_path) == []
+
+
+def test_good_ray_address_syntax_passes_the_parser(tmp_path):
+    # negative control: a well-formed address gets past the syntax check to the connection
+    # check (nothing listens on port 1), still before anything is printed
+    done = bench(tmp_path, str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                 "--ray-address", "ray://127.0.0.1:1", "--out", "X")
+    line = one_error_line(done, "nothing answers at 127.0.0.1:1")
+    assert "expected auto" not in line
+    assert listing(tmp_path) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. compare: runs measured differently are refused unless --allow-mismatch
+
+
+def write(folder: Path, **plan) -> Path:
+    """Three runs of one variant, measured with ``plan`` (size, frames, settings, ...)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = []
+    for r in range(3):
+        rec = record("flat@wgpu", r, {"flat": 1.0}, seed=r)
+        rec.update({"settings": [], **plan})
+        lines.append(json.dumps(rec) + "\n")
+    (folder / "results.jsonl").write_text("".join(lines))
+    return folder
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    ({"size": [32, 18]}, {"size": [64, 36]}, "size 32x18 vs 64x36"),
+    ({"frames": 20}, {"frames": 10, "warmup": 3}, "frames 20 vs 10; warmup 1 vs 3"),
+    ({"scene": "courtyard"}, {"scene": "dragon"}, "scene courtyard vs dragon"),
+    ({"settings": ["flat.ambient=0.1"]}, {"settings": ["flat.ambient=0.2"]},
+     "settings [flat.ambient=0.1] vs [flat.ambient=0.2]"),
+])
+def test_compare_refuses_runs_measured_differently(tmp_path, old, new, expected):
+    a, b = write(tmp_path / "old", **old), write(tmp_path / "new", **new)
+    before = listing(tmp_path)
+    for extra in ([], ["--fail-on-regression"], ["--out", str(tmp_path / "cmp")]):
+        done = bench(tmp_path, "compare", str(a), str(b), *extra)
+        one_error_line(done, "bench compare: flat@wgpu: measured differently: ", expected,
+                       "--allow-mismatch")
+        assert listing(tmp_path) == before  # no compare.md/html
+    # allowed: compared, and every report says so at its top
+    done = bench(tmp_path, "compare", str(a), str(b), "--allow-mismatch", "--out",
+                 str(tmp_path / "cmp"))
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[0] == f"MISMATCH: flat@wgpu: measured differently: " \
+        f"{expected}"
+    md = (tmp_path / "cmp" / "compare.md").read_text()
+    head = md.split("## Per pass")[0]
+    assert "Mismatch: OLD and NEW were not measured the same way" in head
+    assert f"flat@wgpu: measured differently: {expected}" in head
+    assert "Mismatch" in (tmp_path / "cmp" / "compare.html").read_text()
+
+
+def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
+    # negative control: the same plan (settings in another order) is no mismatch
+    a = write(tmp_path / "old", settings=["a.x=1", "b.y=2"])
+    b = write(tmp_path / "new", settings=["b.y=2", "a.x=1"])
+    done = bench(tmp_path, "compare", str(a), str(b), "--out", str(tmp_path / "cmp"))
+    assert done.returncode == 0, done.stderr
+    assert "MISMATCH" not in done.stdout
+    assert "Mismatch" not in (tmp_path / "cmp" / "compare.md").read_text()
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. the Ray executor's report: concurrency stated, pooled mixed-device rows unmarked
+
+
+def ray_results(folder: Path, *, executor: str | None) -> Path:
+    """ref@wgpu on one host; new@wgpu 50 % slower, its runs split over two hosts."""
+    import numpy as np
+    from PIL import Image
+
+    lines = []
+    for r in range(4):
+        for label, ms, hosts in (("ref@wgpu", 10.0, ("a",)), ("new@wgpu", 15.0, ("a", "b"))):
+            rec = record(label, r, {"p": ms}, seed=r + len(label))
+            rel = f"runs/{rec['variant_id']}/r{r}/image.png"
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(np.full((18, 32, 3), 100, np.uint8)).save(folder / rel)
+            rec["image"] = rel
+            if executor == "ray":
+                rec["executor"] = "ray"
+                rec["ray"] = {"node": "n", "host": hosts[r % len(hosts)], "gpu_ids": ["0"]}
+                rec["ray_cluster"] = {"gpus": 2, "cpus": 16, "submitted": 8}
+            lines.append(json.dumps(rec) + "\n")
+    (folder / "results.jsonl").write_text("".join(lines))
+    return folder
+
+
+def table_row(md: str, prefix: str) -> list[str]:
+    line = next(x for x in md.splitlines() if x.startswith(prefix))
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def test_ray_report_states_concurrency_and_marks_mixed_rows(tmp_path):
+    out = ray_results(tmp_path / "ray", executor="ray")
+    done = bench(tmp_path, "report", str(out))
+    assert done.returncode == 0, done.stderr
+    md = (out / "report.md").read_text()
+    how = md.split("## How this was measured")[1]
+    assert "Runs went through Ray (`--executor ray`), concurrently: all 8 runs" in how
+    assert "one GPU each, so up to 2 ran at the same time (cluster resources: 2 GPU, " \
+        "16 CPU; 2 host(s))" in how
+    assert "one after another" not in how
+    # the pooled row of the variant that ran on two hosts says so; one host: no mark
+    frame = md.split("## Frame time per variant")[1]
+    new = table_row(frame, "| new@wgpu |")
+    assert new[1].startswith("mixed: see Per device (synthetic @ a GPU 0, synthetic @ b GPU 0")
+    assert table_row(frame, "| ref@wgpu |")[1] == "synthetic @ a GPU 0"
+    assert "## Per device" in md
+    # +50 %, CIs far apart, yet pooled over devices: no significance mark
+    images = md.split("## Images")[1]
+    vs = table_row(images, "| new@wgpu |")[-1]
+    assert vs == "+50.0% (mixed devices: see Per device)", vs
+    assert "*" not in vs and "n.s." not in vs
+
+
+def test_local_report_keeps_its_claims_and_marks(tmp_path):
+    # negative control: the same numbers from the local runner: one process after another,
+    # no mixed rows, and the same +50 % does get its significance mark
+    out = ray_results(tmp_path / "local", executor=None)
+    done = bench(tmp_path, "report", str(out))
+    assert done.returncode == 0, done.stderr
+    md = (out / "report.md").read_text()
+    how = md.split("## How this was measured")[1]
+    assert "one after another on this machine" in how and "Ray" not in how
+    assert "mixed" not in md
+    assert table_row(md.split("## Images")[1], "| new@wgpu |")[-1] == "+50.0% *"
