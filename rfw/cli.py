@@ -279,7 +279,9 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
     from .templates import new_package, new_pass
 
     kind = "raster" if args.raster else "compute"
-    if args.package:
+    if args.package is not None:
+        if not args.package.strip():  # not ./passes/NAME: the user asked for a package
+            raise RfwError("expected a folder, not an empty name", element="new-pass --package")
         if args.tests:
             raise RfwError("--tests does not go with --package (its test is in DIR/tests)",
                            element="new-pass")

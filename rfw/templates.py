@@ -200,6 +200,15 @@ def _check_name(name: str) -> None:
                          element="new-pass")
 
 
+def _check_free(name: str) -> None:
+    # a second class under a registered id breaks every later rfw command ("registered twice")
+    from .registry import available
+
+    if name in available():
+        raise GraphError(f"pass id '{name}' is already registered (built-in or installed): "
+                         "choose another name", element="new-pass")
+
+
 def _title(name: str) -> str:
     return name.replace("_", " ").capitalize()
 
@@ -209,6 +218,7 @@ def new_package(name: str, root: Path, *, kind: str = "compute") -> list[Path]:
     ``rfw.passes``, shaders as package data), ``rfw_<name>/`` with the pass, ``tests/`` with
     its test and a README; returns the files. ``root`` must not exist or be empty."""
     _check_name(name)
+    _check_free(name)
     if root.exists() and (not root.is_dir() or any(root.iterdir())):
         raise GraphError("already exists and is not an empty folder: not overwritten",
                          file=str(root), element="--package")
@@ -228,6 +238,8 @@ def new_pass(name: str, folder: Path, *, kind: str = "compute",
     """Write ``folder/<name>/`` (module, shader, ``__init__``) and a test; returns the files.
     ``package`` names the folder (an import package) instead of ``<name>``."""
     _check_name(name)
+    if package is None:  # new_package checked it
+        _check_free(name)
     target = inside(folder, package or name)  # every file below is checked to stay in it
     if target.exists():
         raise GraphError("already exists: not overwritten", file=str(target))

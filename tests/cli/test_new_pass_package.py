@@ -144,3 +144,47 @@ def test_package_refuses_a_used_folder_and_bad_names(tmp_path):
     assert done.stderr == "rfw: error: new-pass: --tests does not go with --package (its " \
                           "test is in DIR/tests)\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["used"]
+
+
+def _one_line(done, expected):
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stdout == "" and "Traceback" not in done.stderr
+    assert done.stderr.count("\n") == 1 and done.stderr.startswith("rfw: error: ")
+    assert expected in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("name", ["flat", "tonemap"])
+def test_registered_ids_are_refused(tmp_path, name):
+    # a second class under a built-in id would break every later rfw command
+    taken = f"rfw: error: new-pass: pass id '{name}' is already registered (built-in or " \
+            "installed): choose another name\n"
+    done = rfw("new-pass", name, "--package", tmp_path / "pkg", cwd=tmp_path)
+    _one_line(done, taken)
+    done = rfw("new-pass", name, "--dir", "p", cwd=tmp_path)
+    _one_line(done, taken)
+    done = rfw("new-pass", name, cwd=tmp_path)  # the default --dir: ./passes
+    _one_line(done, taken)
+    assert list(tmp_path.iterdir()) == []
+    # negative control: a free id is written, with and without --package
+    assert rfw("new-pass", f"{name}_mine", "--dir", "p", cwd=tmp_path).returncode == 0
+    assert rfw("new-pass", f"{name}_mine", "--package", "pkg", cwd=tmp_path).returncode == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p", "pkg"]
+
+
+def test_an_installed_plugin_id_is_refused(installed, tmp_path):
+    _, site = installed
+    done = rfw("new-pass", "my_glow", "--package", "again", cwd=tmp_path, site=site)
+    _one_line(done, "new-pass: pass id 'my_glow' is already registered")
+    done = rfw("new-pass", "my_glow", cwd=tmp_path, site=site)
+    _one_line(done, "new-pass: pass id 'my_glow' is already registered")
+    assert list(tmp_path.iterdir()) == []
+    # negative control: where it is not installed, the same id is free
+    assert rfw("new-pass", "my_glow", "--package", "again", cwd=tmp_path).returncode == 0
+    assert (tmp_path / "again" / "pyproject.toml").is_file()
+
+
+@pytest.mark.parametrize("package", ["", "  "])
+def test_empty_package_is_one_line_not_passes(tmp_path, package):
+    done = rfw("new-pass", "my_glow", "--package", package, cwd=tmp_path)
+    _one_line(done, "rfw: error: new-pass --package: expected a folder, not an empty name")
+    assert list(tmp_path.iterdir()) == []  # no ./passes/my_glow
