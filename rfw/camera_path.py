@@ -44,6 +44,8 @@ PATH_KINDS = ("keyframes", "orbit")
 PATH_KEYS = ("kind", "keys", "target_interpolation", "center", "radius", "height", "start",
              "turns")
 KEY_KEYS = ("t", "position", "target", "yfov")
+KEYFRAMES_ONLY = ("keys", "target_interpolation")
+ORBIT_ONLY = ("center", "radius", "height", "start", "turns")
 TARGET_INTERPOLATIONS = ("linear", "slerp")
 MAX_KEYS = 10_000
 
@@ -67,27 +69,28 @@ def check_path(value: Any, source: str | None, where: str = "camera.path") -> di
         if key not in PATH_KEYS:
             raise RfwError(f"unknown key '{key}'" + did_you_mean(key, PATH_KEYS),
                            file=source, element=where)
-    kind = value.get("kind", "keyframes" if "keys" in value else "orbit")
+    kind = value.get("kind") or _implied_kind(value, source, where)
     if kind not in PATH_KINDS:
         raise RfwError(f"'kind' must be one of {', '.join(PATH_KINDS)}, not {kind!r}"
                        + did_you_mean(str(kind), PATH_KINDS), file=source,
                        element=f"{where}.kind")
     out: dict[str, Any] = {"kind": kind}
-    interp = value.get("target_interpolation", "linear")
-    if interp not in TARGET_INTERPOLATIONS:
-        raise RfwError(f"must be one of {', '.join(TARGET_INTERPOLATIONS)}, not {interp!r}",
-                       file=source, element=f"{where}.target_interpolation")
-    out["target_interpolation"] = interp
     if kind == "keyframes":
-        stray = [k for k in ("center", "radius", "height", "start", "turns") if k in value]
+        stray = [k for k in ORBIT_ONLY if k in value]
         if stray:
             raise RfwError(f"'{stray[0]}' belongs to an orbit, not to keyframes", file=source,
                            element=f"{where}.{stray[0]}")
+        interp = value.get("target_interpolation", "linear")
+        if interp not in TARGET_INTERPOLATIONS:
+            raise RfwError(f"must be one of {', '.join(TARGET_INTERPOLATIONS)}, not "
+                           f"{interp!r}", file=source, element=f"{where}.target_interpolation")
+        out["target_interpolation"] = interp
         out["keys"] = _keys(value.get("keys"), source, f"{where}.keys")
         return out
-    if "keys" in value:
-        raise RfwError("an orbit has no keys (kind = \"keyframes\" has)", file=source,
-                       element=f"{where}.keys")
+    stray = [k for k in KEYFRAMES_ONLY if k in value]
+    if stray:
+        raise RfwError(f"an orbit has no {stray[0]} (kind = \"keyframes\" has)", file=source,
+                       element=f"{where}.{stray[0]}")
     if "center" in value:
         out["center"] = _vector(value["center"], f"{where}.center", source)
     for key, lo in (("radius", 1e-6), ("height", -1e9), ("start", -1e6), ("turns", -1e6)):
@@ -95,6 +98,17 @@ def check_path(value: Any, source: str | None, where: str = "camera.path") -> di
             out[key] = float(check_number(value[key], key, lo=lo, hi=1e9, file=source,
                                           element=f"{where}.{key}"))
     return out
+
+
+def _implied_kind(value: dict[str, Any], source: str | None, where: str) -> str:
+    """The kind a path without ``kind`` implies: keyframes for a keyframe-only key, an
+    orbit for an orbit-only key (or none), whatever order ``--set`` gave them in."""
+    frames = [k for k in KEYFRAMES_ONLY if k in value]
+    orbit = [k for k in ORBIT_ONLY if k in value]
+    if frames and orbit:
+        raise RfwError(f"mixes keyframe keys ({', '.join(frames)}) with orbit keys "
+                       f"({', '.join(orbit)}): a path is one kind", file=source, element=where)
+    return "keyframes" if frames else "orbit"
 
 
 def _keys(keys: Any, source: str | None, where: str) -> list[dict[str, Any]]:
@@ -142,14 +156,26 @@ def _lerp(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
     return (1.0 - u) * a + u * b
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
-    """Unit vectors ``a`` to ``b`` along the great circle (linear when nearly parallel)."""
+def _slerp(a: np.ndarray, b: np.ndarray, u: float, up: np.ndarray) -> np.ndarray:
+    """Unit vectors ``a`` to ``b`` along the great circle (linear when nearly parallel).
+    Opposite directions have no one great circle: the turn goes around ``up`` (the camera's
+    up; another axis where ``a`` runs along it), the same way every time."""
     dot = float(np.clip(a @ b, -1.0, 1.0))
     angle = math.acos(dot)
     if angle < 1e-6:
         v = _lerp(a, b, u)
-    else:
-        v = (math.sin((1 - u) * angle) * a + math.sin(u * angle) * b) / math.sin(angle)
+        return v / np.linalg.norm(v)
+    side = b - dot * a  # the turn's direction, square to a
+    if np.linalg.norm(side) < 1e-6:
+        # opposite: turn in the plane square to the axis (up with its part along a removed)
+        for axis in (np.asarray(up, np.float64), np.array([0.0, 1.0, 0.0]),
+                     np.array([1.0, 0.0, 0.0])):
+            axis = axis - (axis @ a) * a
+            if np.linalg.norm(axis) > 1e-6:
+                break
+        side = np.cross(axis, a)
+    side = side / np.linalg.norm(side)
+    v = math.cos(u * angle) * a + math.sin(u * angle) * side
     return v / np.linalg.norm(v)
 
 
@@ -210,7 +236,8 @@ class CameraPath:
         if self.spec["target_interpolation"] == "slerp" and np.linalg.norm(da) > 0 \
                 and np.linalg.norm(db) > 0:
             la, lb = float(np.linalg.norm(da)), float(np.linalg.norm(db))
-            at = eye + _slerp(da / la, db / lb, u) * ((1 - u) * la + u * lb)
+            at = eye + _slerp(da / la, db / lb, u, np.array(a.up, np.float64)) * (
+                (1 - u) * la + u * lb)
         else:
             at = _lerp(ta, tb, u)
         return replace(a, position=tuple(map(float, eye)), target=tuple(map(float, at)),
@@ -308,6 +335,22 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
 FRAMES_DIR = "frames"  # per-frame images go here, inside --out
 
 
+def clear_frames(out_dir: Path) -> None:
+    """Remove the per-frame images an earlier run left in ``<out_dir>/frames`` (and the
+    folder, if that empties it): every run clears them, with ``--save-every`` or without,
+    so none of them can pass for this run's frames."""
+    from .fileio import inside
+
+    folder = inside(out_dir, FRAMES_DIR)
+    if not folder.is_dir():
+        return
+    for old in folder.glob("*.[0-9][0-9][0-9][0-9].png"):
+        if old.is_file() or old.is_symlink():
+            old.unlink()
+    if not any(folder.iterdir()):
+        folder.rmdir()
+
+
 def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any], None]:
     """An ``each_frame`` callback writing every output of timed frames ``0, every, 2 *
     every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits).
@@ -316,10 +359,8 @@ def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any],
 
     from .fileio import atomic_write, inside, to_png_array
 
+    clear_frames(out_dir)
     folder = inside(out_dir, FRAMES_DIR)
-    if folder.is_dir():
-        for old in folder.glob("*.[0-9][0-9][0-9][0-9].png"):
-            old.unlink()
 
     def write(k: int, frame: Any) -> None:
         if k % every and k != frames - 1:

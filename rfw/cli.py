@@ -154,7 +154,7 @@ def _run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config or DEFAULT_CONFIG)
     sets = list(args.set or [])
-    if args.scene:
+    if args.scene is not None:  # "" too: resolve_scene names --scene for it
         sets.append(f"scene={args.scene}")
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
@@ -163,7 +163,9 @@ def _run(args: argparse.Namespace) -> int:
 
     from .scene.names import resolve_scene  # --scene dragon: the cached (or fetched) GLB
 
-    cfg = replace(cfg, scene=resolve_scene(cfg.scene, fetch=args.fetch, file=cfg.source))
+    cfg = replace(cfg, scene=resolve_scene(cfg.scene, fetch=args.fetch, file=cfg.source,
+                                           element="--scene" if args.scene is not None
+                                           else "scene"))
     backend = args.backend or backend_for(cfg)
     get_backend(backend)  # an unknown name: one line naming the installed ones
     if backend != "vk" and (args.validate or args.no_alias):
@@ -175,6 +177,9 @@ def _run(args: argparse.Namespace) -> int:
         raise RfwError("is not a folder", file=str(out), element="--out")
     # this run's paths, checked and cleared first: a failed run leaves no stale results
     clear_outputs(out, cfg.outputs)
+    from .camera_path import clear_frames
+
+    clear_frames(out)  # OUT/frames/*.png too, with --save-every or without
     with _fuzzing(args):
         result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
                         alias=not args.no_alias, each_frame=_frame_images(args, cfg, out))
@@ -244,7 +249,7 @@ def _scene_name(scene: str | None) -> str | None:
     # --scene dragon: the cached GLB (fetched first only when RFW_FETCH=1 allows)
     from .scene.names import resolve_scene
 
-    return resolve_scene(scene, element="--scene") if scene else None
+    return resolve_scene(scene, element="--scene") if scene is not None else None
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:

@@ -175,7 +175,25 @@ def _camera(value: Any, source: str, prefix: str = "") -> dict[str, Any]:
             out[key] = check_number(v, where, lo=1e-6, hi=1e9, file=source, element=where)
     if out.get("znear", 0.0) >= out.get("zfar", math.inf):
         raise _fail(source, "'znear' must be smaller than 'zfar'", f"{prefix}camera")
+    if "up" in out:
+        _check_up(out, source, f"{prefix}camera.up")
     return out
+
+
+def _check_up(camera: dict[str, Any], source: str, where: str) -> None:
+    """An up vector gives the image its top: zero, or along the view direction, it gives
+    none (the renderer would pick another axis without a word)."""
+    up = [float(v) for v in camera["up"]]
+    if not math.hypot(*up) > 1e-9:
+        raise _fail(source, f"must not be zero, not {camera['up']!r}", where)
+    if "position" in camera and "target" in camera:
+        view = [float(t) - float(p) for t, p in zip(camera["target"], camera["position"],
+                                                    strict=True)]
+        cross = (view[1] * up[2] - view[2] * up[1], view[2] * up[0] - view[0] * up[2],
+                 view[0] * up[1] - view[1] * up[0])
+        if math.hypot(*cross) <= 1e-6 * math.hypot(*view) * math.hypot(*up):
+            raise _fail(source, f"{camera['up']!r} is parallel to the view direction (target "
+                        f"- position = {view!r}): it gives the image no top", where)
 
 
 def _camera_value(text: str) -> Any:
@@ -205,9 +223,9 @@ def _set_camera(cfg: Config, key: str, text: str) -> Config:
     elif len(parts) == 2:
         camera[parts[1]] = value
     elif len(parts) == 3 and parts[1] == "path":
-        path = dict(camera.get("path") or {})
-        if parts[2] != "kind" and "kind" not in path:  # keys make keyframes, else an orbit
-            path["kind"] = "keyframes" if parts[2] == "keys" else "orbit"
+        path = camera.get("path") or {}
+        # no kind here: check_path infers it from all the path's keys, in any order
+        path = {"kind": path} if isinstance(path, str) else dict(path)
         path[parts[2]] = value
         camera["path"] = path
     else:
@@ -217,7 +235,7 @@ def _set_camera(cfg: Config, key: str, text: str) -> Config:
         raise _fail(cfg.source, f"unknown key '{parts[1]}'" + did_you_mean(parts[1],
                                                                         _CAMERA_KEYS),
                     f"--set {key}")
-    return replace(cfg, camera=_camera(camera, cfg.source, "--set "))
+    return replace(cfg, camera=camera)  # checked once all --set are in: apply_overrides
 
 
 def _pass_entry(t: Any, i: int, source: str) -> PassEntry:
@@ -468,6 +486,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def apply_overrides(cfg: Config, sets: list[str]) -> Config:
     """``--set key=value``: a variant, size/scene/frames, pass.enabled or pass.setting."""
+    camera_set = False
     for item in sets:
         key, eq, value = item.partition("=")
         key = key.strip()
@@ -493,6 +512,7 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
                 value, cfg.source, key="frames_in_flight", hi=MAX_FRAMES_IN_FLIGHT))
         elif key == "camera" or key.startswith("camera."):
             cfg = _set_camera(cfg, key, value)
+            camera_set = True
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
@@ -502,6 +522,8 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
                             + did_you_mean(head, known))
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
             cfg = replace(cfg, explicit=[*cfg.explicit, (key, value)])
+    if camera_set:  # the whole camera table: a path's keys may come in any order
+        cfg = replace(cfg, camera=_camera(cfg.camera, cfg.source, "--set "))
     return cfg
 
 

@@ -47,6 +47,10 @@ def resolve_scene(text: str, *, fetch: bool = False, cache: Path | None = None,
     """
     from . import is_builtin
 
+    if not text.strip():  # Path("") is "."; the default scene would show without a word
+        raise SceneError(f"{text!r} names no scene: give a scene file, a built-in scene "
+                         f"(default, courtyard, stress:COUNT) or a name from 'rfw scenes list'",
+                         file=file, element=element)
     path = Path(text)
     if is_builtin(text) or path.exists() or path.suffix or not path.name:
         return text
