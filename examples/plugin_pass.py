@@ -10,7 +10,9 @@ the file that defines the class); the same SPIR-V runs on wgpu and vk.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from pathlib import Path
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -37,6 +39,20 @@ class InvertPass(ComputePass):
                      o_inverted=ctx.storage("inverted"), u_params=self.params)
 
 
+def out_problem(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold the output (one line), or None: it is a writable folder or
+    can be made one. Checked before rendering, so a bad --out costs no render."""
+    folder = Path(os.path.abspath(folder))
+    for p in (folder, *folder.parents):  # the nearest part that exists decides
+        if p.exists():
+            if not p.is_dir():
+                return f"{p}: --out: not a folder"
+            if not os.access(p, os.W_OK | os.X_OK):
+                return f"{p}: --out: cannot write here"
+            return None
+    return None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", default="320x180", help="WxH")
@@ -45,6 +61,10 @@ def main() -> int:
     ap.add_argument("--out", default="out/plugin", help="folder for the images")
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.split("x"))
+    why = out_problem(Path(args.out))
+    if why:
+        print(f"plugin_pass: error: {why}", file=sys.stderr)
+        return 2
 
     try:
         cfg = rfw.make_config(

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -20,6 +21,20 @@ import rfw
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def out_problem(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold the output (one line), or None: it is a writable folder or
+    can be made one. Checked before rendering, so a bad --out costs no render."""
+    folder = Path(os.path.abspath(folder))
+    for p in (folder, *folder.parents):  # the nearest part that exists decides
+        if p.exists():
+            if not p.is_dir():
+                return f"{p}: --out: not a folder"
+            if not os.access(p, os.W_OK | os.X_OK):
+                return f"{p}: --out: cannot write here"
+            return None
+    return None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("key", help="the setting to sweep, as --set names it (e.g. ssao.samples)")
@@ -30,6 +45,11 @@ def main() -> int:
     ap.add_argument("--backend", default=None)
     ap.add_argument("--out", default="sweep.png", help="the plot (PNG)")
     args = ap.parse_args()
+    out = Path(args.out)
+    why = f"{out}: --out: is a folder, not a PNG" if out.is_dir() else out_problem(out.parent)
+    if why:
+        print(f"sweep_plot: error: {why}", file=sys.stderr)
+        return 2
 
     rows = []
     try:
@@ -58,7 +78,12 @@ def main() -> int:
     ax.set_title(f"{Path(args.config).stem}, {args.size}")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(args.out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out)
+    except OSError as e:  # the folder changed while the sweep ran
+        print(f"sweep_plot: error: {out}: --out: {e.strerror or e}", file=sys.stderr)
+        return 2
     print(f"wrote {args.out}")
     return 0
 

@@ -171,3 +171,40 @@ def test_notebook_runs_and_shows_results(tmp_path):
     ref = rfw.run(ROOT / "configs" / "deferred.toml", size=(32, 18), frames=1)
     assert np.array_equal(a, ref.images["tonemap.ldr"])
     assert not np.array_equal(b, ref.images["tonemap.ldr"])
+
+
+def _refused(done: subprocess.CompletedProcess, script: str, expected: str) -> None:
+    # one line, before any render: nothing on stdout (the sweep's table comes after it)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stdout == "" and "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{script}: error: "), done.stderr
+    assert expected in lines[0], lines[0]
+
+
+def test_sweep_plot_out_folder_is_checked_before_the_sweep(tmp_path):
+    (tmp_path / "afile").write_text("mine")
+    (tmp_path / "adir").mkdir()
+    args = ["ssao.samples", "4", "--size", "32x18", "--frames", "1"]
+    done = example("sweep_plot.py", *args, "--out", "afile/folder/sw.png", cwd=tmp_path)
+    _refused(done, "sweep_plot", f"{tmp_path / 'afile'}: --out: not a folder")
+    done = example("sweep_plot.py", *args, "--out", "adir", cwd=tmp_path)
+    _refused(done, "sweep_plot", "adir: --out: is a folder, not a PNG")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["adir", "afile"]
+    assert (tmp_path / "afile").read_text() == "mine"
+    # negative control: a folder that is missing but can be made is made, after the sweep
+    done = example("sweep_plot.py", *args, "--out", "missing/folder/sw.png", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert Image.open(tmp_path / "missing" / "folder" / "sw.png").size == (640, 400)
+
+
+def test_plugin_pass_out_folder_is_checked_before_rendering(tmp_path):
+    (tmp_path / "afile").write_text("mine")
+    for out in ("afile", "afile/sub"):
+        done = example("plugin_pass.py", "--size", "32x18", "--out", out, cwd=tmp_path)
+        _refused(done, "plugin_pass", f"{tmp_path / 'afile'}: --out: not a folder")
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"]
+    # negative control: a missing nested folder is made
+    done = example("plugin_pass.py", "--size", "32x18", "--out", "a/b", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "a" / "b" / "invert.inverted.png").is_file()
