@@ -125,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
                      seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)
     _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
+    if peers:  # a config's own [camera] table is a camera the peers do not render either
+        _check_config_camera(plan)
     if args.ray_address is not None and args.executor != "ray":
         raise RfwError("--ray-address needs --executor ray", element="--ray-address")
     if args.ray_address is not None and args.ray_address != "auto":
@@ -166,6 +168,16 @@ def _check_peer_camera(peers: list[str], sets: list[str] | None,
             if key == "camera" or key.startswith("camera."):
                 raise RfwError(f"peers render their default camera, not {flag} {key}: drop "
                                "--peers or the camera setting", element="--peers")
+
+
+def _check_config_camera(plan) -> None:
+    from .runner import _check
+
+    for job in plan.jobs:
+        if job.kind == "rfw" and _check(Path(job.config), list(job.sets)).camera:
+            raise RfwError("peers render their default camera, not this config's [camera]: "
+                           "drop --peers or the camera table", file=job.config,
+                           element="--peers")
 
 
 def _check_reference(reference: str | None, labels: list[str]) -> None:

@@ -215,3 +215,20 @@ def test_local_report_keeps_its_claims_and_marks(tmp_path):
     assert "one after another on this machine" in how and "Ray" not in how
     assert "mixed" not in md
     assert table_row(md.split("## Images")[1], "| new@wgpu |")[-1] == "+50.0% *"
+
+
+def test_peers_with_a_config_camera_are_refused(tmp_path):
+    text = (ROOT / "configs" / "flat.toml").read_text()
+    (tmp_path / "cam.toml").write_text(text.replace(
+        'outputs = ["flat.color"]', 'outputs = ["flat.color"]\ncamera = { yfov = 20.0 }'))
+    (tmp_path / "plain.toml").write_text(text)
+    before = listing(tmp_path)
+    done = bench(tmp_path, "cam.toml", "--size", "32x18", "--peers", "moderngl", "--out", "X")
+    one_error_line(done, f"{tmp_path / 'cam.toml'}: --peers: ", "[camera]")
+    # negative controls: the camera table is accepted without peers, and the same config
+    # without it is accepted with peers (both reach the later --reference check)
+    for args in (["cam.toml"], ["plain.toml", "--peers", "moderngl"]):
+        done = bench(tmp_path, *args, "--size", "32x18", "--reference", "nosuch", "--out", "X")
+        line = one_error_line(done, "--reference 'nosuch'")
+        assert "--peers" not in line
+    assert listing(tmp_path) == before
