@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import wgpu
 
+from .camera_path import path_for
 from .config import Config, apply_overrides, build
 from .errors import RfwError
 from .frame import camera_for, load_scene_for
@@ -55,6 +56,10 @@ fn fs_main(v: V) -> @location(0) vec4f {
 """
 
 
+# said once at start: a config's camera.path drives rfw run and rfw bench, not the window
+PATH_NOTE = "camera.path is not followed by rfw view: it shows the path's first camera"
+
+
 class Viewer:
     """Owns the window, the device, the scene and the executor of the current config."""
 
@@ -72,6 +77,10 @@ class Viewer:
         compile(build(cfg).graph)
         self.scene = load_scene_for(cfg, scene)
         self.camera = camera_for(cfg, self.scene)
+        path = path_for(cfg, self.camera)
+        if path is not None:  # the window's camera is the user's to move, not the path's
+            self.camera = path.at(0.0)
+            print(PATH_NOTE, flush=True)
         self.canvas = canvas or RenderCanvas(size=cfg.size, title=f"rfw: {cfg.name}",
                                              update_mode="continuous")
         self.device = Device()

@@ -136,3 +136,18 @@ def test_good_view_input_control(tmp_path):
                 RFW_VIEW_FORMAT="bgra8unorm")
     assert done.returncode == 0, done.stdout + done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shot.png"]
+
+
+def test_camera_path_is_said_and_its_first_camera_shown(tmp_path):
+    keys = ("camera.path.keys=[{position=[6,3,7],target=[0,1,0]},"
+            "{position=[-6,3,7],target=[0,1,0]}]")
+    seen, out = shot(tmp_path, DEFERRED, "path.png", "--frames", "3", "--set", keys)
+    note = "camera.path is not followed by rfw view: it shows the path's first camera"
+    assert out.splitlines().count(note) == 1
+    first = run_png(tmp_path, DEFERRED, "camera.position=6,3,7", "camera.target=0,1,0")
+    assert max_diff(seen, first) <= 1
+    # negative control: the static camera (what the path used to be ignored for) differs
+    assert max_diff(seen, run_png(tmp_path, DEFERRED)) > 1
+    # and without a path nothing is said
+    _, plain = shot(tmp_path, DEFERRED, "plain.png", "--frames", "2")
+    assert note not in plain
