@@ -15,6 +15,9 @@ keys = [
 ]
 ```
 
+Without ``kind`` the keys say it, in any order: ``keys`` or ``target_interpolation`` make
+keyframes, an orbit key (or none) an orbit; keys of both kinds are one error.
+
 Keyframes: frame ``k`` of ``N`` sits at ``t = k / (N - 1)`` (the first frame is the first
 key, the last frame the last key, exactly); positions and fields of view interpolate
 linearly between the keys around ``t``, targets linearly or, with ``slerp``, by the view
