@@ -10,12 +10,12 @@ the file that defines the class); the same SPIR-V runs on wgpu and vk.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Annotated, ClassVar
 
 import numpy as np
+from _common import out_problem  # this folder is on the path: the script runs from it
 
 import rfw
 from rfw import ComputePass, Settings, Tex2D, register_pass
@@ -37,20 +37,6 @@ class InvertPass(ComputePass):
     def record(self, ctx) -> None:
         ctx.dispatch(threads=ctx.extent("inverted"), t_color=ctx.sampled("color"),
                      o_inverted=ctx.storage("inverted"), u_params=self.params)
-
-
-def out_problem(folder: Path) -> str | None:
-    """Why ``folder`` cannot hold the output (one line), or None: it is a writable folder or
-    can be made one. Checked before rendering, so a bad --out costs no render."""
-    folder = Path(os.path.abspath(folder))
-    for p in (folder, *folder.parents):  # the nearest part that exists decides
-        if p.exists():
-            if not p.is_dir():
-                return f"{p}: --out: not a folder"
-            if not os.access(p, os.W_OK | os.X_OK):
-                return f"{p}: --out: cannot write here"
-            return None
-    return None
 
 
 def main() -> int:

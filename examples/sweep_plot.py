@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -15,24 +14,11 @@ import matplotlib
 
 matplotlib.use("Agg")  # headless: no window, a PNG
 import matplotlib.pyplot as plt
+from _common import out_problem  # this folder is on the path: the script runs from it
 
 import rfw
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def out_problem(folder: Path) -> str | None:
-    """Why ``folder`` cannot hold the output (one line), or None: it is a writable folder or
-    can be made one. Checked before rendering, so a bad --out costs no render."""
-    folder = Path(os.path.abspath(folder))
-    for p in (folder, *folder.parents):  # the nearest part that exists decides
-        if p.exists():
-            if not p.is_dir():
-                return f"{p}: --out: not a folder"
-            if not os.access(p, os.W_OK | os.X_OK):
-                return f"{p}: --out: cannot write here"
-            return None
-    return None
 
 
 def main() -> int:
