@@ -189,11 +189,12 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
     out_dir = Path(out_dir)
     records = load_results(out_dir)
     variants = summarize_results(records)
-    rfw = [v for v in variants if v.kind == "rfw"]
+    pooled = [v for v in variants if v.kind == "rfw"]
+    rfw = split_devices(pooled)  # a variant measured on several devices: one row per device
     peers = [v for v in variants if v.kind == "peer"]
     doc = Doc()
     doc.h(1, "rfw benchmark")
-    _environment(doc, records, rfw)
+    _environment(doc, records, pooled)
     _frame_table(doc, rfw)
     charts = _charts(out_dir, rfw)
     charts += path_charts(out_dir, rfw, Img)  # runs along a camera path: GPU ms per frame
@@ -202,16 +203,16 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
-    _images(doc, out_dir, rfw, reference)
+    _images(doc, out_dir, rfw, reference, pooled)
     _counters(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
-    _devices(doc, rfw)
+    _devices(doc, pooled)
     _failures(doc, variants)
     _method(doc, records)
     md, page = out_dir / "report.md", out_dir / "report.html"
     md.write_text(doc.markdown(), encoding="utf-8")
     page.write_text(doc.html("rfw benchmark", out_dir), encoding="utf-8")
-    write_csv(out_dir / "results.csv", variants)
+    write_csv(out_dir / "results.csv", [*rfw, *peers])
     return md, page
 
 
@@ -268,9 +269,25 @@ def _by_device(v: VariantSummary) -> list[tuple[str, VariantSummary]]:
     return out
 
 
-def mixed_devices(v: VariantSummary) -> bool:
-    """Whether ``v``'s runs measured more than one device (its pooled numbers mix them)."""
-    return len({device_of(r) for r in v.records}) > 1
+def split_devices(variants: list[VariantSummary]) -> list[VariantSummary]:
+    """One row per (variant, device) where a variant's runs measured more than one device,
+    labelled ``variant [device]`` with statistics over that device's runs only (pooled
+    numbers would mix devices); a variant measured on one device stays as it is."""
+    out = []
+    for v in variants:
+        parts = _by_device(v)
+        if len(parts) == 1:
+            out.append(v)
+            continue
+        for device, part in parts:
+            part.label, part.base, part.device = f"{v.label} [{device}]", v.label, device
+            out.append(part)
+    return out
+
+
+def _report_devices(rfw: list[VariantSummary]) -> list[str]:
+    """Every device the rfw runs measured, in first-run order."""
+    return list(dict.fromkeys(device_of(r) for v in rfw for r in v.records))
 
 
 def _devices(doc: Doc, rfw: list[VariantSummary]) -> None:
@@ -372,8 +389,6 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
         gpu, wall, cpu = v.frame.get("gpu_ms"), v.frame.get("wall_ms"), v.frame.get("cpu_ms")
         alloc = m.get("transient_allocated_bytes", m.get("plan_transient_bytes"))
         devices = ", ".join(dict.fromkeys(device_of(r) for r in v.records))
-        if mixed_devices(v):  # its pooled numbers mix devices: the per-device table has them
-            devices = f"mixed: see Per device ({devices})"
         rows.append([v.label, devices, v.get("backend"), ms(gpu), ci(gpu), spread(gpu),
                      ms(wall), spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
                      + (" (plan)" if m.get("source") == "plan" else "")])
@@ -503,18 +518,21 @@ def _pick_reference(rfw: list[VariantSummary], reference: str | int | None) -> V
 
 
 def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
-                      reference: str | int | None = None) -> tuple[VariantSummary | None,
-                                                                   list[dict[str, Any]]]:
+                      reference: str | int | None = None,
+                      pooled: list[VariantSummary] | None = None
+                      ) -> tuple[VariantSummary | None, list[dict[str, Any]]]:
     """Each variant's output against the reference: PSNR, FLIP, difference PNGs (written to
-    ``out_dir/images``). Variants whose image has another shape are compared with nothing."""
+    ``out_dir/images``). Variants whose image has another shape are compared with nothing.
+    ``rfw`` may hold per-device rows (:func:`split_devices`); ``--reference`` then names or
+    numbers a variant of ``pooled``, the variants as run."""
     if not any(v.ok and v.image for v in rfw):
         return None, []
-    ref = _pick_reference(rfw, reference)
+    ref = _pick_reference(pooled if pooled is not None else rfw, reference)
     if not ref.image:
         return ref, []
     ref_img = load_png(inside(out_dir, ref.image))
     rows = []
-    for v in rfw:
+    for i, v in enumerate(rfw):
         if not v.image:
             continue
         img = load_png(inside(out_dir, v.image))
@@ -522,6 +540,8 @@ def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
         if img.shape == ref_img.shape:
             c = compare(ref_img, img)
             name = check_identifier("variant id", v.records[0].get("variant_id"))
+            if v.base:  # one device's row: its files apart from the variant's other rows
+                name += f".{i}"
             diff = Path("images") / f"{name}.diff.png"
             save_png(inside(out_dir, diff), c["diff"])
             legend = Path("images") / f"{name}.diff_legend.png"
@@ -537,17 +557,22 @@ def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
 
 
 def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
-            reference: str | int | None) -> None:
-    ref, rows = image_comparisons(out_dir, rfw, reference)
+            reference: str | int | None, pooled: list[VariantSummary]) -> None:
+    ref, rows = image_comparisons(out_dir, rfw, reference, pooled)
     if ref is None:
         return
     doc.h(2, "Images")
     has_flip = any(r.get("flip") is not None for r in rows)
+    devices = _report_devices(pooled)
+    ref_on = dict(_by_device(ref))  # the reference's statistics on each device it ran on
     doc.p(f"Reference: **{ref.label}**; image differences next to the time differences "
           "(frame GPU ms, median). Difference: |reference - variant|, max over RGB, "
           "colour-mapped from black (0) to the largest difference of that image (its legend "
           "below it). `vs reference`: `*` where the 95% CIs of the two medians do not overlap, "
           "`(n.s.)` where they do (not a result). "
+          + ("The runs measured several devices: each row is compared with the reference's "
+             "runs on the same device; where the reference has none there, the change has no "
+             "mark. " if len(devices) > 1 else "")
           + ("FLIP: NVIDIA's perceptual error (LDR, 67 pixels per degree; 0 = identical), "
              "magma error map." if has_flip else "SSIM from scikit-image (FLIP is not "
                                                  "installed)."))
@@ -568,14 +593,18 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
         metric = r.get("flip") if has_flip else r.get("ssim")
         cells.append("-" if metric is None else f"{metric:.4f}")
         cells.append("-" if own_ms is None else f"{own_ms:.3f}")
-        if r["variant"] is ref:
+        if r["variant"] is ref or r["variant"].base == ref.label:
             cells.append("reference")
-        elif mixed_devices(r["variant"]) or mixed_devices(ref):
-            # pooled over devices: no significance mark, the per-device table compares
-            change = change_text(ref_gpu, own_gpu).removesuffix(" *").removesuffix(" (n.s.)")
-            cells.append(f"{change} (mixed devices: see Per device)")
-        else:
+        elif len(devices) == 1:
             cells.append(change_text(ref_gpu, own_gpu))
+        else:  # against the reference on this row's device only
+            device = device_of(r["variant"].first)
+            same = ref_on.get(device)
+            if same is None:
+                change = change_text(ref_gpu, own_gpu).removesuffix(" *").removesuffix(" (n.s.)")
+                cells.append(f"{change} (reference not run on {device}: no mark)")
+            else:
+                cells.append(change_text(same.frame.get("gpu_ms"), own_gpu))
         table.append(cells)
     doc.table(headers, table)
 

@@ -21,6 +21,8 @@ class VariantSummary:
     frame: dict[str, Any] = field(default_factory=dict)  # metric -> summary
     passes: list[dict[str, Any]] = field(default_factory=list)  # {name, gpu_ms, cpu_ms}
     samples: dict[str, list[list[float]]] = field(default_factory=dict)  # metric -> per run
+    base: str = ""  # one device's row of a variant measured on several: the variant's label
+    device: str = ""  # and that device
 
     @property
     def first(self) -> dict[str, Any]:

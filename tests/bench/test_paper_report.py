@@ -212,13 +212,36 @@ def test_stacked_chart_error_bars_are_the_pass_cis(tmp_path, monkeypatch):
         assert err.min() > 0  # negative control of a bar that draws nothing
 
 
+def _rewrite(folder: Path, change) -> None:
+    """Apply ``change(record)`` to every record of ``folder/results.jsonl``."""
+    lines = [json.loads(x) for x in (folder / "results.jsonl").read_text().splitlines()]
+    for rec in lines:
+        change(rec)
+    (folder / "results.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+
+
+def _slower(rec: dict, factor: float) -> None:
+    for p in rec["passes"]:
+        p["gpu_ms"] = [x * factor for x in p["gpu_ms"]]
+    rec["frame"]["gpu_ms"] = [x * factor for x in rec["frame"]["gpu_ms"]]
+
+
+def _row(md: str, prefix: str) -> list[str]:
+    line = next(x for x in md.splitlines() if x.startswith(prefix))
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
 def test_per_device_tables_side_by_side(tmp_path):
     two = write_results(tmp_path / "two", {
-        "d@wgpu": {"passes": {"g": 10.0}, "device": "GPU A"},
-        "e@wgpu": {"passes": {"g": 5.0}, "device": "GPU B"}})
-    lines = [json.loads(x) for x in (two / "results.jsonl").read_text().splitlines()]
-    lines[0]["device"] = "GPU B"  # d@wgpu also ran once on B
-    (two / "results.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+        "d@wgpu": {"passes": {"g": 10.0}, "device": "GPU A", "image": _image()},
+        "e@wgpu": {"passes": {"g": 5.0}, "device": "GPU B", "image": _image()}})
+
+    def first_d_on_b(rec: dict) -> None:  # d@wgpu's first run ran on B, twice as slow
+        if rec["variant"] == "d@wgpu" and rec["repeat"] == 0:
+            rec["device"] = "GPU B"
+            _slower(rec, 2.0)
+
+    _rewrite(two, first_d_on_b)
     assert rfw("report", str(two)).returncode == 0
     md = (two / "report.md").read_text()
     assert "## Per device" in md
@@ -228,16 +251,91 @@ def test_per_device_tables_side_by_side(tmp_path):
         "GPU B: GPU ms", "GPU B: 95% CI", "GPU A: GPU ms", "GPU A: 95% CI"]
     d = next(x for x in md.splitlines() if x.startswith("| d@wgpu | frame |")).split("|")
     e = next(x for x in md.splitlines() if x.startswith("| e@wgpu | frame |")).split("|")
-    assert float(d[3]) == pytest.approx(10.0, rel=0.05) and float(d[5]) == pytest.approx(
+    assert float(d[3]) == pytest.approx(20.0, rel=0.05) and float(d[5]) == pytest.approx(
         10.0, rel=0.05)
     assert float(e[3]) == pytest.approx(5.0, rel=0.05) and e[5].strip() == "-"  # not on A
-    # the device column: d's pooled row mixes devices and says so, e's does not
-    assert "| d@wgpu | mixed: see Per device (GPU B, GPU A) | wgpu |" in md
-    assert "| e@wgpu | GPU B | wgpu |" in md
-    # negative control: one device, no per-device section
-    one = write_results(tmp_path / "one", {"d@wgpu": {"passes": {"g": 10.0}}})
+    # the frame table: one row per (variant, device), each with that device's statistics;
+    # nothing is pooled over devices any more
+    frame = md.split("## Frame time per variant")[1].split("\n## ")[0]
+    on_b, on_a = _row(frame, "| d@wgpu [GPU B] |"), _row(frame, "| d@wgpu [GPU A] |")
+    assert on_b[1:3] == ["GPU B", "wgpu"] and on_a[1:3] == ["GPU A", "wgpu"]
+    assert float(on_b[3]) == pytest.approx(20.0, rel=0.05)
+    assert float(on_a[3]) == pytest.approx(10.0, rel=0.05)
+    assert _row(frame, "| e@wgpu |")[1] == "GPU B"  # one device: no suffix
+    assert "| d@wgpu |" not in frame and "mixed" not in md
+    # per-pass tables and charts' rows too
+    assert "### d@wgpu [GPU B]" in md and "### d@wgpu [GPU A]" in md and "### e@wgpu" in md
+    # results.csv: the same split rows, each with its own median
+    rows = list(csv.DictReader((two / "results.csv").open()))
+    frame_gpu = {(r["variant"], r["device"]): float(r["median"]) for r in rows
+                 if r["pass"] == "frame" and r["metric"] == "gpu_ms"}
+    assert set(frame_gpu) == {("d@wgpu [GPU B]", "GPU B"), ("d@wgpu [GPU A]", "GPU A"),
+                              ("e@wgpu", "GPU B")}
+    assert frame_gpu["d@wgpu [GPU B]", "GPU B"] == pytest.approx(20.0, rel=0.05)
+    assert frame_gpu["d@wgpu [GPU A]", "GPU A"] == pytest.approx(10.0, rel=0.05)
+    # vs reference (d@wgpu, split): e is compared with d's run on B, its own device
+    images = md.split("## Images")[1]
+    assert _row(images, "| d@wgpu [GPU B] |")[-1] == "reference"
+    assert _row(images, "| d@wgpu [GPU A] |")[-1] == "reference"
+    vs = _row(images, "| e@wgpu |")[-1]  # pooled d (median 10 ms) would give -50 %
+    assert vs.endswith("% *") and float(vs[:-3]) == pytest.approx(-75.0, abs=1.0), vs
+    # negative control: one device, no per-device section, no device suffix on any label
+    one = write_results(tmp_path / "one", {"d@wgpu": {"passes": {"g": 10.0}},
+                                           "e@wgpu": {"passes": {"g": 5.0}}})
     assert rfw("report", str(one)).returncode == 0
-    assert "## Per device" not in (one / "report.md").read_text()
+    md = (one / "report.md").read_text()
+    assert "## Per device" not in md and "[synthetic]" not in md
+    assert _row(md.split("## Frame time per variant")[1], "| d@wgpu |")[1] == "synthetic"
+    assert "### d@wgpu\n" in md
+    assert {r["variant"] for r in csv.DictReader((one / "results.csv").open())} == {
+        "d@wgpu", "e@wgpu"}
+
+
+def test_vs_reference_on_the_same_device(tmp_path):
+    # B is twice as slow as A for everything; n is 10 % slower than r on each device. Each
+    # device's row is compared with the reference on that device: +10 % *, never the
+    # +120 % of n on B against r on A, nor a pooled n.s. over both devices.
+    out = write_results(tmp_path / "b", {
+        "r@wgpu": {"passes": {"g": 10.0}, "spread": 0.01, "image": _image()},
+        "n@wgpu": {"passes": {"g": 11.0}, "spread": 0.01, "image": _image()},
+        "s@wgpu": {"passes": {"g": 10.5}, "spread": 0.4, "image": _image()},
+        "o@wgpu": {"passes": {"g": 12.0}, "spread": 0.01, "image": _image()}}, repeats=4)
+
+    def place(rec: dict) -> None:
+        if rec["variant"] == "o@wgpu":  # only ever ran on C, where r never ran
+            rec["device"] = "GPU C"
+        elif rec["repeat"] % 2:
+            rec["device"] = "GPU B"
+            _slower(rec, 2.0)
+        else:
+            rec["device"] = "GPU A"
+
+    _rewrite(out, place)
+    done = rfw("report", str(out))
+    assert done.returncode == 0, done.stderr
+    md = (out / "report.md").read_text()
+    images = md.split("## Images")[1].split("\n## ")[0]
+    assert "compared with the reference's runs on the same device" in images
+    assert _row(images, "| r@wgpu [GPU A] |")[-1] == "reference"
+    assert _row(images, "| r@wgpu [GPU B] |")[-1] == "reference"
+    assert _row(images, "| n@wgpu [GPU A] |")[-1] == "+10.0% *"
+    assert _row(images, "| n@wgpu [GPU B] |")[-1] == "+10.0% *"
+    # negative control of the mark: +5 % inside a wide spread is n.s. on each device
+    assert _row(images, "| s@wgpu [GPU A] |")[-1] == "+5.0% (n.s.)"
+    assert _row(images, "| s@wgpu [GPU B] |")[-1] == "+5.0% (n.s.)"
+    # no reference run on C: the change is shown without a mark
+    o = _row(images, "| o@wgpu |")[-1]
+    assert o.endswith("(reference not run on GPU C: no mark)") and "*" not in o
+    assert "n.s." not in o
+    # the split rows' difference images are files of their own
+    diffs = sorted(p.name for p in (out / "images").glob("n_wgpu*.diff.png"))
+    assert len(diffs) == 2, diffs
+    # --reference names the variant as run, not one of its rows
+    done = rfw("report", str(out), "--reference", "n@wgpu")
+    assert done.returncode == 0, done.stderr
+    images = (out / "report.md").read_text().split("## Images")[1].split("\n## ")[0]
+    assert _row(images, "| r@wgpu [GPU B] |")[-1] == "-9.1% *"
+    assert _row(images, "| n@wgpu [GPU A] |")[-1] == "reference"
 
 
 def test_compare_writes_md_and_html_with_image_diffs(tmp_path):

@@ -1,7 +1,7 @@
 """Fixes from a review of ``rfw bench``, through the CLI in a subprocess: peers refuse a
 camera they would not render, a bad ``--ray-address`` is refused before anything is printed,
 ``compare`` refuses runs measured differently unless told, and the Ray executor's report
-says how its runs ran and marks rows pooled over devices."""
+says how its runs ran and splits a variant measured on several devices into one row per device."""
 
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# 5. the Ray executor's report: concurrency stated, pooled mixed-device rows unmarked
+# 5. the Ray executor's report: concurrency stated, one row per (variant, device)
 
 
 def ray_results(folder: Path, *, executor: str | None) -> Path:
@@ -181,7 +181,7 @@ def table_row(md: str, prefix: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
-def test_ray_report_states_concurrency_and_marks_mixed_rows(tmp_path):
+def test_ray_report_states_concurrency_and_splits_devices(tmp_path):
     out = ray_results(tmp_path / "ray", executor="ray")
     done = bench(tmp_path, "report", str(out))
     assert done.returncode == 0, done.stderr
@@ -191,29 +191,33 @@ def test_ray_report_states_concurrency_and_marks_mixed_rows(tmp_path):
     assert "one GPU each, so up to 2 ran at the same time (cluster resources: 2 GPU, " \
         "16 CPU; 2 host(s))" in how
     assert "one after another" not in how
-    # the pooled row of the variant that ran on two hosts says so; one host: no mark
-    frame = md.split("## Frame time per variant")[1]
-    new = table_row(frame, "| new@wgpu |")
-    assert new[1].startswith("mixed: see Per device (synthetic @ a GPU 0, synthetic @ b GPU 0")
-    assert table_row(frame, "| ref@wgpu |")[1] == "synthetic @ a GPU 0"
+    # the variant that ran on two hosts has one row per host; one host: one row, no suffix
+    frame = md.split("## Frame time per variant")[1].split("\n## ")[0]
+    a, b = "synthetic @ a GPU 0", "synthetic @ b GPU 0"
+    assert table_row(frame, f"| new@wgpu [{a}] |")[1] == a
+    assert table_row(frame, f"| new@wgpu [{b}] |")[1] == b
+    assert table_row(frame, "| ref@wgpu |")[1] == a
+    assert "| new@wgpu |" not in frame and "mixed" not in md
     assert "## Per device" in md
-    # +50 %, CIs far apart, yet pooled over devices: no significance mark
-    images = md.split("## Images")[1]
-    vs = table_row(images, "| new@wgpu |")[-1]
-    assert vs == "+50.0% (mixed devices: see Per device)", vs
+    # +50 % on host a against the reference on host a: marked; host b has no reference run
+    images = md.split("## Images")[1].split("\n## ")[0]
+    on_a = table_row(images, f"| new@wgpu [{a}] |")[-1]
+    assert on_a.endswith("% *") and abs(float(on_a[:-3]) - 50.0) < 2.0, on_a
+    vs = table_row(images, f"| new@wgpu [{b}] |")[-1]
+    assert vs.endswith(f"% (reference not run on {b}: no mark)"), vs
     assert "*" not in vs and "n.s." not in vs
 
 
 def test_local_report_keeps_its_claims_and_marks(tmp_path):
     # negative control: the same numbers from the local runner: one process after another,
-    # no mixed rows, and the same +50 % does get its significance mark
+    # one device, so no split rows (no device suffix), and the +50 % gets its mark
     out = ray_results(tmp_path / "local", executor=None)
     done = bench(tmp_path, "report", str(out))
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     how = md.split("## How this was measured")[1]
     assert "one after another on this machine" in how and "Ray" not in how
-    assert "mixed" not in md
+    assert "mixed" not in md and "[synthetic" not in md and "## Per device" not in md
     assert table_row(md.split("## Images")[1], "| new@wgpu |")[-1] == "+50.0% *"
 
 
