@@ -25,7 +25,7 @@ SIZE = "32x18"
 
 def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, check=False, cwd=cwd)
+                          text=True, check=False, cwd=cwd, timeout=300)
 
 
 def run(out: Path, *args: str, config: Path = FLAT) -> subprocess.CompletedProcess:
@@ -38,20 +38,23 @@ def image(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGBA"))
 
 
-def refused(tmp_path: Path, *args: str, needles: tuple[str, ...]) -> str:
+def refused(tmp_path: Path, *args: str, needles: tuple[str, ...],
+            command: str = "run") -> str:
     """The CLI refuses: exit 2, one line naming ``needles``, no traceback, nothing
     written outside --out (the working folder stays empty)."""
     work = tmp_path / "work"
     work.mkdir(exist_ok=True)
-    done = cli("run", str(FLAT), "--size", SIZE, "--out", str(tmp_path / "o"), *args, cwd=work)
-    assert done.returncode == 2, done.stderr
+    out = tmp_path / "o"
+    extra = ["--out", str(out), "--frames", "2"] if command == "run" else []
+    done = cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
+    assert done.returncode == 2, done.stdout + done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
     assert "Traceback" not in done.stderr
     for needle in needles:
         assert needle in lines[0], lines[0]
     assert list(work.iterdir()) == []
-    assert not (tmp_path / "o" / "timings.json").exists()
+    assert not (out / "timings.json").exists()
     return lines[0]
 
 

@@ -6,25 +6,17 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-ROOT = Path(__file__).resolve().parents[1]
-FLAT = ROOT / "configs" / "flat.toml"
-SIZE = "32x18"
+from .test_camera_path import FLAT, SIZE, cli, refused
+
 # two keys from one eye, looking opposite ways (+z, then -z)
 KEYS = ("camera.path.keys=[{position=[0,1,0],target=[0,1,5]},"
         "{position=[0,1,0],target=[0,1,-5]}]")
 SLERP = "camera.path.target_interpolation=slerp"
-
-
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, check=False, cwd=cwd, timeout=300)
 
 
 def run(out: Path, *args: str, frames: int = 2) -> dict:
@@ -38,25 +30,6 @@ def run(out: Path, *args: str, frames: int = 2) -> dict:
 
 def sets(*items: str) -> list[str]:
     return [a for s in items for a in ("--set", s)]
-
-
-def refused(tmp_path: Path, *args: str, needles: tuple[str, ...],
-            command: str = "run") -> str:
-    """Exit 2, one line naming ``needles``, no traceback, nothing written outside --out."""
-    work = tmp_path / "work"
-    work.mkdir(exist_ok=True)
-    out = tmp_path / "o"
-    extra = ["--out", str(out), "--frames", "2"] if command == "run" else []
-    done = cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
-    assert done.returncode == 2, done.stdout + done.stderr
-    lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
-    assert "Traceback" not in done.stderr
-    for needle in needles:
-        assert needle in lines[0], lines[0]
-    assert list(work.iterdir()) == []
-    assert not (out / "timings.json").exists()
-    return lines[0]
 
 
 def image(path: Path) -> np.ndarray:
