@@ -290,25 +290,6 @@ def set_frame_camera(frame: Any, camera: Any) -> None:
         sc.set_viewport(sc.size)
 
 
-def one_frame(frame: Any, *, last: bool) -> None:
-    """One frame of ``frame`` (:class:`rfw.frame.Frame`) without draining the frames in
-    flight unless ``last``, as ``Frame.run`` would drive it."""
-    if len(frame.executors) == 1 and not frame.mixed.bridges:
-        (ex,) = frame.executors.values()
-        ex.drain_after_frame = last
-        try:
-            ex.frame()
-        finally:
-            ex.drain_after_frame = False
-        frame.frame_index += 1
-        return
-    frame.drain_after_frame = last
-    try:
-        frame.frame()
-    finally:
-        frame.drain_after_frame = False
-
-
 def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
              each_frame: Callable[[int, Any], None] | None = None) -> list[dict[str, Any]]:
     """``warmup`` untimed frames from the path's first camera, then ``frames`` timed ones,
@@ -329,7 +310,7 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
             # the write's wait for frames in flight (vk) is part of the frame's wall time
             cameras.append({**describe(cam, path.param(k, frames)),
                             "write_ms": (time.perf_counter() - start) * 1e3})
-        one_frame(frame, last=k == frames - 1)
+        frame.step(last=k == frames - 1)
         if each_frame is not None:
             each_frame(k, frame)
     return cameras

@@ -104,11 +104,16 @@ def run_frames(executor: Any, frames: int) -> None:
     ``run`` returns with its frames done and a per-frame clock around ``frame()`` (the
     bench's) counts the drain."""
     for k in range(frames):
-        executor.drain_after_frame = k == frames - 1
-        try:
-            executor.frame()
-        finally:
-            executor.drain_after_frame = False
+        one_frame(executor, last=k == frames - 1)
+
+
+def one_frame(executor: Any, *, last: bool) -> None:
+    """One frame of ``executor``, draining the frames in flight inside it if ``last``."""
+    executor.drain_after_frame = last
+    try:
+        executor.frame()
+    finally:
+        executor.drain_after_frame = False
 
 
 @dataclass
@@ -318,6 +323,16 @@ class Frame:
             self.frame_index += frames
             return
         run_frames(self, frames)
+
+    def step(self, *, last: bool) -> None:
+        """One frame as :meth:`run` drives it, draining the frames in flight only if
+        ``last`` (``rfw.camera_path``: a camera between frames)."""
+        if len(self.executors) == 1 and not self.mixed.bridges:
+            (ex,) = self.executors.values()
+            one_frame(ex, last=last)
+            self.frame_index += 1
+            return
+        one_frame(self, last=last)
 
     drain_after_frame = False  # the last frame of a run drains (inside frame(): the bench's clock)
 
