@@ -465,13 +465,16 @@ def _whole(built: Built, backend: str, devices: Devices, *,
 
 
 def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera: Any = None,
-          size: tuple[int, int] | None = None, alias: bool = True) -> Frame:
-    """Upload ``scene`` to each backend used and make its executor; the frame owns both."""
+          size: tuple[int, int] | None = None, alias: bool = True,
+          uploads: dict[str, Any] | None = None) -> Frame:
+    """Upload ``scene`` to each backend used and make its executor; the frame owns both.
+    ``uploads`` maps a backend to a scene already uploaded there (e.g. ``rfw view``'s, kept
+    across changes of config): used as it is, and left to the caller to destroy."""
     frame = Frame(mixed, {}, {s: side.backend for s, side in sides.items()})
     try:
         for s, side in sides.items():
-            uploaded = None
-            if scene is not None:
+            uploaded = (uploads or {}).get(s)
+            if uploaded is None and scene is not None:
                 uploaded = side.backend.scene(side.device, scene, camera,
                                               size or mixed.plan.size)
                 frame.scenes.append(uploaded)
@@ -482,7 +485,8 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
         frame.destroy()
         raise
     frame.devices = {s: side.device for s, side in sides.items()}
-    frame.default_light = bool(frame.scenes and frame.scenes[0].default_light)
+    used = [*frame.scenes, *(uploads or {}).values()]
+    frame.default_light = bool(used and used[0].default_light)
     return frame
 
 
