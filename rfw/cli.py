@@ -241,7 +241,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     view(Path(args.config or DEFAULT_CONFIG), sets, scene=_scene_name(args.scene),
          frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
-         screenshot=Path(args.screenshot) if args.screenshot else None)
+         screenshot=Path(args.screenshot) if args.screenshot else None,
+         backend=args.backend, validation=args.validate)
     return 0
 
 
@@ -370,6 +371,12 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES), help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
     v.add_argument("--no-overlay", action="store_true", help="start without the overlay (H)")
+    v.add_argument("--backend", metavar="NAME",
+                   help="backend of unpinned passes: wgpu, vk or another installed one "
+                   "(default: the one every pass is pinned to, else wgpu)")
+    v.add_argument("--validate", action="store_true",
+                   help="the Vulkan validation layer on the vk device; its messages are "
+                   "counted when the window closes")
     v.add_argument("--screenshot", metavar="FILE.png",
                    help="save the presented pixels there on the last frame and on key C")
     v.set_defaults(func=cmd_view)

@@ -1,9 +1,10 @@
 """``rfw view``'s on-screen overlay: Dear ImGui (imgui-bundle) drawn with wgpu-py's imgui
 backend into the window's own render pass, after the graph's image.
 
-It shows per-pass GPU and CPU ms (medians of the last frames), the plan's memory (transient
-bytes after aliasing, before aliasing, the textures the executor holds), culling counters
-where the executor keeps them, a frame-time graph, and the variant groups; a checkbox per
+It shows per-pass GPU and CPU ms (medians of the last frames) with the backend each pass
+ran on where the frame mixes them, the plan's memory (transient bytes after aliasing, before
+aliasing, the textures the wgpu executor holds, what the vk executor allocated), the meshlet
+passes' GPU culling counters (vk), a frame-time graph, and the variant groups; a checkbox per
 pass and a button per variant option change the config through the viewer, which refuses a
 change that breaks the graph (the overlay shows the reason). The overlay only reads the
 viewer's state and calls :meth:`rfw.view.Viewer.set_pass` / :meth:`~rfw.view.Viewer.choose`.
@@ -121,6 +122,7 @@ class Overlay:
         imgui.begin("rfw", None, imgui.WindowFlags_.always_auto_resize)
         self._text(f"{v.cfg.name}  {v.cfg.size[0]}x{v.cfg.size[1]}  frame {v.frame_count}")
         self._timings()
+        self._bridges()
         self._frame_graph()
         self._memory()
         self._variants()
@@ -139,14 +141,18 @@ class Overlay:
         for head in ("pass (keys 1-9)", "GPU ms", "CPU ms"):
             imgui.table_setup_column(head)
         imgui.table_headers_row()
+        timings = v.timings()
+        mixed = len(v.executors) > 1
         for i, entry in enumerate(v.cfg.passes):
             imgui.table_next_row()
             imgui.table_next_column()
-            changed, on = imgui.checkbox(f"{i + 1} {entry.name}##pass", entry.enabled)
+            side = v.backend_of(entry.name)
+            label = f"{i + 1} {entry.name}" + (f" [{side}]" if mixed and side else "")
+            changed, on = imgui.checkbox(f"{label}##pass", entry.enabled)
             self._rect(f"pass:{entry.name}")
             if changed:  # applied after this frame's submit: it may replace the executor
                 v.later(v.set_pass, entry.name, on)
-            t = v.executor.timings.get(entry.name)
+            t = timings.get(entry.name)
             if t is None:  # disabled, or culled: nothing reads it
                 self.lines.append(f"{entry.name} off")
                 continue
@@ -156,8 +162,16 @@ class Overlay:
             imgui.table_next_column()
             imgui.text("-" if cpu is None else f"{cpu:.3f}")
             self.lines.append(f"{entry.name} gpu {'-' if gpu is None else f'{gpu:.3f}'} "
-                              f"cpu {'-' if cpu is None else f'{cpu:.3f}'}")
+                              f"cpu {'-' if cpu is None else f'{cpu:.3f}'}"
+                              + (f" on {side}" if mixed else ""))
         imgui.end_table()
+
+    def _bridges(self) -> None:
+        """A mixed frame's host copies between backends: wall ms each, and bytes."""
+        for name, t in self.viewer.frame.bridge_timings.items():
+            ms = median_ms(t.cpu_ms)
+            self._text(f"{name}: host copy {'-' if ms is None else f'{ms:.3f}'} ms, "
+                       f"{_mib(t.bytes)}")
 
     def _frame_graph(self) -> None:
         imgui = self.imgui
@@ -173,19 +187,35 @@ class Overlay:
 
     def _memory(self) -> None:
         v = self.viewer
-        plan = v.executor.plan
+        plan = v.plan
         self._text(f"memory: transients {_mib(plan.transient_bytes)} aliased, "
                    f"{_mib(plan.unaliased_bytes)} unaliased")
-        self._text(f"        textures held {_mib(texture_bytes(v.executor))}")
+        wgpu_ex = v.executors.get("wgpu")
+        if wgpu_ex is not None:
+            self._text(f"        textures held {_mib(texture_bytes(wgpu_ex))}")
+        for name, mem in v.memory().items():
+            if "transient_allocated_bytes" in mem:
+                self._text(f"        {name}: transients allocated "
+                           f"{_mib(mem['transient_allocated_bytes'])} in "
+                           f"{mem.get('allocations', 0)} allocation(s)")
         culling = v.culling()
-        self._text("culling: " + (", ".join(f"{k} {val}" for k, val in culling.items())
-                                  if culling else "no counters on this backend"))
+        shown = {k: val for k, val in culling.items() if val is not None}
+        if not shown:
+            self._text("culling: no GPU culling counters in this frame")
+            return
+        # the counters in lines of three, meshlets first
+        items = [f"{k} {val:,}" for k, val in shown.items()]
+        self._text("culling: " + ", ".join(items[:3]))
+        for k in range(3, len(items), 3):
+            self._text("         " + ", ".join(items[k:k + 3]))
 
     def _variants(self) -> None:
         imgui, v = self.imgui, self.viewer
         if not v.cfg.variants:
             return
         imgui.separator_text("variants (V cycles, Shift+V next group)")
+        if v.techniques:  # auto options as this device resolved them
+            self._text("auto: " + ", ".join(f"{k}={t}" for k, t in v.techniques.items()))
         for gi, (group, options) in enumerate(v.cfg.variants.items()):
             mark = ">" if gi == v.group else " "
             imgui.text(f"{mark} {group}:")

@@ -7,6 +7,13 @@ table, H hides or shows the overlay (:mod:`rfw.overlay`), C saves the presented 
 ``--screenshot`` file. Shaders are also reloaded whenever their source changes: the pipeline
 cache is keyed by the preprocessed source's hash.
 
+The frame runs on any backend, as ``rfw run`` does (``--backend``; default: the one the
+config's passes are pinned to, else wgpu; pinned passes mix in through bridges): the window's
+own wgpu device copies a wgpu output on the GPU, another backend's output (vk: meshlets with
+GPU culling, ray-traced shadows) is read back each frame and uploaded, so what the window
+shows is what ``rfw run --backend`` writes on either. The overlay then shows that backend's
+culling counters and memory.
+
 The window shows the graph output's bytes as they are: the swapchain is configured with a
 non-sRGB format (the output is display-encoded already; an ``*-srgb`` swapchain would encode
 it a second time). A change (key or mouse) is transactional: the new config is built,
@@ -28,12 +35,14 @@ from typing import Any
 import numpy as np
 import wgpu
 
+from .backend import Devices, get_backend
 from .camera_path import path_for
-from .config import Config, apply_overrides, build
+from .config import Config, apply_overrides, build, resolve_auto
 from .errors import RfwError
-from .frame import camera_for, load_scene_for
+from .frame import camera_for, load_scene_for, pinned_elsewhere, prepare, start
 from .graph import compile
 from .overlay import Overlay
+from .render import backend_for
 
 _BLIT = """
 @group(0) @binding(0) var t: texture_2d<f32>;
@@ -56,6 +65,8 @@ fn fs_main(v: V) -> @location(0) vec4f {
 """
 
 
+STATS_EVERY = 15  # frames between reads of the culling counters and memory (they wait)
+
 # said once at start: a config's camera.path drives rfw run and rfw bench, not the window
 PATH_NOTE = "camera.path is not followed by rfw view: it shows the path's first camera"
 
@@ -65,15 +76,17 @@ class Viewer:
 
     def __init__(self, cfg: Config, *, scene: Any = None, script: list[str] = (),
                  frames: int | None = None, report_every: int = 60, canvas: Any = None,
-                 overlay: bool = True, screenshot: Path | None = None):
+                 overlay: bool = True, screenshot: Path | None = None,
+                 backend: str | None = None, validation: bool = False):
         from rendercanvas.glfw import RenderCanvas, loop
 
-        from .backends.gpu_scene import GpuScene
         from .backends.wgpu_backend import Device
 
         self.cfg = cfg
         self.loop = loop
-        # a bad config or scene fails here, before a window opens
+        self.backend = backend or backend_for(cfg)
+        # a bad config, backend or scene fails here, before a window opens
+        get_backend(self.backend, file=cfg.source)
         compile(build(cfg).graph)
         self.scene = load_scene_for(cfg, scene)
         self.camera = camera_for(cfg, self.scene)
@@ -83,8 +96,12 @@ class Viewer:
             print(PATH_NOTE, flush=True)
         self.canvas = canvas or RenderCanvas(size=cfg.size, title=f"rfw: {cfg.name}",
                                              update_mode="continuous")
+        # the window's device: it presents, and runs the wgpu part of a frame; another
+        # backend's device is made on first use (with its validation layer: --validate)
         self.device = Device()
-        self.gpu_scene = GpuScene(self.device.device, self.scene, self.camera)
+        self.devices = Devices((self.device,), validation=validation)
+        self.validation = validation
+        self.uploads: dict[str, Any] = {}  # backend -> the scene uploaded there, kept
         self.context = self.canvas.get_wgpu_context()
         self.format = present_format(self.context.get_preferred_format(self.device.adapter))
         # COPY_SRC: the presented texture can be read back (C, --screenshot, the tests)
@@ -100,7 +117,9 @@ class Viewer:
         self.report_every = report_every
         self.screenshot = screenshot
         self.frame_count = 0  # frames drawn
-        self.executor = None
+        self.frame: Any = None  # the rfw.frame.Frame of the current config
+        self.techniques: dict[str, str] = {}  # what auto variants chose on this device
+        self.stats: dict[str, dict[str, Any]] = {}  # backend -> its collect(), refreshed
         self.log: list[str] = []
         self.status = ""  # the last refusal or error, shown in the overlay
         self.group = 0  # the variant group V cycles
@@ -110,8 +129,14 @@ class Viewer:
         self._last_draw: float | None = None
         self._later: list[tuple[Any, tuple]] = []
         self._tried: dict[str, str] = {}  # variant group -> the option V tried last
+        self._shown: Any = None  # the texture the window blits: the output's copy
         self._blit = self._blit_pipeline()
-        self._rebuild(cfg)
+        try:
+            self._rebuild(cfg)
+        except BaseException:
+            self.canvas.close()
+            self.close()
+            raise
         self.overlay = Overlay(self, self.canvas, self.device.device, self.format) \
             if overlay else None
         self.canvas.add_event_handler(self._on_event, "key_down", "pointer_move", "wheel",
@@ -130,24 +155,80 @@ class Viewer:
 
     def _rebuild(self, cfg: Config) -> None:
         """Make ``cfg`` current: everything that can fail happens before anything changes."""
-        from .backends.wgpu_backend import Executor
-
-        built = build(cfg)
-        plan = compile(built.graph)
-        old = self.executor
-        executor = Executor(self.device, plan, built.passes, built.slots,
-                            self.gpu_scene, present=plan.outputs[:1])
+        run = get_backend(self.backend, file=cfg.source)
+        techniques: dict[str, str] = {}
+        resolved = cfg
+        if run.auto_variants:  # auto variants resolve for the device, as rfw run does
+            resolved, techniques = resolve_auto(cfg, run.caps(self.devices.get(run)))
+        mix = pinned_elsewhere(resolved, self.backend)
+        built = build(resolved)
+        mixed, sides = prepare(built, self.backend, self.devices, mix=mix)
+        for name, side in sides.items():  # the scene goes up once per backend, not per change
+            if name not in self.uploads:
+                self.uploads[name] = side.backend.scene(side.device, self.scene, self.camera,
+                                                        cfg.size)
+        frame = start(mixed, sides, uploads=self.uploads)
+        output = mixed.plan.outputs[0]
+        old = self.frame
         if old is not None:
-            executor.shaders = old.shaders  # keep compiled pipelines across toggles
+            keep = old.executors.get("wgpu")
+            new = frame.executors.get("wgpu")
+            if keep is not None and new is not None:
+                new.shaders = keep.shaders  # keep compiled pipelines across toggles
             old.destroy()
-        self.executor, self.cfg = executor, cfg
+        self.frame, self.cfg, self.techniques = frame, cfg, techniques
         self.group = min(self.group, max(0, len(cfg.variants) - 1))
-        self.gpu_scene.camera = self.camera
-        self.gpu_scene.set_viewport(self.cfg.size)
-        self.output = plan.outputs[0]
-        self.output_format = plan.resource(self.output).format
-        self.say(f"graph: {' -> '.join(plan.order)}"
-                 + (f" (off: {', '.join(plan.disabled)})" if plan.disabled else ""))
+        for upload in self.uploads.values():
+            upload.camera = self.camera
+            upload.set_viewport(self.cfg.size)
+        self.output = output
+        self.output_format = mixed.plan.resource(output).format
+        self.stats = {}
+        self._shown = self._shown_texture()
+        self.say(f"graph: {' -> '.join(mixed.plan.order)}"
+                 + (f" (off: {', '.join(mixed.plan.disabled)})" if mixed.plan.disabled else "")
+                 + ("" if self.backend == "wgpu" and not mix else
+                    f" on {'+'.join(frame.executors)}"))
+        if techniques:
+            self.say("techniques: " + ", ".join(f"{k}={v}" for k, v in techniques.items()))
+
+    @property
+    def executors(self) -> dict[str, Any]:
+        """The current frame's executors by backend."""
+        return self.frame.executors
+
+    @property
+    def plan(self) -> Any:
+        """The current config's compiled plan (every backend's passes, bridges included)."""
+        return self.frame.plan
+
+    def timings(self) -> dict[str, Any]:
+        """Per pass (every backend's), its timings; bridges (host copies) included."""
+        out: dict[str, Any] = {}
+        for ex in self.frame.executors.values():
+            out.update(ex.timings)
+        out.update(self.frame.bridge_timings)
+        return out
+
+    def backend_of(self, name: str) -> str | None:
+        """The backend pass ``name`` runs on now (None: off or culled)."""
+        return self.frame.mixed.side.get(name)
+
+    def _shown_texture(self) -> Any:
+        """The texture the window shows: a copy of the output on the window's device."""
+        from .backends.wgpu_backend import wgpu_format
+
+        r = self.frame.plan.resource(self.output)
+        old = self._shown
+        if old is not None and tuple(old.size[:2]) == (r.width, r.height) and \
+                str(old.format) == wgpu_format(r.format):
+            return old
+        if old is not None:
+            old.destroy()
+        return self.device.device.create_texture(
+            size=(r.width, r.height, 1), format=wgpu_format(r.format),
+            usage=wgpu.TextureUsage.COPY_DST | wgpu.TextureUsage.TEXTURE_BINDING,
+            label="rfw:shown")
 
     def say(self, text: str) -> None:
         self.log.append(text)
@@ -175,8 +256,7 @@ class Viewer:
             if self.choose(group, option):
                 self._tried.pop(group)
         elif key.lower() == "r":
-            self.executor.shaders.programs.clear()
-            self.say("shaders reloaded")
+            self.reload()
         elif key.lower() == "p":
             self.report()
         elif key.lower() == "h" and self.overlay is not None:
@@ -188,6 +268,18 @@ class Viewer:
                 self._capture_next = True
         elif key.lower() in "wasdqe":
             self._move(key.lower())
+
+    def reload(self) -> None:
+        """R: shaders read again. wgpu compiles on the next frame (a broken shader skips
+        frames until fixed); another backend compiles when its executor is made, so the
+        frame is built again, transactionally (a broken shader is refused, and the shaders
+        that worked keep running)."""
+        wgpu_ex = self.frame.executors.get("wgpu")
+        if wgpu_ex is not None:
+            wgpu_ex.shaders.programs.clear()
+        if set(self.frame.executors) - {"wgpu"} and not self._apply([]):
+            return  # refused: the shaders that worked keep running
+        self.say("shaders reloaded")
 
     def later(self, action: Any, *args: Any) -> None:
         """Run ``action(*args)`` once the frame being drawn is submitted (the overlay's
@@ -212,16 +304,32 @@ class Viewer:
                          for i, g in enumerate(self.cfg.variants))
 
     def culling(self) -> dict[str, Any]:
-        """Culling counters of the current executor, where it keeps them (wgpu: none)."""
-        stats = getattr(self.executor, "culling_stats", None)
-        return dict(stats()) if callable(stats) else {}
+        """The GPU culling counters of the last frame read (meshlet passes on vk; {} where
+        no pass counts), refreshed every ``STATS_EVERY`` frames."""
+        for stats in self.stats.values():
+            if stats.get("culling"):
+                return dict(stats["culling"])
+        return {}
+
+    def memory(self) -> dict[str, dict[str, Any]]:
+        """Per backend of the frame, the memory its executor reports (vk: transients
+        allocated, allocations), refreshed with the culling counters."""
+        return {name: stats["memory"] for name, stats in self.stats.items()
+                if stats.get("memory")}
+
+    def _collect(self) -> None:
+        # each backend's own numbers (what timings.json's culling and memory hold); reading
+        # the counters back waits for the frame, so not every frame
+        self.frame.drain()
+        self.stats = {name: self.frame.backends[name].collect(ex)
+                      for name, ex in self.frame.executors.items()}
 
     def _apply(self, sets: list[str]) -> bool:
         """All or nothing: a change that breaks the config or graph leaves the current one."""
         try:
             self._rebuild(apply_overrides(self.cfg, sets))
         except RfwError as e:  # a toggle that breaks the graph is refused, not fatal
-            self.status = f"refused {', '.join(sets)}: {e}"
+            self.status = f"refused {', '.join(sets) or 'reload'}: {e}"
             self.say(self.status)
             return False
         self.status = ""
@@ -255,8 +363,10 @@ class Viewer:
 
     def _set_camera(self, eye: np.ndarray, at: np.ndarray) -> None:
         self.camera = replace(self.camera, position=tuple(eye), target=tuple(at))
-        self.gpu_scene.camera = self.camera
-        self.gpu_scene.set_viewport(self.cfg.size)
+        self.frame.drain()  # a backend's camera may be host memory frames in flight read
+        for upload in self.uploads.values():
+            upload.camera = self.camera
+            upload.set_viewport(self.cfg.size)
 
     def _on_event(self, event: dict) -> None:
         kind = event["event_type"]
@@ -282,7 +392,8 @@ class Viewer:
         self._last_draw = now
         last = self.frames_left is not None and self.frames_left <= 1
         try:
-            self.executor.frame()
+            self.frame.step(last=False)
+            self._fill_shown()
             ok = True
         except RfwError as e:  # e.g. a shader edited into an error: keep the window up
             self._failed(f"frame skipped: {e}")
@@ -299,6 +410,9 @@ class Viewer:
             action(*args)
         if ok:
             self.frame_count += 1
+            # from the second frame on: the first has no earlier depth for occlusion tests
+            if self.frame_count % STATS_EVERY == 2 or last:
+                self._collect()
             if self.report_every and self.frame_count % self.report_every == 0:
                 self.report()
         if self.frames_left is not None:  # failed frames count: --frames always ends
@@ -315,9 +429,9 @@ class Viewer:
     def _present(self, *, capture: bool) -> None:
         target = self.context.get_current_texture()
         dev = self.device.device
-        src = self.executor.view(self.output)
         bg = dev.create_bind_group(layout=self._blit.get_bind_group_layout(0),
-                                   entries=[{"binding": 0, "resource": src}])
+                                   entries=[{"binding": 0,
+                                             "resource": self._shown.create_view()}])
         enc = dev.create_command_encoder(label="rfw:present")
         rp = enc.begin_render_pass(color_attachments=[{
             "view": target.create_view(), "load_op": "clear", "store_op": "store",
@@ -336,11 +450,28 @@ class Viewer:
                 save_png(self.screenshot, self.captured)
                 self.say(f"wrote {self.screenshot}")
 
+    def _fill_shown(self) -> None:
+        """Copy the frame's output into the shown texture: on the GPU where the window's
+        device rendered it, else read back (after the frame) and uploaded."""
+        dev = self.device.device
+        owner = self.frame.mixed.owner[self.output]
+        size = (self._shown.width, self._shown.height, 1)
+        if owner == "wgpu":
+            enc = dev.create_command_encoder(label="rfw:shown")
+            enc.copy_texture_to_texture(
+                {"texture": self.frame.executors["wgpu"].texture(self.output)},
+                {"texture": self._shown}, size)
+            dev.queue.submit([enc.finish()])
+            return
+        data = np.ascontiguousarray(self.frame.read(self.output))
+        dev.queue.write_texture({"texture": self._shown}, data,
+                                {"bytes_per_row": data.nbytes // size[1]}, size)
+
     def report(self) -> None:
-        self.executor.drain()  # frames in flight append their timings once done
+        self.frame.drain()  # frames in flight append their timings once done
         parts = []
-        for name, t in self.executor.timings.items():
-            recent = t.gpu_ms[-30:] or t.cpu_ms[-30:]
+        for name, t in self.timings().items():
+            recent = getattr(t, "gpu_ms", [])[-30:] or t.cpu_ms[-30:]
             if not recent:  # no frame of this graph has finished yet
                 continue
             parts.append(f"{name} {statistics.median(recent):.2f}")
@@ -354,12 +485,24 @@ class Viewer:
         self.close()
 
     def close(self) -> None:
-        if self.overlay is not None:
+        if getattr(self, "overlay", None) is not None:
             self.overlay.close()  # what it showed last stays readable
-        if self.executor is not None:
-            self.executor.destroy()
-            self.executor = None
-        self.gpu_scene.destroy()
+        if self.frame is not None:
+            self.frame.destroy()
+            self.frame = None
+        for upload in self.uploads.values():
+            upload.destroy()
+        self.uploads = {}
+        if self._shown is not None:
+            self._shown.destroy()
+            self._shown = None
+        self.devices.close()  # validation's leak reports arrive here
+        if self.validation:
+            messages = [m for name, dev in self.devices.devices.items()
+                        for m in getattr(dev, "messages", ())]
+            self.say(f"validation: {len(messages)} messages")
+            for m in messages[:5]:
+                self.say(f"  {m.text}")
 
 
 def present_format(preferred: str) -> str:
@@ -405,7 +548,8 @@ def check_screenshot(path: Path | None) -> None:
 
 def view(config: Path, sets: list[str], *, scene: str | None = None,
          frames: int | None = None, script: list[str] = (), overlay: bool = True,
-         screenshot: Path | None = None) -> Viewer:
+         screenshot: Path | None = None, backend: str | None = None,
+         validation: bool = False) -> Viewer:
     from .config import load_config
 
     check_screenshot(screenshot)
@@ -415,13 +559,18 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
         sets = [*sets, f"scene={scene}"]
     cfg = apply_overrides(cfg, sets)
     compile(build(cfg).graph)  # config and scene errors first, with or without a display
+    backend = backend or backend_for(cfg)
+    get_backend(backend, file=cfg.source)  # an unknown name: one line naming the installed
+    if validation and backend == "wgpu" and not pinned_elsewhere(cfg, backend):
+        raise RfwError("--validate needs a Vulkan part of the frame: --backend vk, or a "
+                       "pass pinned to vk", file=cfg.source, element="--validate")
     loaded = load_scene_for(cfg)
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         # glfw aborts the process without a display: say so instead
         raise RfwError("no display for a window (set DISPLAY, or run under xvfb-run -a); "
                        "'rfw run' renders headless", element="rfw view")
     v = Viewer(cfg, scene=loaded, frames=frames, script=script, overlay=overlay,
-               screenshot=screenshot)
+               screenshot=screenshot, backend=backend, validation=validation)
     start = time.perf_counter()
     v.run()
     v.say(f"closed after {v.frame_count} frames in {time.perf_counter() - start:.1f} s")

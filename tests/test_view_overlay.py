@@ -34,7 +34,7 @@ from rfw.view import Viewer
 
 cfg = apply_overrides(load_config({config!r}), {sets!r})
 v = Viewer(cfg, scene=load_scene_for(cfg), frames={frames}, report_every=0,
-           overlay={overlay}, screenshot=Path({shot!r}))
+           overlay={overlay}, screenshot=Path({shot!r}), backend={backend!r})
 draws = [0]
 events = []
 out = {{}}
@@ -66,10 +66,12 @@ print("RESULT " + json.dumps(out))
 
 
 def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int = 8,
-          overlay: bool = True, pre: str = "") -> tuple[dict, list[str], str]:
+          overlay: bool = True, pre: str = "",
+          backend: str | None = None) -> tuple[dict, list[str], str]:
     script = tmp / "driver.py"
     script.write_text(DRIVER.format(tmp=str(tmp), config=str(config), sets=list(sets),
                                     frames=frames, overlay=overlay, pre=pre, shot=str(tmp / "shot.png"),
+                                    backend=backend,
                                     hook=textwrap.indent(textwrap.dedent(hook), "    ")))
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     done = under_xvfb([sys.executable, str(script)], env=env, cwd=tmp)
@@ -80,14 +82,30 @@ def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int
     return json.loads(result[len("RESULT "):]), lines, done.stderr
 
 
-def run_png(tmp: Path, size: str, *sets: str) -> np.ndarray:
+def run_cli(tmp: Path, size: str, *sets: str, config: Path = DEFERRED,
+            args: tuple[str, ...] = ()) -> Path:
     out = tmp / "run"
     done = subprocess.run(
-        [sys.executable, "-m", "rfw.cli", "run", str(DEFERRED), "--size", size, "--frames", "1",
-         "--out", str(out), *(a for s in sets for a in ("--set", s))],
+        [sys.executable, "-m", "rfw.cli", "run", str(config), "--size", size, "--frames", "1",
+         "--out", str(out), *args, *(a for s in sets for a in ("--set", s))],
         capture_output=True, text=True, timeout=180, cwd=tmp, check=False)
     assert done.returncode == 0, done.stdout + done.stderr
+    return out
+
+
+def run_png(tmp: Path, size: str, *sets: str, **kw) -> np.ndarray:
+    out = run_cli(tmp, size, *sets, **kw)
     return np.asarray(Image.open(out / "tonemap.ldr.png").convert("RGBA")).astype(int)
+
+
+def culling_shown(lines: list[str]) -> dict[str, int]:
+    """The culling counters an overlay showed: ``culling: a 1, b 2,025, ...`` and the lines
+    under it (thousands are written with commas)."""
+    start = next(i for i, x in enumerate(lines) if x.startswith("culling:"))
+    text = [lines[start][len("culling:"):]]
+    text += [x for x in lines[start + 1:] if x.startswith("         ")]
+    return {k: int(v.replace(",", "")) for item in ", ".join(text).split(", ")
+            for k, v in [item.split()]}
 
 
 def test_overlay_shows_timings_memory_and_toggles_passes_with_the_mouse(tmp_path):
@@ -182,3 +200,68 @@ def test_broken_shader_is_said_once(tmp_path):
     assert lines.index(skipped[0]) < lines.index("frames render again")
     # broken frames still show the window, with the error in the overlay; fixed, it is gone
     assert skipped[0] in result["broken"] and skipped[0] not in result["lines"]
+
+
+MESHLET = ROOT / "configs" / "meshlet.toml"
+
+
+def test_overlay_shows_the_vk_culling_counters_of_the_view(tmp_path):
+    # draws 0-9 from the config's camera; draws 11-13 step forward (W): the counters read
+    # again at frame 16 are the moved view's
+    result, _, _ = drive(tmp_path, """
+        if n == 10:
+            out["first"] = list(v.overlay.lines)
+        if n in (11, 12, 13):
+            v.key("w")
+    """, config=MESHLET, sets=["size=160x90"], frames=20)
+    run = json.loads((run_cli(tmp_path, "160x90", config=MESHLET) / "timings.json").read_text())
+    expected = {k: val for k, val in run["culling"].items() if val is not None}
+    assert expected["meshlets_drawn"] > 0 and expected["culled_frustum"] > 0
+    # what rfw run counted for the same view, to the meshlet
+    assert culling_shown(result["first"]) == expected
+    assert any(x.strip().startswith("vk: transients allocated") for x in result["first"])
+    # negative control: the moved view's counters are told apart
+    moved = culling_shown(result["lines"])
+    assert moved.keys() == expected.keys() and moved != expected
+    assert moved["meshlets_total"] == expected["meshlets_total"]  # the scene's: unchanged
+
+
+def test_vk_reload_says_a_broken_shader_once_and_renders_again(tmp_path):
+    shader = (ROOT / "passes" / "tonemap" / "tonemap.comp.glsl").read_text()
+    path = tmp_path / "tonemap.comp.glsl"
+    path.write_text(shader)
+    (tmp_path / "hot_tonemap.py").write_text(textwrap.dedent('''
+        from passes.tonemap.tonemap import TonemapPass
+        from rfw import register_pass
+
+        @register_pass("hot_tonemap")
+        class HotTonemapPass(TonemapPass):
+            """The tonemap pass with its shader in the test's folder."""
+    '''))
+    config = tmp_path / "hot.toml"
+    config.write_text(DEFERRED.read_text().replace('name = "tonemap"',
+                                                   'name = "tonemap"\nuse = "hot_tonemap"'))
+    broken = shader.replace("void main", "oops_undeclared; void main", 1)
+    # the same GLSL file is the vk pass's shader: R on draw 3 builds the frame again and
+    # finds it broken (draws 3-5 skipped, said once); fixed, R on draw 6 renders again
+    result, lines, _ = drive(tmp_path, f"""
+        if n == 3:
+            Path({str(path)!r}).write_text({broken!r})
+            v.key("r")
+        if n == 6:
+            Path({str(path)!r}).write_text({shader!r})
+            v.key("r")
+    """, config=config, sets=["size=32x18"], frames=9, pre="import hot_tonemap",
+        overlay=False, backend="vk")
+    skipped = [x for x in lines if x.startswith("frame skipped")]
+    assert len(skipped) == 1 and "pass 'tonemap'" in skipped[0], lines
+    assert "tonemap.comp.glsl:" in skipped[0]  # the file and line of the error
+    assert result["draws"] == 9 and result["frames"] == 9 - 3
+    assert lines.index(skipped[0]) < lines.index("frames render again")
+    shot = np.asarray(Image.open(tmp_path / "shot.png")).astype(int)
+    expected = run_png(tmp_path, "32x18", args=("--backend", "vk"))
+    assert np.abs(shot - expected).max() <= 1
+    # negative control: a small change of the tonemap (what a stale or other shader would
+    # give) is told apart
+    assert np.abs(shot - run_png(tmp_path, "32x18", "tonemap.exposure=1.25",
+                                 args=("--backend", "vk"))).max() > 1

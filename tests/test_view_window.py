@@ -116,7 +116,39 @@ def test_h_hides_the_overlay(tmp_path):
     assert max_diff(np.asarray(Image.open(tmp_path / "shown.png")).astype(int), expected) > 32
 
 
+MESHLET = str(ROOT / "configs" / "meshlet.toml")
+MIXED = str(ROOT / "configs" / "deferred_mixed.toml")
+
+
+def test_vk_window_shows_the_vk_run_image_and_toggles(tmp_path):
+    # meshlet.toml pins its passes to vk: the viewer runs them there (GPU culling and all),
+    # under the validation layer; key 1 then turns the shadow pass on
+    seen, out = shot(tmp_path, MESHLET, "vk.png", "--frames", "4", "--keys", "1",
+                     "--validate")
+    graphs = [line for line in out.splitlines() if line.startswith("graph:")]
+    assert graphs[0].startswith("graph: cull -> gbuffer -> hiz") and graphs[0].endswith(" on vk")
+    assert graphs[1].startswith("graph: shadow -> cull")
+    assert "validation: 0 messages" in out.splitlines()
+    assert max_diff(seen, run_png(tmp_path, MESHLET, "shadow.enabled=true")) <= 1
+    # negative control: the image without the shadow pass is told apart
+    assert max_diff(seen, run_png(tmp_path, MESHLET)) > 1
+
+
+def test_mixed_window_shows_the_mixed_run_image(tmp_path):
+    # deferred_mixed.toml pins lighting to vk: wgpu and vk with bridges between them
+    expected = run_png(tmp_path, MIXED)
+    seen, out = shot(tmp_path, MIXED, "mixed.png", "--frames", "3")
+    [graph] = [line for line in out.splitlines() if line.startswith("graph:")]
+    assert "bridge." in graph and graph.endswith(" on wgpu+vk")
+    assert max_diff(seen, expected) <= 1
+    # negative control: a camera step (W) before the first frame is told apart
+    moved, _ = shot(tmp_path, MIXED, "moved.png", "--frames", "3", "--keys", "w")
+    assert max_diff(moved, expected) > 1
+
+
 @pytest.mark.parametrize(("args", "env", "names"), [
+    (["--backend", "nosuch"], {}, "--backend"),
+    (["--validate"], {}, "--validate"),  # deferred.toml runs on wgpu: nothing to validate
     (["--screenshot", "shot.jpg"], {}, "--screenshot"),
     (["--screenshot", "nowhere/shot.png"], {}, "--screenshot"),
     ([], {"RFW_VIEW_FORMAT": "rgba16float"}, "RFW_VIEW_FORMAT"),
