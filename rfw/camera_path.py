@@ -271,13 +271,15 @@ def describe(camera: Any, t: float) -> dict[str, Any]:
 
 
 def _queued_writes(scene: Any) -> bool:
-    """Whether ``scene`` (a backend's upload) writes its camera through the queue: wgpu's
-    ``queue.write_buffer`` lands after every frame submitted before it, so frames in flight
-    keep their camera without a drain. Anything else (vk's host-mapped uniforms) is written
-    by the CPU at once and must wait for the frames that read it."""
+    """Whether a camera set on ``scene`` (a backend's upload) between frames is the next
+    frame's alone, so frames in flight keep theirs without a drain: wgpu's
+    ``queue.write_buffer`` lands after every frame submitted before it; vk's scene
+    (``camera_per_frame``) hands each frame the cameras it began with, copied in by the
+    frame's own command buffer. Anything else is written by the CPU at once and must wait
+    for the frames that read it."""
     from .backends.gpu_scene import GpuScene
 
-    return type(scene) is GpuScene
+    return type(scene) is GpuScene or getattr(type(scene), "camera_per_frame", False) is True
 
 
 def set_frame_camera(frame: Any, camera: Any) -> None:
@@ -307,7 +309,7 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
             start = time.perf_counter()
             if k:
                 set_frame_camera(frame, cam)
-            # the write's wait for frames in flight (vk) is part of the frame's wall time
+            # a write's wait for frames in flight (a backend that needs one) is frame time
             cameras.append({**describe(cam, path.param(k, frames)),
                             "write_ms": (time.perf_counter() - start) * 1e3})
         frame.step(last=k == frames - 1)

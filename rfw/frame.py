@@ -344,12 +344,12 @@ class Frame:
                 drain()
 
     def set_camera(self, camera: Any) -> None:
-        """Render from ``camera`` from the next frame on: every backend's scene writes it
-        (a host write into memory frames in flight read, so they are drained first)."""
-        self.drain()
-        for sc in self.scenes:
-            sc.camera = camera
-            sc.set_viewport(sc.size)  # the size start() gave it
+        """Render from ``camera`` from the next frame on: every backend's scene takes it for
+        its next frame (:func:`rfw.camera_path.set_frame_camera`: frames in flight keep
+        theirs, drained first only where a backend's camera write would race them)."""
+        from .camera_path import set_frame_camera
+
+        set_frame_camera(self, camera)
 
     def frame(self) -> None:
         exs = self.executors

@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -23,13 +24,16 @@ FLAT = ROOT / "configs" / "flat.toml"
 SIZE = "32x18"
 
 
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def cli(*args: str, cwd: Path | None = None,
+        env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, check=False, cwd=cwd, timeout=300)
+                          text=True, check=False, cwd=cwd, timeout=300,
+                          env=None if env is None else {**os.environ, **env})
 
 
-def run(out: Path, *args: str, config: Path = FLAT) -> subprocess.CompletedProcess:
-    done = cli("run", str(config), "--size", SIZE, "--out", str(out), *args)
+def run(out: Path, *args: str, config: Path = FLAT,
+        env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    done = cli("run", str(config), "--size", SIZE, "--out", str(out), *args, env=env)
     assert done.returncode == 0, done.stderr
     return done
 
@@ -289,8 +293,10 @@ def test_gltf_cameras_by_name_or_index(tmp_path):
 # -- frames in flight ------------------------------------------------------------------------
 
 
-def _drains(monkeypatch, backend: str, sets: list[str]) -> tuple[int, dict]:
-    """Executor drains of a 6-frame run of flat.toml (2 frames in flight) with ``sets``."""
+def _drains(monkeypatch, backend: str, sets: list[str]) -> tuple[int, dict, list[int]]:
+    """Executor drains (with frames in flight) of a 6-frame run of flat.toml (2 frames in
+    flight) with ``sets``, and the frames in flight right after each camera write."""
+    import rfw.camera_path
     from rfw.config import apply_overrides, load_config
     from rfw.render import render
 
@@ -298,34 +304,112 @@ def _drains(monkeypatch, backend: str, sets: list[str]) -> tuple[int, dict]:
         from vkext.executor import VkExecutor as cls
     else:
         from rfw.backends.wgpu_backend import Executor as cls
-    calls = []
-    original = cls.drain
+    calls, busy = [], []
+    original, write = cls.drain, rfw.camera_path.set_frame_camera
 
     def drain(self):
         calls.append(self.in_flight.busy)
         original(self)
 
+    def set_frame_camera(frame, camera):
+        write(frame, camera)
+        busy.append(sum(ex.in_flight.busy for ex in frame.executors.values()))
+
     monkeypatch.setattr(cls, "drain", drain)
+    monkeypatch.setattr(rfw.camera_path, "set_frame_camera", set_frame_camera)
     cfg = apply_overrides(load_config(FLAT), ["size=32x18", *sets])
     result = render(cfg, frames=6, backend=backend, validation=backend == "vk",
                     frames_in_flight=2)
     monkeypatch.setattr(cls, "drain", original)
-    return sum(1 for busy in calls if busy), result.timings
+    monkeypatch.setattr(rfw.camera_path, "set_frame_camera", write)
+    return sum(1 for b in calls if b), result.timings, busy
 
 
 def test_wgpu_path_keeps_frames_in_flight(monkeypatch):
     # wgpu writes the camera through the queue (after every frame submitted before it): a
     # path drains no more often than a static camera
-    static, _ = _drains(monkeypatch, "wgpu", [])
-    path, timings = _drains(monkeypatch, "wgpu", ["camera.path=orbit"])
+    static, _, _ = _drains(monkeypatch, "wgpu", [])
+    path, timings, _ = _drains(monkeypatch, "wgpu", ["camera.path=orbit"])
     assert len(timings["camera_path"]["frames"]) == 6
     assert path == static
 
 
-def test_vk_path_drains_before_each_camera_write(monkeypatch):
-    # vk's camera lives in host-mapped memory that frames in flight read: each frame's
-    # camera write waits for them (control for the test above: here the count grows)
-    static, _ = _drains(monkeypatch, "vk", [])
-    path, timings = _drains(monkeypatch, "vk", ["camera.path=orbit"])
+def test_vk_path_keeps_frames_in_flight(monkeypatch):
+    # each vk frame copies the cameras it began with from its slot's own buffer into the
+    # camera uniforms (vkext.scene.VkScene.copy_camera): no camera write drains, and the
+    # frames before it are still in flight when the next camera is written
+    static, _, _ = _drains(monkeypatch, "vk", [])
+    path, timings, busy = _drains(monkeypatch, "vk", ["camera.path=orbit"])
     assert timings["validation"]["messages"] == 0
-    assert path > static
+    assert len(timings["camera_path"]["frames"]) == 6
+    assert path == static
+    assert len(busy) == 6 and busy[0] == 0  # the first camera: before any frame
+    assert all(b > 0 for b in busy[1:]), busy
+    # control: a scene that writes its camera at once (as vk's did) drains before each
+    # write, so nothing is in flight when it is written
+    from vkext.scene import VkScene
+
+    monkeypatch.setattr(VkScene, "camera_per_frame", False)
+    drained, _, busy = _drains(monkeypatch, "vk", ["camera.path=orbit"])
+    assert drained > static
+    assert busy == [0] * 6
+
+
+def _frames(out: Path, output: str, n: int) -> list[np.ndarray]:
+    return [image(out / "frames" / f"{output}.{k:04d}.png") for k in range(n)]
+
+
+PATHS = [  # (config, output, extra --set): the sun's camera, async compute, the meshlets
+    ("deferred_ssao_shadows.toml", "fxaa.color", ["async_compute=on"]),
+    ("meshlet.toml", "tonemap.ldr", []),
+]
+
+
+@pytest.mark.parametrize(("config", "output", "extra"), PATHS)
+def test_vk_path_frames_in_flight_render_each_frames_camera(tmp_path, config, output,
+                                                             extra):
+    """A vk path with two frames in flight, under (synchronization) validation, saves the
+    frames one frame in flight saves, each from its own camera."""
+    n = 5
+    args = ["--backend", "vk", "--frames", str(n), "--save-every", "1", "--size", "48x27",
+            "--set", "camera.path=orbit", "--set", "camera.path.turns=0.25",
+            *(a for s in extra for a in ("--set", s))]
+    cfg = ROOT / "configs" / config
+    two = run(tmp_path / "two", "--validate", *args, config=cfg,
+              env={"RFW_FRAMES_IN_FLIGHT": "2"})
+    assert "validation: 0 message(s)" in two.stdout, two.stdout
+    timings = json.loads((tmp_path / "two" / "timings.json").read_text())
+    assert timings["frames_in_flight"] == 2  # --validate: synchronization validation too
+    run(tmp_path / "one", *args, config=cfg, env={"RFW_FRAMES_IN_FLIGHT": "1"})
+    two_frames, one_frames = (_frames(tmp_path / d, output, n) for d in ("two", "one"))
+    for k in range(n):
+        assert np.array_equal(two_frames[k], one_frames[k]), k
+    for k in range(1, n):  # the camera moved
+        assert not np.array_equal(two_frames[k], two_frames[k - 1]), k
+    # control: a frame from its neighbour's camera fails the comparison
+    for k in range(1, n):
+        assert not np.array_equal(two_frames[k], one_frames[k - 1]), k
+        assert not np.array_equal(two_frames[k - 1], one_frames[k]), k
+
+
+def test_vk_camera_copy_is_synchronized_or_validation_says_so(monkeypatch):
+    """Control for the validation runs above: the copy of a frame's cameras without its
+    barriers is a hazard that synchronization validation reports (so their 0 means it is
+    ordered against the passes that read the cameras)."""
+    from rfw.config import apply_overrides, load_config
+    from rfw.render import render
+    from vkext.consts import lib
+    from vkext.scene import VkScene
+
+    def unsynchronized(self, cmd, source):  # the copy alone
+        lib.vkCmdCopyBuffer(cmd, source.handle, self.dynamic_uniforms.handle, 1,
+                            self._camera_region)
+
+    cfg = apply_overrides(load_config(FLAT), ["size=32x18", "camera.path=orbit"])
+    ok = render(cfg, frames=4, backend="vk", validation=True, frames_in_flight=2)
+    assert ok.timings["validation"]["messages"] == 0
+    monkeypatch.setattr(VkScene, "copy_camera", unsynchronized)
+    bad = render(cfg, frames=4, backend="vk", validation=True, frames_in_flight=2)
+    texts = bad.timings["validation"]["texts"]
+    assert bad.timings["validation"]["messages"] > 0
+    assert any("SYNC-HAZARD-READ-AFTER-WRITE" in t for t in texts), texts[:1]

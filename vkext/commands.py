@@ -430,6 +430,17 @@ def copy_image_to_buffer(cmd: Any, image: Image, buffer: Buffer, *, mip: int = 0
                                             layer)])
 
 
+def copy_into_uniforms(cmd: Any, source: Buffer, dst: Buffer, region: Any,
+                       readers: State) -> None:
+    """Record the copy of ``region`` (a ``VkBufferCopy*``) of ``source`` into ``dst``, a
+    uniform range ``readers`` read every frame: after their reads recorded or submitted
+    before it on the queue, before theirs after it."""
+    rng = (region.dstOffset, region.size)
+    barrier(cmd, buffer_barriers=[BufferBarrier(dst, readers, COPY_WRITE, *rng)])
+    lib.vkCmdCopyBuffer(cmd, source.handle, dst.handle, 1, region)
+    barrier(cmd, buffer_barriers=[BufferBarrier(dst, COPY_WRITE, readers, *rng)])
+
+
 def copy_buffer_to_image(cmd: Any, buffer: Buffer, image: Image, *, mip: int = 0,
                          layer: int = 0, aspect: str | int | None = None,
                          layout: str = "TRANSFER_DST_OPTIMAL") -> None:

@@ -146,6 +146,10 @@ class FrameSlot:
     # what the command buffer holds, for a frame that would record the same (whole-frame
     # replay): the frame's resources and each pass's (name, bundle); None: not reusable
     holds: tuple | None = None
+    # the scene's cameras as this slot's frame began (host-visible, copied into the scene's
+    # camera buffer at the frame's start: VkScene.copy_camera), and the bytes it holds
+    camera: Buffer | None = None
+    camera_data: bytes | None = None
 
     def destroy(self, device: VkDevice) -> None:
         if device.alive:
@@ -153,7 +157,7 @@ class FrameSlot:
                 vk.vkDestroyFence(device.device, f, None)
         self.fence = self.own_fence = self.submit_info = None
         self.keep.clear()
-        for obj in (self.descriptors, self.timestamps, self.pool):
+        for obj in (self.descriptors, self.timestamps, self.pool, self.camera):
             if obj is not None:
                 obj.destroy()
 
@@ -259,6 +263,8 @@ class VkExecutor(FrameExecutor):
         self._frame_barriers = {p: [_chained(b) for b in bs] for p, bs in self._barriers.items()}
         # async compute: the plan's submissions on two queues (vkext.queues); None: one
         self.queues = async_queues(device, plan, (self._barriers, self._frame_barriers))
+        if self.queues is not None and scene is not None:  # the cameras' copy: its own batch
+            self.queues.prologue = lambda cmd, slot: scene.copy_camera(cmd, slot.camera)
         try:
             self._allocate()
             self.programs = Programs(device, scene)
@@ -433,6 +439,10 @@ class VkExecutor(FrameExecutor):
         info.sType = vk.VK_STRUCTURE_TYPE_SUBMIT_INFO_2
         info.commandBufferInfoCount, info.pCommandBufferInfos = 1, cmds
         slot.submit_info, slot.keep = info, [cmds]
+        if self.scene is not None:
+            slot.camera = self.allocator.create_buffer(
+                self.scene.camera_span, ("transfer_src",), host_visible=True,
+                label=f"rfw:camera{k}")
         return slot
 
     def run(self, frames: int = 1) -> None:
@@ -453,14 +463,21 @@ class VkExecutor(FrameExecutor):
         A frame records while earlier ones run, so what it writes from the host must not
         be what they read: settings (a pass's ``params``) and the scene it draws are host
         writes (uniform values, bundles recorded again), so a frame that finds any of them
-        changed first drains the frames in flight. The scene's camera is written by
-        ``set_viewport``: drain before it (``rfw.frame.Frame.set_camera`` does)."""
+        changed first drains the frames in flight. The scene's camera is not one of them:
+        the frame writes the cameras it begins with (``VkScene.set_viewport``'s bytes) into
+        its slot's own buffer, and its command buffer first copies them into the buffer the
+        camera sets bind (``VkScene.copy_camera``; async compute: a batch of its own ahead
+        of the frame's, ``vkext.queues``), so frames in flight keep theirs."""
         inputs = (self.scene, *(getattr(p, "params", None) for p in self.passes.values()))
         last, self._inputs = self._inputs, inputs  # objects kept: their ids stay theirs
         if last is not None and (len(last) != len(inputs) or
                                  any(a is not b for a, b in zip(last, inputs, strict=False))):
             self.drain()
         slot = self._frame_slot = self.in_flight.slot(self.frame_index)
+        if slot.camera is not None and slot.camera_data != self.scene.camera_blob:
+            # its last frame is finished (slot() waited for it): no copy reads these bytes
+            slot.camera_data = self.scene.camera_blob
+            slot.camera.write(np.frombuffer(slot.camera_data, np.uint8))
         self.pool, self.cmd, self.timestamps = slot.pool, slot.cmd, slot.timestamps
         self.descriptors, self.ring = slot.descriptors, slot.ring
         dev, ts = self.device, self.timestamps
@@ -529,6 +546,8 @@ class VkExecutor(FrameExecutor):
             ts.reset(cmd)
         if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
             lib.vkCmdPipelineBarrier2(cmd, self._frame_start[0])
+        if self._frame_slot.camera is not None:  # the frame's own cameras, before any pass
+            self.scene.copy_camera(cmd, self._frame_slot.camera)
 
     def _prefix(self, name: str) -> int:
         # a pass's barriers and begin timestamp; its position

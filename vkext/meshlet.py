@@ -194,7 +194,6 @@ class MeshletScene:
         self.triangle_count = sum(mesh_triangles[scene.instances[k].mesh] for k in order)
         self._upload("draws", np.frombuffer(b"".join(rows_) or bytes(48), np.uint8))
         self.frozen: bytes | None = None  # the culling camera while frozen
-        self._view: tuple[tuple, bytes] | None = None  # (camera, size) and their bytes
 
     def _upload(self, name: str, data: np.ndarray) -> None:
         data = np.ascontiguousarray(data)
@@ -208,18 +207,17 @@ class MeshletScene:
         """The scene's meshlet buffers by their block names in the meshlet shaders."""
         return dict(self.buffers)
 
-    def cull_camera(self, freeze: bool) -> bytes:
-        """The camera culling tests use: the main camera, or (``freeze``) the one it was when
-        the freeze began, while the view moves on."""
-        seen = (self.vscene.camera, self.vscene.size)
-        if self._view is None or self._view[0] != seen:  # once per camera, not per pass
-            self._view = (seen, main_camera_bytes(*seen))
-        view = self._view[1]
-        if freeze and self.frozen is None:
-            self.frozen = view
-        elif not freeze:
+    def cull_camera(self, freeze: bool) -> Any:
+        """The camera culling tests use: the main camera's uniforms (the scene's, each
+        frame's own: ``VkScene.copy_camera``), or (``freeze``) the bytes it was when the
+        freeze began, while the view moves on. Never the live camera as bytes: those would
+        be a host write into a uniform buffer the frames in flight read."""
+        if not freeze:
             self.frozen = None
-        return self.frozen or view
+            return self.vscene.camera_range("main")
+        if self.frozen is None:
+            self.frozen = main_camera_bytes(self.vscene.camera, self.vscene.size)
+        return self.frozen
 
     def push(self, flags: int, phase: str, *, draw_base: int = 0, count: int | None = None,
              viewport: tuple[int, int] = (0, 0)) -> bytes:

@@ -11,6 +11,12 @@ run on it one after the other. With a compute-only family, resources cross with 
 ownership transfers: the acquire replaces the plan's barrier before the pass, the release is
 recorded after the pass that used the resource last on the other queue.
 
+A frame's cameras (``VkScene.copy_camera``: the frame slot's bytes into the buffer the camera
+sets bind) are a graphics batch of their own ahead of the frame's (:attr:`AsyncQueues.prologue`):
+it signals the graphics semaphore first, and a compute submission that needs nothing of this
+frame waits for it instead of the last frame's end, so every pass reads its frame's cameras on
+either queue (the graphics values of a frame move up by one).
+
 Frame GPU time, with passes on two queues overlapping, is the span from a timestamp before
 the frame's first graphics batch to one after its last (which waits for the compute queue):
 :attr:`AsyncQueues.frame_gpu_ms`, one value per finished frame. Per-pass timestamps stay as
@@ -20,12 +26,13 @@ they are (a pass's begin and end are on its own queue).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
 from rfw.errors import RfwError
 from rfw.graph import CompiledGraph
-from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, QueuePlan, Transfer
+from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, QueuePlan, Submission, Transfer
 from rfw.graph.sync import State
 
 from .commands import (
@@ -41,6 +48,9 @@ from .device import VkDevice
 from .memory import Buffer, Image
 
 SPAN_ENV = "RFW_VK_FRAME_SPAN"
+# the prologue's batch: first on the graphics queue, waiting for nothing (its commands order
+# themselves after what ran before on the queue), signalling the frame's graphics base
+PROLOGUE = Submission(-1, GRAPHICS, (), 0)
 # the frame's first graphics batch opens with this (frames in flight: what ran before on
 # the queue is done; the executor's barriers chain after it); compute batches wait for it
 _BEFORE = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"MEMORY_WRITE"}))
@@ -148,6 +158,8 @@ class _Slot:
         q, dev = runner.plan, runner.device
         self.cmds = [runner.pools[s.queue].allocate(1)[0] for s in q.submissions]
         self.begun: set[int] = set()
+        self.owner: Any = None  # the executor's frame slot it serves
+        self.prologue: Any = None  # its prologue's command buffer, recorded once
         self.span: Any = None  # a 2-query timestamp pool
         self.span_pending = False
         self.ts_cmds: tuple[Any, Any] | None = None
@@ -201,6 +213,9 @@ class AsyncQueues:
             self.acquires.setdefault(t.before, []).append(t)
             self.releases.setdefault(t.after, []).append(t)
         self.frames = 0  # frames submitted
+        # records a frame's first commands (the executor's: the cameras' copy) into a command
+        # buffer of its own, given the executor's frame slot; None: no prologue batch
+        self.prologue: Callable[[Any, Any], None] | None = None
         self.frame_gpu_ms: list[float] = []
         self._slots: dict[int, _Slot] = {}  # by id of the executor's frame slot
         self._owners: list[Any] = []
@@ -255,6 +270,7 @@ class AsyncQueues:
         if s is None:
             s = self._slots[id(slot)] = _Slot(self, f"rfw:slot{len(self._slots)}")
             self._owners.append(slot)  # kept: its id stays its own
+            s.owner = slot
         self._read_span(s)  # its last frame is done: the caller waited for it
         s.begun.clear()
         self._slot, self._last = s, None
@@ -299,12 +315,16 @@ class AsyncQueues:
         for k in sorted(s.begun):
             if s.cmds[k] is not last:
                 vk.vkEndCommandBuffer(s.cmds[k])
-        base = {x: self.frames * self.count[x] for x in (GRAPHICS, COMPUTE)}
+        pre = int(self.prologue is not None)  # the prologue: one more graphics batch
+        base = {GRAPHICS: self.frames * (self.count[GRAPHICS] + pre) + pre,
+                COMPUTE: self.frames * self.count[COMPUTE]}
         fence = vk.vkCreateFence(self.device.device, vk.VkFenceCreateInfo(), None)
         graphics = [sub.index for sub in q.submissions if sub.queue == GRAPHICS]
         if s.span is not None:
             vk.vkResetQueryPool(self.device.device, s.span, 0, 2)
         try:
+            if pre:
+                self._batch(PROLOGUE, [self._prologue(s)], base, None)
             for sub in q.submissions:
                 cmds = [s.cmds[sub.index]] if sub.index in s.begun else []
                 if s.ts_cmds is not None and sub.index == graphics[0]:
@@ -320,6 +340,15 @@ class AsyncQueues:
         self.frames += 1
         self._last = None
         return fence
+
+    def _prologue(self, s: _Slot) -> Any:
+        if s.prologue is None:  # the same commands every frame of the slot
+            cmd = self.pools[GRAPHICS].allocate(1)[0]
+            vk.vkBeginCommandBuffer(cmd, vk.VkCommandBufferBeginInfo())
+            self.prologue(cmd, s.owner)  # type: ignore[misc]
+            vk.vkEndCommandBuffer(cmd)
+            s.prologue = cmd
+        return s.prologue
 
     def _batch(self, sub: Any, cmds: list[Any], base: dict[str, int], fence: Any) -> None:
         infos = ffi.new("VkCommandBufferSubmitInfo[]", max(1, len(cmds)))

@@ -38,7 +38,7 @@ from rfw.scene.model import Camera, Scene, SceneError
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import one_time, record_upload
+from .commands import copy_into_uniforms, one_time, record_upload
 from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
@@ -76,6 +76,8 @@ _SCENE_READ = State(None, frozenset({"VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "V
                                      "FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                     frozenset({"VERTEX_ATTRIBUTE_READ", "INDEX_READ", "UNIFORM_READ",
                                "SHADER_STORAGE_READ"}))
+# the cameras' uniforms: read by any stage of any pass (written by a frame's copy_camera)
+CAMERA_READ = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"UNIFORM_READ"}))
 _SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                  frozenset({"SHADER_SAMPLED_READ"}))
 
@@ -344,6 +346,10 @@ class VkScene:
     bind by name; ``draw()`` records every instance with sets 1 to 3 bound.
     """
 
+    # a camera set between frames is the next frame's alone (set_viewport, copy_camera):
+    # frames in flight keep theirs, nothing drains them (rfw.camera_path.set_frame_camera)
+    camera_per_frame = True
+
     def __init__(self, device: VkDevice, scene: Scene, camera: Camera | None = None, *,
                  block_size: int = 32 * MiB):
         self.device = device
@@ -408,15 +414,20 @@ class VkScene:
             up.buffer(self.static_uniforms, np.frombuffer(bytes(blob), np.uint8))
         self._instances(up)
 
-        # camera (main, sun) and lights: host-visible, written by set_viewport
+        # camera (main, sun) and lights: the lights written here, once; the cameras copied in
+        # by each frame from its own slot's bytes (copy_camera), so frames in flight keep theirs
         lights, self.sun_matrix, self.default_light = lights_bytes(scene)
         self._cam_offsets = (0, align_up(CAMERA_BYTES, align))
         self._lights_offset = align_up(self._cam_offsets[1] + CAMERA_BYTES, align)
+        self.camera_span = self._cam_offsets[1] + CAMERA_BYTES  # both cameras' bytes
+        self.camera_blob = bytes(self.camera_span)  # what set_viewport made last
         self.dynamic_uniforms = self.allocator.create_buffer(
-            self._lights_offset + LIGHTS_BYTES, ("uniform",), host_visible=True,
-            label="scene:camera+lights")
+            self._lights_offset + LIGHTS_BYTES, ("uniform", "transfer_dst"),
+            host_visible=True, label="scene:camera+lights")
         self.dynamic_uniforms.write(np.frombuffer(lights, np.uint8), self._lights_offset)
         self.dynamic_uniforms.write(np.zeros(self._lights_offset, np.uint8), 0)
+        self._camera_region = ffi.new("VkBufferCopy*", {"srcOffset": 0, "dstOffset": 0,
+                                                        "size": self.camera_span})
 
         # textures, their samplers and the defaults
         self.textures = [self._texture(up, t.pixels, t.srgb, t.name) for t in scene.textures]
@@ -542,13 +553,25 @@ class VkScene:
 
     # per frame -----------------------------------------------------------------------------
     def set_viewport(self, size: tuple[int, int]) -> None:
-        """Write both cameras for an output ``size``; call while no frame is in flight."""
+        """Make both cameras' bytes for an output ``size`` (``camera_blob``): no GPU memory
+        is written here, so frames in flight are not disturbed. Each executor frame copies
+        the bytes it began with into the cameras' buffer (:meth:`copy_camera`)."""
         self.size = (int(size[0]), int(size[1]))
-        self.dynamic_uniforms.write(np.frombuffer(main_camera_bytes(self.camera, self.size),
-                                                  np.uint8), self._cam_offsets[0])
-        self.dynamic_uniforms.write(np.frombuffer(
-            sun_camera_bytes(self.camera, self.sun_matrix, self.size), np.uint8),
-            self._cam_offsets[1])
+        blob = bytearray(self.camera_span)
+        main = main_camera_bytes(self.camera, self.size)
+        sun = sun_camera_bytes(self.camera, self.sun_matrix, self.size)
+        blob[0:len(main)] = main
+        off = self._cam_offsets[1]
+        blob[off:off + len(sun)] = sun
+        self.camera_blob = bytes(blob)
+
+    def copy_camera(self, cmd: Any, source: Buffer) -> None:
+        """Record the copy of a frame's cameras (``camera_blob`` as the frame wrote it into
+        ``source``, host-visible and its own until it is finished) into the buffer the
+        camera sets bind: after every read of the frames before it (on this queue, or
+        ordered before it), before every read after it."""
+        copy_into_uniforms(cmd, source, self.dynamic_uniforms, self._camera_region,
+                           CAMERA_READ)
 
     def camera_range(self, camera: str = "main") -> BufferRange:
         k = 1 if camera == "sun" else 0
