@@ -309,6 +309,7 @@ class Frame:
         self.executors = executors
         self.backends = backends if backends is not None else {}
         self.scenes: list[Any] = []  # each backend's upload of the scene, owned by the frame
+        self.borrowed: list[Any] = []  # ... those of them the caller owns (start's uploads)
         self.devices: dict[str, Any] = {}
         self.frame_index = 0
         self.bridge_timings = {n: BridgeTiming(n) for n in mixed.bridges}
@@ -412,8 +413,9 @@ class Frame:
         for ex in self.executors.values():
             ex.destroy()
         for sc in reversed(self.scenes):
-            sc.destroy()
-        self.scenes = []
+            if not any(sc is b for b in self.borrowed):
+                sc.destroy()
+        self.scenes, self.borrowed = [], []
         if self._devices is not None:
             self._devices.close()
 
@@ -474,7 +476,10 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
     try:
         for s, side in sides.items():
             uploaded = (uploads or {}).get(s)
-            if uploaded is None and scene is not None:
+            if uploaded is not None:  # the caller's: the frame sets its camera, no more
+                frame.scenes.append(uploaded)
+                frame.borrowed.append(uploaded)
+            elif scene is not None:
                 uploaded = side.backend.scene(side.device, scene, camera,
                                               size or mixed.plan.size)
                 frame.scenes.append(uploaded)
@@ -485,8 +490,7 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
         frame.destroy()
         raise
     frame.devices = {s: side.device for s, side in sides.items()}
-    used = [*frame.scenes, *(uploads or {}).values()]
-    frame.default_light = bool(used and used[0].default_light)
+    frame.default_light = bool(frame.scenes and frame.scenes[0].default_light)
     return frame
 
 

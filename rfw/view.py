@@ -363,10 +363,7 @@ class Viewer:
 
     def _set_camera(self, eye: np.ndarray, at: np.ndarray) -> None:
         self.camera = replace(self.camera, position=tuple(eye), target=tuple(at))
-        self.frame.drain()  # a backend's camera may be host memory frames in flight read
-        for upload in self.uploads.values():
-            upload.camera = self.camera
-            upload.set_viewport(self.cfg.size)
+        self.frame.set_camera(self.camera)  # the next frame's: frames in flight keep theirs
 
     def _on_event(self, event: dict) -> None:
         kind = event["event_type"]
