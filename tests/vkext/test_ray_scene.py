@@ -263,6 +263,10 @@ def test_a_closed_scene_refuses(vk_device):
 def test_closing_frees_what_it_built(vk_device):
     """Leak check: live vkext objects return to the baseline after close."""
     o, d = _rays()
+    # the device's raycaster (its pipeline) is made on first use and kept for every scene:
+    # made here, whichever test ran first on this worker
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+        scene.cast(o, d)
     before = vk_device.live_objects()
     for _ in range(3):
         with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
