@@ -238,7 +238,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     sets = list(args.set or [])
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
-    view(Path(args.config or DEFAULT_CONFIG), sets, scene=_scene_name(args.scene),
+    view(Path(args.config or DEFAULT_CONFIG), sets,
+         scene=_scene_name(args.scene, fetch=args.fetch),
          frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
          screenshot=Path(args.screenshot) if args.screenshot else None,
@@ -246,11 +247,11 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scene_name(scene: str | None) -> str | None:
-    # --scene dragon: the cached GLB (fetched first only when RFW_FETCH=1 allows)
+def _scene_name(scene: str | None, *, fetch: bool = False) -> str | None:
+    # --scene dragon: the cached GLB (fetched first with --fetch, or when RFW_FETCH=1 allows)
     from .scene.names import resolve_scene
 
-    return resolve_scene(scene, element="--scene") if scene is not None else None
+    return resolve_scene(scene, fetch=fetch, element="--scene") if scene is not None else None
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:
@@ -365,7 +366,10 @@ def parser() -> argparse.ArgumentParser:
     run.set_defaults(func=cmd_run)
     v = sub.add_parser("view", help="a live window: camera, pass toggles, timings")
     v.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
-    v.add_argument("--scene")
+    v.add_argument("--scene", help="as rfw run's --scene: a file, a built-in or fetched "
+                   "scene's name")
+    v.add_argument("--fetch", action="store_true",
+                   help="fetch a named scene that is not cached yet (also RFW_FETCH=1)")
     v.add_argument("--size", type=argtypes.size)
     v.add_argument("--set", action="append", metavar="KEY=VALUE")
     v.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES), help="close after this many frames")

@@ -29,8 +29,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="config TOMLs or names in configs/ (deferred, forward, ...), "
                         "CONFIG@vk to pin one config's backend; or 'compare OLD NEW', or "
                         "'report DIR'")
-    p.add_argument("--scene", action="append", help="scene file or 'default' (repeatable: "
-                   "a matrix axis)")
+    p.add_argument("--scene", action="append", help="scene file, 'default', a built-in or "
+                   "fetched scene's name ('rfw scenes list'); repeatable: a matrix axis")
+    p.add_argument("--fetch", action="store_true",
+                   help="fetch a named scene (--scene dragon) that is not cached yet "
+                   "(also RFW_FETCH=1)")
     p.add_argument("--size", type=argtypes.size, help="output size WxH (default: the first config's)")
     p.add_argument("--frames", type=int, default=10, help="timed frames per run (default 10)")
     p.add_argument("--warmup", type=int, default=2, help="untimed frames first (default 2)")
@@ -120,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
 
     peers = _peers(args.peers)
     _check_peer_camera(peers, args.set, args.vary)
-    plan = make_plan(args.configs, scenes=args.scene, size=args.size, frames=args.frames,
+    plan = make_plan(args.configs, scenes=args.scene, fetch=args.fetch, size=args.size,
+                     frames=args.frames,
                      warmup=args.warmup, repeat=args.repeat, backends=args.backend,
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
                      seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)

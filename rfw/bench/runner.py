@@ -94,16 +94,17 @@ def resolve_config(name: str) -> Path:
                    file=name, suggest=(p.stem, known))
 
 
-def resolve_scene(scene: str | None) -> str | None:
+def resolve_scene(scene: str | None, *, fetch: bool = False) -> str | None:
     """``None``/``default`` as they are, a scene file as an absolute path (from the working
-    directory), a fetched scene's name as its cached GLB (``rfw.scene.names``); a missing
-    file or an unknown or unfetched name fails here, before any run."""
+    directory), a fetched scene's name as its cached GLB (``rfw.scene.names``; fetched first
+    with ``fetch``); a missing file or an unknown or unfetched name fails here, before any
+    run."""
     if scene is None or scene == "default":
         return scene
     from ..scene import is_builtin, stress_count  # numpy and the loaders: when one is named
     from ..scene.names import resolve_scene as by_name
 
-    scene = by_name(scene, element="--scene")  # a fetched scene's name: its cached GLB
+    scene = by_name(scene, fetch=fetch, element="--scene")  # a fetched scene: its GLB
     if is_builtin(scene) and not Path(scene).exists():  # stress, stress:COUNT
         if scene != "courtyard":
             stress_count(scene)  # a bad count fails here, before any run
@@ -158,8 +159,9 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
               repeat: int = 3, backends: list[str] | None = None, sets: list[str] | None = None,
               vary: list[str] | None = None, peers: list[str] | None = None,
               order: str = "rotate", seed: int = 0, timeout: float = 600.0,
-              peer_frames: int | None = None) -> Plan:
+              peer_frames: int | None = None, fetch: bool = False) -> Plan:
     """The jobs of a matrix: configs x scenes x backends x the ``--vary`` axes, then peers.
+    ``fetch``: a named scene not cached yet is fetched first (``--fetch``).
 
     ``CONFIG@BACKEND`` (e.g. ``meshlet@vk``) runs that config on that backend only, whatever
     ``backends`` says (a config may name several: ``deferred@wgpu deferred@vk``).
@@ -176,7 +178,8 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     frames_in_flight()  # a bad RFW_FRAMES_IN_FLIGHT: refused once here, not by every run
     if peer_frames is not None:
         peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES)
-    scenes = list(dict.fromkeys(resolve_scene(s) for s in scenes)) if scenes else [None]
+    scenes = list(dict.fromkeys(resolve_scene(s, fetch=fetch) for s in scenes)) \
+        if scenes else [None]
     backends = backends or ["wgpu"]
     sets = list(sets or [])
     axes = _parse_vary(list(vary or []))

@@ -150,3 +150,54 @@ def test_view_takes_names_too(tmp_path):
     done = cli("view", str(FLAT), "--scene", "boxtextured", "--frames", "1",
                cache=tmp_path / "c")
     one_line(done, "'boxtextured' is not fetched yet", "rfw scenes fetch boxtextured")
+
+
+def test_a_config_and_the_python_api_take_scene_names(tmp_path):
+    cache = tmp_path / "c"
+    fake_entry(cache)
+    by_flag = tmp_path / "flag"
+    assert run(by_flag, cache, "--scene", "boxtextured").returncode == 0
+    # scene = "boxtextured" in a config (beside it: no file of that name)
+    config = tmp_path / "named.toml"
+    assert 'scene = "default"' in FLAT.read_text()
+    config.write_text(FLAT.read_text().replace('scene = "default"', 'scene = "boxtextured"'))
+    by_config = tmp_path / "config"
+    done = run(by_config, cache, config=config)
+    assert done.returncode == 0, done.stderr
+    # rfw.run(..., scene=NAME), and a misspelt name as one RfwError with the close match
+    code = ("import sys, rfw\n"
+            f"r = rfw.run({str(FLAT)!r}, scene='boxtextured', size=(32, 18))\n"
+            f"r.save({str(tmp_path / 'api')!r})\n"
+            "try:\n"
+            f"    rfw.run({str(FLAT)!r}, scene='boxtexturd', size=(32, 18))\n"
+            "except rfw.RfwError as e:\n"
+            "    print('refused:', e)\n")
+    api = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=False, env={**os.environ, "RFW_CACHE": str(cache)})
+    assert api.returncode == 0, api.stderr
+    assert "refused:" in api.stdout and "did you mean 'boxtextured'?" in api.stdout
+    expected = image(by_flag / "flat.color.png")
+    assert np.array_equal(image(by_config / "flat.color.png"), expected)
+    assert np.array_equal(image(tmp_path / "api" / "flat.color.png"), expected)
+    # negative control: the default scene's image is another
+    default = tmp_path / "default"
+    assert run(default, cache).returncode == 0
+    assert not np.array_equal(image(default / "flat.color.png"), expected)
+
+
+def test_bench_and_view_say_how_to_fetch_and_take_fetch(tmp_path):
+    # not cached: the hint names --fetch, which both commands take
+    line = one_line(cli("bench", "flat", "--scene", "boxtextured", "--frames", "1",
+                        "--repeat", "1", "--out", str(tmp_path / "b"), cache=tmp_path / "c"),
+                    "'boxtextured'", "--fetch")
+    assert "not fetched yet" in line
+    for command in ("bench", "view"):
+        done = cli(command, "--help", cache=tmp_path / "c")
+        assert "--fetch" in done.stdout
+    # cached, bench runs the named scene (--fetch then has nothing to fetch)
+    fake_entry(tmp_path / "c")
+    done = cli("bench", "flat", "--scene", "boxtextured", "--fetch", "--size", "32x18",
+               "--frames", "1", "--warmup", "0", "--repeat", "1", "--no-progress", "--out",
+               str(tmp_path / "b"), cache=tmp_path / "c", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert not (tmp_path / "b" / "RUN-FAILED.txt").exists()
