@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -294,7 +295,10 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
                            element="new-pass")
         for path in new_package(args.name, Path(args.package), kind=kind):
             print(f"wrote {path}")
-        print(f"install it with: pip install --no-build-isolation {args.package}")
+        # a path pip cannot take for a package name on an index: ./my-glow, not my-glow
+        where = args.package if Path(args.package).is_absolute() or \
+            args.package.startswith(("./", "../")) else f"./{args.package}"
+        print(f"install it with: pip install --no-build-isolation {shlex.quote(where)}")
         return 0
     for path in new_pass(args.name, Path(args.dir), kind=kind,
                          tests=Path(args.tests) if args.tests else None):

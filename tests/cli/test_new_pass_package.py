@@ -49,16 +49,24 @@ def rfw(*args, cwd, site=None):
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
-    """The generated package and the private folder it was pip-installed into."""
+    """The generated package and the private folder it was pip-installed into, with the
+    command ``new-pass`` printed (kept off the index and out of the environment)."""
     tmp = tmp_path_factory.mktemp("pkg")
     pkg = tmp / "my-glow"
-    done = rfw("new-pass", "my_glow", "--package", pkg, cwd=tmp)
+    done = rfw("new-pass", "my_glow", "--package", "my-glow", cwd=tmp)
     assert done.returncode == 0, done.stderr
+    [said] = [x for x in done.stdout.splitlines() if x.startswith("install it with: ")]
+    command = said.removeprefix("install it with: ").split()
+    assert command == ["pip", "install", "--no-build-isolation", "./my-glow"]
     site = tmp / "site"
-    done = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
-                           "--no-build-isolation", "--no-index", "--target", str(site),
-                           str(pkg)], capture_output=True, text=True, check=False, cwd=tmp)
+    private = ["--quiet", "--no-deps", "--no-index", "--target", str(site)]
+    done = subprocess.run([sys.executable, "-m", *command, *private], capture_output=True,
+                          text=True, check=False, cwd=tmp)
     assert done.returncode == 0, done.stderr
+    # negative control: the bare name (what it used to print) is a package name to pip
+    bare = subprocess.run([sys.executable, "-m", *command[:-1], "my-glow", *private,
+                           "--dry-run"], capture_output=True, text=True, check=False, cwd=tmp)
+    assert bare.returncode != 0 and "No matching distribution found for my-glow" in bare.stderr
     return pkg, site
 
 
