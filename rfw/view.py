@@ -184,6 +184,7 @@ class Viewer:
         self.output = output
         self.output_format = mixed.plan.resource(output).format
         self.stats = {}
+        self._warm = False  # the first frame compiles pipelines: its times are dropped
         self._shown = self._shown_texture()
         self.say(f"graph: {' -> '.join(mixed.plan.order)}"
                  + (f" (off: {', '.join(mixed.plan.disabled)})" if mixed.plan.disabled else "")
@@ -406,6 +407,9 @@ class Viewer:
             action, args = self._later.pop(0)
             action(*args)
         if ok:
+            if not self._warm:  # as rfw run's warm-up: compile times are no frame's cost
+                self.frame.clear_timings()
+                self._warm = True
             self.frame_count += 1
             # from the second frame on: the first has no earlier depth for occlusion tests
             if self.frame_count % STATS_EVERY == 2 or last:
@@ -472,7 +476,8 @@ class Viewer:
             if not recent:  # no frame of this graph has finished yet
                 continue
             parts.append(f"{name} {statistics.median(recent):.2f}")
-        line = f"frame {self.frame_count} gpu ms: " + ", ".join(parts)
+        line = f"frame {self.frame_count} gpu ms: " + (", ".join(parts) or
+                                                       "none yet (no timed frame is done)")
         self.canvas.set_title(f"rfw: {self.cfg.name} | {line}")
         self.say(line)
 
@@ -571,4 +576,9 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
     start = time.perf_counter()
     v.run()
     v.say(f"closed after {v.frame_count} frames in {time.perf_counter() - start:.1f} s")
+    if screenshot is not None and frames is not None and v._error is not None:
+        # the last frame failed: no screenshot of it (one C wrote earlier is older)
+        old = " (the file there is from an earlier frame)" if screenshot.exists() else ""
+        raise RfwError(f"no screenshot of the last frame: {v._error}{old}",
+                       file=str(screenshot), element="--screenshot")
     return v

@@ -183,3 +183,38 @@ def test_camera_path_is_said_and_its_first_camera_shown(tmp_path):
     # and without a path nothing is said
     _, plain = shot(tmp_path, DEFERRED, "plain.png", "--frames", "2")
     assert note not in plain
+
+
+def test_no_screenshot_of_a_failed_last_frame_is_one_line(tmp_path):
+    # a tonemap pass whose shader (in the test's folder) does not compile: every frame fails
+    shader = (ROOT / "passes" / "tonemap" / "tonemap.comp.glsl").read_text()
+    (tmp_path / "tonemap.comp.glsl").write_text(shader.replace("void main", "oops; void main"))
+    (tmp_path / "hot_tonemap.py").write_text(
+        "from passes.tonemap.tonemap import TonemapPass\n"
+        "from rfw import register_pass\n\n\n"
+        "@register_pass('hot_tonemap')\n"
+        "class HotTonemapPass(TonemapPass):\n"
+        "    '''The tonemap pass with its shader in the test's folder.'''\n")
+    config = tmp_path / "hot.toml"
+    config.write_text(Path(DEFERRED).read_text().replace(
+        'name = "tonemap"', 'name = "tonemap"\nuse = "hot_tonemap"'))
+
+    def view_with_plugin(shot_name: str) -> subprocess.CompletedProcess:
+        # the real CLI, with the plugin module imported first (as an entry point would)
+        code = ("import sys; sys.path.insert(0, sys.argv.pop(1)); import hot_tonemap; "
+                "from rfw.cli import main; sys.exit(main(sys.argv[1:]))")
+        return under_xvfb([sys.executable, "-c", code, str(tmp_path), "view", str(config),
+                           "--size", SIZE, "--frames", "3", "--no-overlay", "--screenshot",
+                           shot_name], env=_env(), cwd=tmp_path)
+
+    done = view_with_plugin("broken.png")
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rfw: error:") and "--screenshot" in lines[0]
+    assert "no screenshot of the last frame: frame skipped: pass 'tonemap'" in lines[0]
+    assert not (tmp_path / "broken.png").exists()
+    # negative control: the shader fixed, the same command writes its screenshot
+    (tmp_path / "tonemap.comp.glsl").write_text(shader)
+    done = view_with_plugin("fixed.png")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (tmp_path / "fixed.png").is_file()
