@@ -2,6 +2,9 @@
 
 A change is flagged when the 95% CIs of the two medians do not overlap *and* the relative
 change of the median exceeds the threshold; slower is a regression, faster an improvement.
+With too few samples or runs on either side (:func:`rfw.bench.stats.no_mark`) nothing is
+flagged: the verdict says why. OLD and NEW measured differently (size, frames, warm-up,
+scene, settings, executor, device) are refused unless ``--allow-mismatch``.
 With ``--out`` it also writes ``compare.md`` and a self-contained ``compare.html`` there: every
 change with its significance, and each variant's NEW image against its OLD one (PSNR, FLIP,
 difference image with its legend)."""
@@ -14,7 +17,9 @@ from typing import Any
 
 from ..errors import RfwError
 from ..fileio import inside
+from .report import device_of
 from .runner import load_results
+from .stats import MIN_RUNS, MIN_SAMPLES, no_mark
 from .summary import VariantSummary, summarize_results
 
 METRICS = ("gpu_ms", "cpu_ms")  # per pass; frames add wall_ms
@@ -37,7 +42,14 @@ class Change:
     def overlap(self) -> bool:
         return self.new["ci_lo"] <= self.old["ci_hi"] and self.old["ci_lo"] <= self.new["ci_hi"]
 
+    @property
+    def too_few(self) -> str | None:
+        """Why this change cannot be judged (``n=3<6``, ``1 run``), or None."""
+        return no_mark(self.old, self.new)
+
     def verdict(self, threshold: float) -> str:
+        if self.too_few:
+            return f"too few samples ({self.too_few})"
         if self.overlap or abs(self.relative) <= threshold:
             return "same"
         return "regression" if self.relative > 0 else "improvement"
@@ -58,7 +70,7 @@ def _metrics(v: VariantSummary) -> dict[tuple[str, str], dict[str, Any]]:
 def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[Change],
                                                                             list[str]]:
     """Every (variant, pass, metric) in both result sets, and notes on what is in one only
-    or measured on different devices."""
+    or measured with different drivers (other devices are a mismatch: :func:`mismatches`)."""
     olds = {v.label: v for v in summarize_results(old) if v.ok}
     news = {v.label: v for v in summarize_results(new) if v.ok}
     notes = []
@@ -68,9 +80,8 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
             notes.append(f"{label}: only in {'OLD' if label in olds else 'NEW'}")
     for label in [k for k in olds if k in news]:
         a, b = olds[label], news[label]
-        if (a.get("device"), a.get("driver")) != (b.get("device"), b.get("driver")):
-            notes.append(f"{label}: devices differ ({a.get('device')} / {a.get('driver')} vs "
-                         f"{b.get('device')} / {b.get('driver')})")
+        if a.get("driver") != b.get("driver"):
+            notes.append(f"{label}: drivers differ ({a.get('driver')} vs {b.get('driver')})")
         ma, mb = _metrics(a), _metrics(b)
         for key in [k for k in ma if k in mb]:
             out.append(Change(label, key[0], key[1], ma[key], mb[key]))
@@ -78,15 +89,35 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
 
 
 # what a run's record says about how it was measured: two runs differing here measured
-# different work, so their time differences are not changes of the code
+# different work, or on another device, or side by side with other runs (Ray runs tasks
+# concurrently), so their time differences are not changes of the code
 PLAN_FIELDS = {"size": "size", "frames": "frames", "warmup": "warmup", "scene": "scene",
-               "settings": "settings"}
+               "settings": "settings", "executor": "executor", "device": "device"}
 
 
 def _plan_of(record: dict[str, Any]) -> dict[str, Any]:
     out = {k: record.get(k) for k in PLAN_FIELDS}
     if isinstance(out["settings"], list):
         out["settings"] = sorted(map(str, out["settings"]))
+    out["executor"] = record.get("executor") or "local"
+    out["device"] = device_of(record)  # the adapter, and where a Ray task ran it
+    return out
+
+
+def _plans(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Each variant's plan; its devices are every device its runs measured."""
+    out: dict[str, dict[str, Any]] = {}
+    for r in records:
+        if r.get("error"):
+            continue
+        plan = _plan_of(r)
+        first = out.setdefault(r.get("variant"), {**plan, "device": []})
+        if plan["device"] not in first["device"]:
+            first["device"].append(plan["device"])
+    for plan in out.values():
+        plan["device"] = sorted(plan["device"])
+        if len(plan["device"]) == 1:
+            plan["device"] = plan["device"][0]
     return out
 
 
@@ -99,10 +130,9 @@ def _show(value: Any) -> str:
 
 
 def mismatches(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[str]:
-    """One line per variant in both sets whose plan (size, frames, warm-up, scene, settings)
-    differs between OLD and NEW, naming what differs."""
-    first_old = {r.get("variant"): _plan_of(r) for r in reversed(old) if not r.get("error")}
-    first_new = {r.get("variant"): _plan_of(r) for r in reversed(new) if not r.get("error")}
+    """One line per variant in both sets whose plan (size, frames, warm-up, scene, settings,
+    executor, device) differs between OLD and NEW, naming what differs."""
+    first_old, first_new = _plans(old), _plans(new)
     out = []
     for label in [k for k in first_old if k in first_new]:
         a, b = first_old[label], first_new[label]
@@ -118,8 +148,8 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
             allow_mismatch: bool = False) -> int:
     """Print the flagged changes (and write ``compare.md``/``.html`` into ``out``); returns
     the exit code (1 on a regression when asked). OLD and NEW measured differently (size,
-    frames, warm-up, scene or settings) are refused unless ``allow_mismatch``; then every
-    report says so at its top."""
+    frames, warm-up, scene, settings, executor or device) are refused unless
+    ``allow_mismatch``; then every report says so at its top."""
     old_records, new_records = load_results(old), load_results(new)
     differ = mismatches(old_records, new_records)
     if differ and not allow_mismatch:
@@ -133,7 +163,7 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
         md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold)
         print(f"wrote {md}, {page}")
     flagged = [(c, c.verdict(threshold)) for c in found]
-    rows = [(c, v) for c, v in flagged if show_all or v != "same"]
+    rows = [(c, v) for c, v in flagged if show_all or v in ("regression", "improvement")]
     print(f"rfw bench compare: {old} -> {new} (threshold {threshold:.0%}, CIs must not "
           f"overlap)")
     for n in notes:
@@ -149,8 +179,12 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
                   f" new {c.new['ci_lo']:.3f}-{c.new['ci_hi']:.3f}]")
     regressions = sum(1 for _, v in flagged if v == "regression")
     improvements = sum(1 for _, v in flagged if v == "improvement")
+    few = sum(1 for c, _ in flagged if c.too_few)
     print(f"{regressions} regression(s), {improvements} improvement(s), "
-          f"{len(flagged) - regressions - improvements} unchanged of {len(flagged)} compared")
+          f"{len(flagged) - regressions - improvements - few} unchanged of {len(flagged)} "
+          "compared" + (f"; {few} not judged: too few samples (under {MIN_SAMPLES} samples "
+                        f"or {MIN_RUNS} runs a side; wall ms has one sample per run"
+                        f"{'' if show_all else '; listed with --all'})" if few else ""))
     return 1 if fail_on_regression and regressions else 0
 
 
@@ -181,9 +215,11 @@ def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
                                   ["threshold", f"{threshold:.0%}"]])
     doc.bullets(notes)
     doc.h(2, "Per pass")
-    doc.p("Medians and 95% CIs of OLD and NEW. `change`: `*` where the CIs do not overlap, "
-          "`(n.s.)` where they do (within the noise); `verdict`: a significant change larger "
-          "than the threshold.")
+    doc.p("Medians and 95% CIs of OLD and NEW (GPU and CPU ms over frames, wall ms per frame "
+          "one number per run). `change`: `*` where the CIs do not overlap, `(n.s.)` where "
+          f"they do (within the noise), no mark below {MIN_SAMPLES} samples or {MIN_RUNS} "
+          "runs on either side (`(n=3<6: no mark)`: too few to say); `verdict`: a significant "
+          "change larger than the threshold.")
     rows = [[c.variant, c.what, c.metric, ms(c.old), ci(c.old), ms(c.new), ci(c.new),
              change_text(c.old, c.new), c.verdict(threshold)] for c in found]
     doc.table(["variant", "pass", "metric", "OLD ms", "OLD 95% CI", "NEW ms", "NEW 95% CI",

@@ -21,6 +21,8 @@ from ..fileio import inside
 from .images import compare, diff_legend, load_png, psnr, save_png
 from .path_chart import path_charts
 from .runner import load_results
+from .stats import MIN_RUNS, MIN_SAMPLES, change_text, no_mark
+from .stats import significant as significant  # the rule lives in stats.py; callers import it here
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
 
 
@@ -166,7 +168,23 @@ def ms(s: dict[str, Any] | None, key: str = "median") -> str:
 
 
 def ci(s: dict[str, Any] | None) -> str:
-    return "-" if not s else f"{s['ci_lo']:.3f}-{s['ci_hi']:.3f}"
+    """``lo-hi``; ``lo-hi (n=2<6)`` where too few samples or runs make it no 95% CI."""
+    if not s:
+        return "-"
+    why = no_mark(s)
+    return f"{s['ci_lo']:.3f}-{s['ci_hi']:.3f}" + (f" ({why})" if why else "")
+
+
+# how every CI of the reports is made and when a difference gets a mark, said once
+CI_METHOD = ("95% CI of the median: a percentile bootstrap (2000 resamples, seeded) that "
+             "resamples runs, then frames in each run, so run-to-run noise widens it (wall ms: "
+             "the runs' numbers resampled). A difference is marked `*` when the two CIs do not overlap, `(n.s.)` when they do "
+             f"(within the noise). Below {MIN_SAMPLES} samples or {MIN_RUNS} runs there is no "
+             "mark (e.g. `(n=3<6: no mark)`, `(1 run: no mark)`) and the CI carries that note: "
+             f"under {MIN_SAMPLES} samples no 95% interval of a median exists without assuming a "
+             "distribution (even the samples' full range covers the median with probability "
+             "1 - 2·0.5^n, 94% at n=5) and the bootstrap returns about that range; one run does "
+             "not measure the noise between runs.")
 
 
 def spread(s: dict[str, Any] | None) -> str:
@@ -375,12 +393,15 @@ def _environment(doc: Doc, records: list[dict[str, Any]], rfw: list[VariantSumma
 
 def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
     doc.h(2, "Frame time per variant")
-    doc.p("Medians over all frames of all repeats; `95% CI` is a bootstrap interval of the "
-          "median that resamples runs, then frames in each run (2000 resamples, seeded); "
-          "`p5-p95` is the spread of single frames. GPU ms: the sum of the passes' timestamp "
-          "times; wall ms: one frame's record and submit, and the wait for the frame that last "
-          "used its slot (frames in flight: `frames_in_flight`), measured on the host; the "
-          "last frame's wait for every frame still in flight counts too.")
+    doc.p("GPU ms: medians over all frames of all repeats (the sum of the passes' timestamp "
+          "times); `p5-p95`: the spread of single frames. Wall ms/frame: each run's total wall "
+          "time of its timed frames (record, submit, the waits for frames in flight, the last "
+          "frame's wait for all of them, on the host) / frames; median and 95% CI across "
+          "runs. Single frames' wall times are not used: with frames in flight one frame's "
+          "clock absorbs the wait for an earlier one, so they spread from near 0 to twice a "
+          "frame. `runs x frames`: what the statistics rest on. How the CIs are made and when "
+          "a difference is marked: *How this was measured*; a CI noted `(n=3<6)` or `(1 run)` "
+          "rests on too few samples to be a 95% interval, and differences from it get no mark.")
     rows = []
     for v in rfw:
         if not v.ok:
@@ -390,14 +411,26 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
         alloc = m.get("transient_allocated_bytes", m.get("plan_transient_bytes"))
         devices = ", ".join(dict.fromkeys(device_of(r) for r in v.records))
         rows.append([v.label, devices, v.get("backend"), ms(gpu), ci(gpu), spread(gpu),
-                     ms(wall), spread(wall), ms(cpu), f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
-                     + (" (plan)" if m.get("source") == "plan" else "")])
-    doc.table(["variant", "device", "backend", "GPU ms", "95% CI", "p5-p95", "wall ms",
-               "wall p5-p95", "CPU record ms", "transient MiB aliased / not"], rows)
+                     ms(wall), ci(wall), ms(cpu),
+                     f"{mib(alloc)} / {mib(m.get('unaliased_bytes'))}"
+                     + (" (plan)" if m.get("source") == "plan" else ""), _samples_text(v)])
+    doc.table(["variant", "device", "backend", "GPU ms", "95% CI", "p5-p95", "wall ms/frame",
+               "wall 95% CI", "CPU record ms", "transient MiB aliased / not", "runs x frames"],
+              rows)
+
+
+def _samples_text(v: VariantSummary) -> str:
+    """``3 x 10``: runs and timed frames per run (``3 x 8-10`` where runs differ)."""
+    frames = sorted({len((r.get("frame") or {}).get("gpu_ms") or (r.get("frame") or {}).get(
+        "wall_ms") or []) for r in v.records})
+    each = f"{frames[0]}" if len(frames) == 1 else f"{frames[0]}-{frames[-1]}"
+    return f"{len(v.records)} x {each}"
 
 
 def _pass_tables(doc: Doc, rfw: list[VariantSummary]) -> None:
     doc.h(2, "Per pass")
+    doc.p("Medians over all frames of all repeats, with the 95% CI of each (see the frame "
+          "table) and the spread of single frames.")
     for v in rfw:
         if not v.ok:
             continue
@@ -462,7 +495,7 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
     plt.close(fig)
     fig, axes = plt.subplots(1, 2, figsize=(14, height), sharey=True)
     for ax, metric, title in ((axes[0], "gpu_ms", "frame GPU ms (all frames, all repeats)"),
-                              (axes[1], "wall_ms", "frame wall ms")):
+                              (axes[1], "wall_ms", "wall ms per frame (one per run)")):
         data = [[x for run in v.samples.get(metric, []) for x in run] or [math.nan]
                 for v in done]
         ax.boxplot(data, orientation="horizontal", tick_labels=labels, whis=(5, 95), showfliers=True,
@@ -484,21 +517,6 @@ def stacked_error(s: dict[str, Any] | None) -> tuple[float, float]:
     if not s:
         return 0.0, 0.0
     return max(0.0, s["median"] - s["ci_lo"]), max(0.0, s["ci_hi"] - s["median"])
-
-
-def significant(a: dict[str, Any] | None, b: dict[str, Any] | None) -> bool:
-    """Whether two medians differ beyond the noise: their 95% CIs do not overlap."""
-    if not a or not b:
-        return False
-    return a["ci_hi"] < b["ci_lo"] or b["ci_hi"] < a["ci_lo"]
-
-
-def change_text(ref: dict[str, Any] | None, own: dict[str, Any] | None) -> str:
-    """``+15.0% *`` when the CIs do not overlap, ``+15.0% (n.s.)`` when they do."""
-    if not ref or not own or not ref["median"]:
-        return "-"
-    mark = " *" if significant(ref, own) else " (n.s.)"
-    return f"{own['median'] / ref['median'] - 1:+.1%}{mark}"
 
 
 def _pick_reference(rfw: list[VariantSummary], reference: str | int | None) -> VariantSummary:
@@ -569,7 +587,8 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
           "(frame GPU ms, median). Difference: |reference - variant|, max over RGB, "
           "colour-mapped from black (0) to the largest difference of that image (its legend "
           "below it). `vs reference`: `*` where the 95% CIs of the two medians do not overlap, "
-          "`(n.s.)` where they do (not a result). "
+          f"`(n.s.)` where they do (not a result), no mark below {MIN_SAMPLES} samples or "
+          f"{MIN_RUNS} runs (e.g. `(n=3<6: no mark)`). "
           + ("The runs measured several devices: each row is compared with the reference's "
              "runs on the same device; where the reference has none there, the change has no "
              "mark. " if len(devices) > 1 else "")
@@ -601,7 +620,7 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
             device = device_of(r["variant"].first)
             same = ref_on.get(device)
             if same is None:
-                change = change_text(ref_gpu, own_gpu).removesuffix(" *").removesuffix(" (n.s.)")
+                change = change_text(ref_gpu, own_gpu).split(" ")[0]
                 cells.append(f"{change} (reference not run on {device}: no mark)")
             else:
                 cells.append(change_text(same.frame.get("gpu_ms"), own_gpu))
@@ -773,10 +792,11 @@ def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
         _how_runs_ran(records),
         "GPU ms are timestamp queries around each pass (wgpu timestamp queries; "
         "`vkCmdWriteTimestamp2` on vk); CPU record ms is the host time of the pass's "
-        "`record()`; wall ms is a whole frame, submit and the wait for its frame-in-flight "
-        "slot included (the last frame also waits for the rest).",
-        "Statistics: median, p5 and p95 over single frames; the 95% CI of the median is a "
-        "two-level bootstrap (runs, then frames; 2000 resamples, fixed seed).",
+        "`record()`; wall ms per frame is a run's wall time over its timed frames (record, "
+        "submit, the waits for frame-in-flight slots, the last frame's wait for the rest) / "
+        "frames.",
+        "Statistics: GPU and CPU ms: median, p5 and p95 over single frames; wall ms: each "
+        "run's total wall time / frames, median over runs. " + CI_METHOD,
         "Results: `results.jsonl` (one line per run, every frame's numbers); re-run the report "
         "with `rfw bench report DIR`, compare two result sets with "
         "`rfw bench compare OLD NEW`.",

@@ -1,6 +1,14 @@
-"""Robust summaries of timing samples: median, p5-p95 spread and a bootstrap CI of the median.
+"""Robust summaries of timing samples: median, p5-p95 spread and a bootstrap CI of the median,
+and the rule that decides whether two of them differ beyond the noise.
 
-Everything is seeded, so one set of samples always gives the same numbers."""
+Everything is seeded, so one set of samples always gives the same numbers.
+
+Significance: two medians differ when their 95% CIs do not overlap, and only when each CI
+rests on at least :data:`MIN_SAMPLES` samples from at least :data:`MIN_RUNS` runs. Below
+:data:`MIN_SAMPLES` no 95% interval of a median exists without assuming a distribution (even
+the samples' whole range covers the median with probability ``1 - 2 * 0.5**n``: 94% at n=5,
+97% at n=6), and the percentile bootstrap then returns about that range; from one run alone
+the run-to-run noise (another process, another memory layout) is not measured."""
 
 from __future__ import annotations
 
@@ -11,13 +19,17 @@ import numpy as np
 
 RESAMPLES = 2000
 SEED = 20240607
+MIN_SAMPLES = 6  # the smallest n with a distribution-free 95% interval of the median
+MIN_RUNS = 2  # one run says nothing of the noise between runs
 
 
 def bootstrap_ci(samples: Sequence[float], *, level: float = 0.95, resamples: int = RESAMPLES,
                  seed: int = SEED) -> tuple[float, float]:
     """Percentile bootstrap confidence interval of the median of ``samples``.
 
-    One sample gives a zero-width interval at that value; none raises ``ValueError``."""
+    One sample gives a zero-width interval at that value; none raises ``ValueError``. Below
+    :data:`MIN_SAMPLES` samples the interval is about the samples' range (n=2: min-max),
+    not a 95% interval: :func:`no_mark` says so."""
     x = np.asarray(samples, np.float64)
     if x.size == 0:
         raise ValueError("bootstrap_ci needs at least one sample")
@@ -74,3 +86,48 @@ def summarize(samples: Sequence[float] | Sequence[Sequence[float]] | None, *,
     return {"n": int(x.size), "runs": len(groups), "median": float(med),
             "mean": float(x.mean()), "p5": float(p5), "p95": float(p95), "ci_lo": lo,
             "ci_hi": hi}
+
+
+def summarize_runs(values: Sequence[float | None]) -> dict[str, Any] | None:
+    """:func:`summarize` of one number per run (a run's median, or its wall time / frames):
+    the median and CI across runs, ``n`` = ``runs`` = the number of runs."""
+    return summarize([[v] for v in values if v is not None])
+
+
+def no_mark(*summaries: dict[str, Any] | None) -> str | None:
+    """Why a difference between these summaries gets no significance mark (``"n=3<6"``,
+    ``"1 run"``), or None when each has enough samples and runs for one."""
+    for s in summaries:
+        if not s:
+            continue
+        if s["n"] < MIN_SAMPLES:
+            return f"n={s['n']}<{MIN_SAMPLES}"
+        if s["runs"] < MIN_RUNS:
+            return f"{s['runs']} run"
+    return None
+
+
+def significant(a: dict[str, Any] | None, b: dict[str, Any] | None) -> bool:
+    """Whether two medians differ beyond the noise: their 95% CIs do not overlap and both
+    rest on enough samples (:func:`no_mark`)."""
+    if not a or not b or no_mark(a, b):
+        return False
+    return a["ci_hi"] < b["ci_lo"] or b["ci_hi"] < a["ci_lo"]
+
+
+def mark(a: dict[str, Any] | None, b: dict[str, Any] | None) -> str:
+    """The significance mark of the difference between ``a`` and ``b``: ``*`` (the CIs do
+    not overlap), ``(n.s.)`` (they do: within the noise) or ``(n=3<6: no mark)`` (too few
+    samples or runs to say)."""
+    why = no_mark(a, b)
+    if why:
+        return f"({why}: no mark)"
+    return "*" if significant(a, b) else "(n.s.)"
+
+
+def change_text(ref: dict[str, Any] | None, own: dict[str, Any] | None) -> str:
+    """``own`` against ``ref``: ``+15.0% *``, ``+15.0% (n.s.)`` or ``+15.0% (n=3<6: no
+    mark)`` (see :func:`mark`); ``-`` when either is missing."""
+    if not ref or not own or not ref["median"]:
+        return "-"
+    return f"{own['median'] / ref['median'] - 1:+.1%} {mark(ref, own)}"

@@ -1,4 +1,10 @@
-"""Results of many runs folded per variant: statistics over all frames of all repeats."""
+"""Results of many runs folded per variant: statistics over all frames of all repeats.
+
+GPU and CPU ms are per frame (every frame of every run, the CI resampling runs, then frames).
+Wall ms is per run: the run's total wall time of its timed frames / frames, one number per
+run, with median and CI across runs. Single frames' wall times are not comparable samples:
+with frames in flight a frame's wall clock may absorb the wait for an earlier frame (on
+lavapipe e.g. wall [0.9, 22.2, 46.5] ms against GPU [21.3, 23.3, 20.7])."""
 
 from __future__ import annotations
 
@@ -6,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..units import MiB
-from .stats import summarize
+from .stats import summarize, summarize_runs
 
 RAYCAST_PEERS = ("open3d", "mitsuba", "embree", "rfw_raycast")  # benchmarks/peers
 
@@ -62,10 +68,14 @@ def summarize_results(records: list[dict[str, Any]]) -> list[VariantSummary]:
 
 
 def _fold_rfw(v: VariantSummary) -> None:
-    for metric in ("gpu_ms", "cpu_ms", "wall_ms"):
+    for metric in ("gpu_ms", "cpu_ms"):
         runs = [r["frame"][metric] for r in v.records if r.get("frame", {}).get(metric)]
         v.samples[metric] = runs
         v.frame[metric] = summarize(runs) if runs else None
+    # wall: one number per run (its frames' total / frames), see the module docstring
+    walls = [wall_per_frame(r) for r in v.records]
+    v.samples["wall_ms"] = [[w] for w in walls if w is not None]
+    v.frame["wall_ms"] = summarize_runs(walls)
     names: list[str] = []
     for r in v.records:  # union of pass names, first-seen order
         names.extend(p["name"] for p in r.get("passes", []) if p["name"] not in names)
@@ -77,6 +87,12 @@ def _fold_rfw(v: VariantSummary) -> None:
             entry[metric] = summarize(runs) if runs else None
             v.samples[f"{name}.{metric}"] = runs
         v.passes.append(entry)
+
+
+def wall_per_frame(record: dict[str, Any]) -> float | None:
+    """A run's wall ms per frame: the total wall time of its timed frames / their number."""
+    wall = (record.get("frame") or {}).get("wall_ms")
+    return sum(wall) / len(wall) if wall else None
 
 
 def _fold_peer(v: VariantSummary) -> None:

@@ -118,6 +118,14 @@ def write(folder: Path, **plan) -> Path:
     ({"scene": "courtyard"}, {"scene": "dragon"}, "scene courtyard vs dragon"),
     ({"settings": ["flat.ambient=0.1"]}, {"settings": ["flat.ambient=0.2"]},
      "settings [flat.ambient=0.1] vs [flat.ambient=0.2]"),
+    # a local run against Ray tasks (side by side, on a node 'vm'): both differ
+    ({}, {"executor": "ray", "ray": {"host": "vm", "gpu_ids": []}},
+     "executor local vs ray; device synthetic vs synthetic @ vm"),
+    ({"device": "GPU A"}, {"device": "GPU B"}, "device GPU A vs GPU B"),
+    # Ray on the same node both times, but the tasks got other GPUs
+    ({"executor": "ray", "ray": {"host": "vm", "gpu_ids": [0]}},
+     {"executor": "ray", "ray": {"host": "vm", "gpu_ids": [1]}},
+     "device synthetic @ vm GPU 0 vs synthetic @ vm GPU 1"),
 ])
 def test_compare_refuses_runs_measured_differently(tmp_path, old, new, expected):
     a, b = write(tmp_path / "old", **old), write(tmp_path / "new", **new)
@@ -148,6 +156,13 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "MISMATCH" not in done.stdout
     assert "Mismatch" not in (tmp_path / "cmp" / "compare.md").read_text()
+    # the same executor and device: Ray both times on one node's GPU 0, then local both times
+    where = {"executor": "ray", "ray": {"host": "vm", "gpu_ids": [0]}}
+    for plan in (where, {"device": "GPU A"}):
+        a, b = write(tmp_path / "o2", **plan), write(tmp_path / "n2", **plan)
+        done = bench(tmp_path, "compare", str(a), str(b), "--fail-on-regression")
+        assert done.returncode == 0, done.stderr
+        assert "MISMATCH" not in done.stdout and "measured differently" not in done.stdout
 
 
 # ---------------------------------------------------------------------------------------------
