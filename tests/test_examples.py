@@ -32,27 +32,50 @@ def test_every_example_is_tested():
             and not p.name.startswith("_")} == tested
 
 
+AB_ROW = re.compile(rf"^(\w+)\s+({NUMBER})\s+({NUMBER})-({NUMBER})\s+({NUMBER})\s+({NUMBER})-"
+                    rf"({NUMBER})\s+({NUMBER})\s+([-+]\d+\.\d)% (.+)$", re.MULTILINE)
+
+
+def ab_rows(stdout: str) -> dict[str, tuple[list[float], str]]:
+    """pass -> ([A ms, A lo, A hi, B ms, B lo, B hi, B/A, change %], mark)."""
+    return {m[1]: ([float(v) for v in m.groups()[1:9]], m[10])
+            for m in AB_ROW.finditer(stdout)}
+
+
 def test_ab_setting(tmp_path):
     done = example("ab_setting.py", "lighting.ambient=0.2", "lighting.ambient=1.5",
-                   "--size", "32x18", "--frames", "2", cwd=tmp_path)
+                   "--size", "32x18", "--frames", "2", "--repeats", "6", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    rows = {m[1]: [float(v) for v in m.groups()[1:]] for m in re.finditer(
-        rf"^(\w+)\s+({NUMBER})\s+({NUMBER})\s+({NUMBER})\s+(?:{NUMBER}|-)$", done.stdout,
-        re.MULTILINE)}
-    assert list(rows) == ["gbuffer", "lighting", "tonemap"]
-    for a, b, diff in rows.values():  # the printed difference is B - A of the printed times
-        assert diff == pytest.approx(b - a, abs=0.002)  # each rounded to 0.001
-    total = re.search(rf"^total\s+({NUMBER})\s+({NUMBER})\s+({NUMBER})$", done.stdout,
-                      re.MULTILINE)
-    assert float(total[1]) == pytest.approx(sum(r[0] for r in rows.values()), abs=0.0025)
+    # interleaved: A and B take turns going first
+    assert "6 renders a side of 2 frames, order AB BA AB BA AB BA)" in done.stdout
+    rows = ab_rows(done.stdout)
+    assert list(rows) == ["gbuffer", "lighting", "tonemap", "total"]
+    for (a, a_lo, a_hi, b, b_lo, b_hi, ratio, change), mark in rows.values():
+        assert a_lo <= a <= a_hi and b_lo <= b <= b_hi  # medians inside their CIs
+        # B/A and the change are of the unrounded medians: within the printed ones' rounding
+        low, high = (b - 5e-4) / (a + 5e-4), (b + 5e-4) / max(a - 5e-4, 1e-9)
+        assert low - 5e-4 <= ratio <= high + 5e-4
+        assert 100 * (low - 1) - 0.05 <= change <= 100 * (high - 1) + 0.05
+        assert mark in ("*", "(n.s.)")  # 6 renders a side: enough for a mark
+    # the summary line names exactly the passes marked * (no timing is asserted)
+    moved = re.search(r"^beyond the noise \(95% CIs apart\): (.+)$", done.stdout, re.MULTILINE)
+    marked = [n for n, (_, mark) in rows.items() if mark == "*" and n != "total"]
+    assert moved[1] == (", ".join(marked) or "no pass")
     changed = re.search(rf"image tonemap\.ldr: mean \|B-A\| ({NUMBER}), ({NUMBER})% of pixels",
                         done.stdout)
     assert float(changed[1]) > 1.0 and float(changed[2]) > 50.0
-    # negative control: A against itself changes no pixel
+    # negative controls: A against itself changes no pixel, and 2 renders a side are too
+    # few for any mark: each change says why instead
     same = example("ab_setting.py", "lighting.ambient=0.2", "lighting.ambient=0.2",
-                   "--size", "32x18", "--frames", "1", cwd=tmp_path)
+                   "--size", "32x18", "--frames", "1", "--repeats", "2", cwd=tmp_path)
     assert same.returncode == 0, same.stderr
     assert "image tonemap.ldr: mean |B-A| 0.0000, 0.0% of pixels changed" in same.stdout
+    assert "order AB BA)" in same.stdout
+    few = ab_rows(same.stdout)
+    assert list(few) == ["gbuffer", "lighting", "tonemap", "total"]
+    assert {mark for _, mark in few.values()} == {"(n=2<6: no mark)"}
+    assert "no marks: n=2<6 (use --repeats 6 or more)" in same.stdout
+    assert "beyond the noise" not in same.stdout
     assert list(tmp_path.iterdir()) == []  # it writes nothing
 
 
@@ -80,13 +103,22 @@ def _line_colours(png: Path, n: int) -> list[int]:
 
 def test_sweep_plot(tmp_path):
     done = example("sweep_plot.py", "ssao.samples", "4", "16", "--size", "32x18",
-                   "--frames", "1", "--out", "sweep.png", cwd=tmp_path)
+                   "--frames", "1", "--repeats", "6", "--out", "sweep.png", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    header, *rows = [line.split() for line in done.stdout.splitlines()[:3]]
+    lines = done.stdout.splitlines()
+    assert lines[0] == "GPU ms, median [95% CI] over 6 renders of 1 frames"
+    header, *rows = [line.split() for line in lines[1:4]]
     passes = ["shadow", "gbuffer", "ssao", "lighting", "tonemap", "fxaa"]
     assert header == ["ssao.samples", *passes]
     assert [r[0] for r in rows] == ["4", "16"]
-    assert all(float(v) >= 0 for r in rows for v in r[1:])
+    for r in rows:  # each cell: median [lo-hi], the median inside its CI
+        cells = re.findall(rf"({NUMBER}) \[({NUMBER})-({NUMBER})\]", " ".join(r[1:]))
+        assert len(cells) == len(passes)
+        assert all(0 <= float(lo) <= float(m) <= float(hi) for m, lo, hi in cells)
+    # the second value against the first: marked passes only, or that none moved
+    versus = re.fullmatch(r"ssao\.samples=16 vs 4: (.+)", lines[4])
+    assert versus and (versus[1] == "no pass beyond the noise" or all(
+        re.fullmatch(r"\w+ [-+]\d+\.\d% \*", x) for x in versus[1].split(", "))), lines[4]
     png = tmp_path / "sweep.png"
     assert Image.open(png).size == (640, 400)
     assert all(c > 20 for c in _line_colours(png, len(passes)))  # a line per pass
@@ -101,6 +133,11 @@ def test_sweep_plot(tmp_path):
     fig.savefig(tmp_path / "empty.png")
     plt.close(fig)
     assert _line_colours(tmp_path / "empty.png", len(passes)) == [0] * len(passes)
+    # negative control of the marks: 2 renders per value are too few, and it says so
+    few = example("sweep_plot.py", "ssao.samples", "4", "16", "--size", "32x18",
+                  "--frames", "1", "--repeats", "2", "--out", "few.png", cwd=tmp_path)
+    assert few.returncode == 0, few.stderr
+    assert "ssao.samples=16 vs 4: no marks: n=2<6 (use --repeats 6 or more)" in few.stdout
 
 
 def test_sweep_plot_bad_key_is_one_line(tmp_path):
@@ -161,8 +198,18 @@ def test_notebook_runs_and_shows_results(tmp_path):
     results = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
                if o.output_type == "execute_result"]
     assert results[1]["data"]["text/plain"] == "(1, 1)"  # one device, one scene load
-    shown = [o["data"] for o in results if "image/png" in o["data"]]
+    shown = [o["data"] for o in results if "image/png" in o["data"]
+             and o["data"]["text/plain"].startswith("<rfw.Result")]
     assert len(shown) == 2
+    # the A/B: per pass medians with CIs and a mark, which passes moved, a chart of the CIs
+    ab = results[4]["data"]["text/plain"]
+    marks = re.findall(rf"'(\w+)': '{NUMBER} \[{NUMBER}-{NUMBER}\] -> {NUMBER} "
+                       rf"\[{NUMBER}-{NUMBER}\] ms: [-+]\d+\.\d% (\*|\(n\.s\.\))'", ab)
+    assert [name for name, _ in marks] == ["gbuffer", "lighting", "tonemap"], ab
+    moved = ", ".join(name for name, mark in marks if mark == "*") or "none"
+    assert results[5]["data"]["text/plain"] == f"'changed significantly (95% CIs apart): {moved}'"
+    chart = results[6]["data"]
+    assert chart["text/plain"].startswith("<Figure") and "image/png" in chart
     for data in shown:
         assert data["text/plain"].startswith("<rfw.Result 'deferred' on ")
         assert "<td>gbuffer</td>" in data["text/html"] and "base64," in data["text/html"]

@@ -12,7 +12,7 @@ the run-to-run noise (another process, another memory layout) is not measured.""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -92,6 +92,15 @@ def summarize_runs(values: Sequence[float | None]) -> dict[str, Any] | None:
     """:func:`summarize` of one number per run (a run's median, or its wall time / frames):
     the median and CI across runs, ``n`` = ``runs`` = the number of runs."""
     return summarize([[v] for v in values if v is not None])
+
+
+def summarize_passes(renders: Sequence[Mapping[str, float | None]]
+                     ) -> dict[str, dict[str, Any] | None]:
+    """Per pass, :func:`summarize_runs` over renders: ``renders`` holds one ``{pass: ms}``
+    per render (e.g. each render's ``Result.gpu_ms``, itself a median over its frames), so
+    the median and CI are across renders; None for a pass without times."""
+    names = list(dict.fromkeys(k for r in renders for k in r))
+    return {k: summarize_runs([r.get(k) for r in renders]) for k in names}
 
 
 def no_mark(*summaries: dict[str, Any] | None) -> str | None:

@@ -15,7 +15,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rfw.bench.stats import MIN_RUNS, MIN_SAMPLES, mark, no_mark, summarize, summarize_runs
+from rfw.bench.stats import (
+    MIN_RUNS,
+    MIN_SAMPLES,
+    mark,
+    no_mark,
+    summarize,
+    summarize_passes,
+    summarize_runs,
+)
 
 from .synthetic import record
 
@@ -65,6 +73,10 @@ def test_the_rule():
     # n=2: the bootstrap gives the min-max range, which the rule does not call a 95% CI
     two = summarize_runs([1.0, 3.0])
     assert (two["ci_lo"], two["ci_hi"]) == (1.0, 3.0) and no_mark(two) == "n=2<6"
+    # what the examples use: per pass, one number per render; a pass without times is None
+    per_pass = summarize_passes([{"g": 10.0 + i, "t": None} for i in range(6)])
+    assert per_pass["t"] is None
+    assert (per_pass["g"]["n"], per_pass["g"]["runs"], per_pass["g"]["median"]) == (6, 6, 12.5)
 
 
 @pytest.mark.parametrize("repeats, frames, expected", [
