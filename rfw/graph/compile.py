@@ -42,7 +42,7 @@ from .queues import (
 )
 from .resolve import Resolved, check_attachment_sizes, resolve
 from .resources import ResourceDecl
-from .schedule import cull, lifetimes, parallel_levels
+from .schedule import cull, lifetimes, parallel_levels, unproduced_after_cull
 from .validate import validate
 
 __all__ = ["IMPLIED_CAPS", "STATS", "Access", "Barrier", "CompiledGraph", "Diagnostic",
@@ -111,6 +111,14 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         keep, culled = cull(declared)
     else:
         keep, culled = list(range(len(declared.passes))), []
+    # ordering-only inputs may lose their producer to the cull (data reads keep theirs); the
+    # pass may depend on what it did, so say so, but as a warning even when strict: the
+    # pass reads nothing through the input (an unproduced read is an error when strict)
+    unproduced = unproduced_after_cull(declared, keep)
+    for p, slot, resource, producer in unproduced:
+        problems.diagnostics.append(Diagnostic(
+            "warning", f"{p.where()}, slot '{slot}': no kept pass produces '{resource}' (its "
+                       f"producer '{producer}' is culled: no graph output needs it)"))
     mode, why = queue_mode(graph, declared, caps)
     schedule, on_compute = plan_order(declared, keep, mode, order_seed)
     queue_of, submissions = plan_submissions(declared, schedule, on_compute)
@@ -157,6 +165,8 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         steps={n: tuple(s.name for s in declared.passes[i].steps)
                for n, i in zip(names, schedule, strict=True) if declared.passes[i].steps},
         queues=queue_plan(mode, why, queue_of, submissions, transfers),
+        unproduced=tuple((p.name, slot, resource, producer)
+                         for p, slot, resource, producer in unproduced),
         follow_output=sum(_follows_output(n, declared.resources) for n, r in resolved.items()
                           if r.kind == "image" and r.format),
     )

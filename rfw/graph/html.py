@@ -64,20 +64,54 @@ def suggested_output(c: CompiledGraph) -> str | None:
 
 def outputs_note(graph: Graph, c: CompiledGraph, kept: CompiledGraph | None = None) -> str | None:
     """One line for a graph without declared outputs: which resources became outputs, and
-    the ``--output`` that keeps only the presented one (with its transient bytes when
-    ``kept``, the plan compiled with it, is given)."""
+    the ``--output`` that keeps only the presented one, given ``kept``, the plan compiled with
+    it: what it would allocate, which outputs it drops and which passes it culls (those
+    whose results nothing declares reading, so maybe read in ways the graph does not say,
+    with the ``--output`` that keeps them). No suggestion when that plan would leave an input
+    without its producer, or did not compile; no note when the suggestion changes nothing."""
     dangling = dangling_outputs(graph, c)
     pick = suggested_output(c)
     if not dangling or pick is None:
         return None
-    saved = ""
-    if kept is not None:
-        saved = (f" (transient {_mib(c.transient_bytes)} -> {_mib(kept.transient_bytes)}, "
-                 f"{len(c.order) - len(kept.order)} of {len(c.order)} passes culled)")
     some = f"{len(dangling)} resources nothing reads became outputs and live" \
         if len(dangling) > 1 else "1 resource nothing reads became an output and lives"
-    return (f"note: no outputs declared, so {some} to the end of the frame: "
-            f"{', '.join(dangling)}; keep only what you present with --output {pick}{saved}")
+    head = (f"note: no outputs declared, so {some} to the end of the frame: "
+            f"{', '.join(dangling)}; ")
+    if kept is None:
+        return head + f"no --output suggested: the plan with --output {pick} does not compile"
+    if kept.unproduced:
+        lost = ", ".join(f"'{r}' of pass '{p}' (its producer '{q}' culled)"
+                         for p, _, r, q in kept.unproduced)
+        return head + f"no --output suggested: --output {pick} would leave {lost} unproduced"
+    culled = [p for p in kept.culled if p not in c.culled]
+    dropped = [n for n in dangling if n != pick]
+    if not culled and not dropped:
+        return None  # declaring it would change nothing
+    parts = [f"transient {_mib(c.transient_bytes)} -> {_mib(kept.transient_bytes)}"]
+    if dropped:
+        parts.append(f"no longer outputs: {', '.join(dropped)}")
+    parts.append(f"culled: {_culled(graph, culled, pick) if culled else 'none'}")
+    return head + f"keep only what you present with --output {pick} ({'; '.join(parts)})"
+
+
+def _culled(graph: Graph, culled: list[str], pick: str) -> str:
+    """The culled passes, and which of them no enabled pass declares reading: their results
+    may be read in ways the graph does not say (Raptor's lighting reads the point shadows
+    and the fog bindlessly), so the note says how to keep them."""
+    read = {b.resource for p in graph.passes if p.enabled for b in p.inputs}
+    declared = {p.name: p for p in graph.passes}  # compile may add passes (bridges)
+    blind = []
+    for name in culled:
+        writes = [b.resource for b in declared[name].outputs] if name in declared else []
+        if writes and not read & set(writes):
+            blind.append((name, writes[0]))
+    text = ", ".join(culled)
+    if not blind:
+        return text
+    keep = " ".join(f"--output {r}" for r in (pick, *(w for _, w in blind)))
+    who = "" if len(blind) == len(culled) else f"{', '.join(n for n, _ in blind)}: "
+    them = "them" if len(blind) > 1 else "it"
+    return f"{text} ({who}no declared reader; keep {them} with {keep})"
 
 
 def dag_svg(c: CompiledGraph) -> str:

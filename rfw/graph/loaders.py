@@ -463,12 +463,27 @@ def loads_raptor(text: str, *, source: str = "<json>", strict: bool | None = Non
     g = GraphBuilder(str(data.get("name", Path(source).stem)), size=RAPTOR_DEFAULT_SIZE,
                      strict=strict, source=source)
     lines = _raptor_lines(text)
+    kinds = _raptor_kinds(passes)
     for i, p in enumerate(passes):
-        _raptor_pass(g, p, i, lines, check)
+        _raptor_pass(g, p, i, lines, check, kinds)
     return _with_warnings(g.build(), check.warnings)
 
 
-def _raptor_pass(g: GraphBuilder, p: Any, i: int, lines: _Lines, check: _Checker) -> None:
+def _raptor_kinds(passes: list[Any]) -> dict[str, str]:
+    """``"image"`` or ``"buffer"`` per resource a Raptor output creates (any pass, enabled or
+    not, declared before or after its readers): what a ``reference`` input reads."""
+    kinds: dict[str, str] = {}
+    for p in passes:
+        outputs = p.get("outputs", []) if isinstance(p, dict) else []
+        for r in outputs if isinstance(outputs, list) else []:
+            if isinstance(r, dict) and isinstance(r.get("name"), str) \
+                    and r.get("type") in ("attachment", "texture", "buffer"):
+                kinds.setdefault(r["name"], "buffer" if r["type"] == "buffer" else "image")
+    return kinds
+
+
+def _raptor_pass(g: GraphBuilder, p: Any, i: int, lines: _Lines, check: _Checker,
+                 kinds: dict[str, str]) -> None:
     check.type(p, dict, f"passes[{i}]")
     name = check.type(p.get("name"), str, f"passes[{i}] 'name'")
     line = lines.of(name)
@@ -485,11 +500,22 @@ def _raptor_pass(g: GraphBuilder, p: Any, i: int, lines: _Lines, check: _Checker
     ptype = _R_PASS_TYPES[rtype]
     b = g.add_pass(name, ptype, enabled=check.type(p.get("enabled", True), bool, where,
                                                      "enabled"), origin=origin)
-    for k, r in enumerate(check.type(p.get("inputs", []), list, f"{where}: 'inputs'")):
+    ins = check.type(p.get("inputs", []), list, f"{where}: 'inputs'")
+    outs = check.type(p.get("outputs", []), list, f"{where}: 'outputs'")
+    # names the pass also binds for real: a reference input on one of them only orders
+    bound = {str(r.get("name")) for r in ins
+             if isinstance(r, dict) and r.get("type") != "reference"}
+    bound |= {str(r.get("name")) for r in outs if isinstance(r, dict)}
+    for k, r in enumerate(ins):
         check.type(r, dict, f"{where}, inputs[{k}]")
         rname, rtype_ = _raptor_io(r, f"{where}, inputs[{k}]", check, _R_IN_KEYS)
+        if rtype_ == "reference" and rname not in bound:
+            # Raptor's reference input is an edge to a resource the pass reads by itself
+            # (depth of field copies 'lighting', samples 'depth'): a real read, so its
+            # producer is never culled, it lives until here and gets a barrier
+            rtype_ = "buffer" if kinds.get(rname) == "buffer" else "texture"
         b.input(rname, rname, _raptor_input_slot(rtype_, ptype))
-    for k, r in enumerate(check.type(p.get("outputs", []), list, f"{where}: 'outputs'")):
+    for k, r in enumerate(outs):
         check.type(r, dict, f"{where}, outputs[{k}]")
         rname, rtype_ = _raptor_io(r, f"{where}, outputs[{k}]", check, _R_OUT_KEYS)
         _raptor_output(b, r, rname, rtype_, f"{where}, output '{rname}'", check)

@@ -164,6 +164,8 @@ class CompiledGraph:
     # queues, submissions, semaphores and ownership transfers (rfw.graph.queues); None: one
     # graphics queue, one submission
     queues: Any = None
+    # (pass, slot, resource, its culled producer) of kept inputs the cull left unproduced
+    unproduced: tuple[tuple[str, str, str, str], ...] = ()
 
     def barriers_before_step(self, pass_name: str, index: int,
                              previous: int) -> tuple[Barrier, ...]:

@@ -167,6 +167,25 @@ def cull(declared: Declared) -> tuple[list[int], list[str]]:
     return sorted(keep), culled
 
 
+def unproduced_after_cull(declared: Declared, keep: list[int]
+                          ) -> list[tuple[PassDecl, str, str, str]]:
+    """(pass, slot, resource, producer) of each kept pass's input whose producer is culled.
+
+    Data reads keep their producers, so only ordering-only inputs can lose one: a pass
+    orders after a producer because it depends on what that producer does (Raptor's
+    reference inputs were loaded so once, and culling dropped what depth of field reads)."""
+    kept = {declared.passes[i].name for i in keep}
+    out = []
+    for i in keep:
+        p = declared.passes[i]
+        for a in declared.accesses[p.name]:
+            r = declared.resources.get(a.resource)
+            if a.role not in ("produce", "history") and r is not None \
+                    and r.producer is not None and r.producer not in kept:
+                out.append((p, a.slots[0], a.resource, r.producer))
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # step 3: order
 
