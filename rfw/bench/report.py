@@ -400,7 +400,7 @@ def _frame_table(doc: Doc, rfw: list[VariantSummary]) -> None:
           "runs. Single frames' wall times are not used: with frames in flight one frame's "
           "clock absorbs the wait for an earlier one, so they spread from near 0 to twice a "
           "frame. `runs x frames`: what the statistics rest on. How the CIs are made and when "
-          "a difference is marked: *How this was measured*; a CI noted `(n=3<6)` or `(1 run)` "
+          "a difference is marked: see \"How this was measured\"; a CI noted `(n=3<6)` or `(1 run)` "
           "rests on too few samples to be a 95% interval, and differences from it get no mark.")
     rows = []
     for v in rfw:
