@@ -205,3 +205,20 @@ def test_bindless_results_are_named_when_culled(tmp_path, name):
     them = "them" if fog else "it"
     assert f"culled: {culled} (no declared reader; keep {them} with --output " in note, note
     assert note.endswith(f" {outputs}))"), note
+
+
+def test_only_passes_without_a_declared_reader_are_flagged(tmp_path):
+    # negative control: 'debug' has a reader ('debug_post', culled too); only the end of the
+    # chain is flagged, and keeping it keeps the chain
+    graph = json.loads(json.dumps(GRAPH))
+    graph["passes"].append({"name": "debug_post", "inputs": [{"type": "texture",
+                                                              "name": "debug_view"}],
+                            "outputs": [attachment("debug_post_view")]})
+    path = tmp_path / "chain.json"
+    path.write_text(json.dumps(graph), encoding="utf-8")
+    note = note_of(path, tmp_path)
+    assert note.endswith("no longer outputs: debug_post_view; culled: debug, debug_post "
+                         "(debug_post: no declared reader; keep it with --output final "
+                         "--output debug_post_view))"), note
+    kept = plan(path, "--output", "final", "--output", "debug_post_view", cwd=tmp_path)
+    assert kept["culled"] == []
