@@ -31,3 +31,8 @@ def __getattr__(name: str):
 
         return getattr(api, name)
     raise AttributeError(f"module 'rfw' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    # the lazy names too: tab completion and dir(rfw) find rfw.run, rfw.Session, ...
+    return sorted(set(globals()) | set(__all__))

@@ -48,6 +48,9 @@ def test_import_exports_the_api_without_vulkan():
     code = ("import sys, rfw; names = [rfw.Config, rfw.PassEntry, rfw.Result, rfw.Session, "
             "rfw.load, rfw.make_config, rfw.override, rfw.run, rfw.RfwError]; "
             "import rfw.render; assert callable(rfw.run) and rfw.run.__module__ == 'rfw.api'; "
+            # dir() lists the lazy names (tab completion), and listing them loads nothing
+            "assert {'run', 'Session', 'load', 'RayScene'} <= set(dir(rfw)), dir(rfw); "
+            "assert set(rfw.__all__) <= set(dir(rfw)); "
             "print('vulkan' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120, check=False)
