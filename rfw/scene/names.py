@@ -126,7 +126,7 @@ BUILTIN_ROWS = (
 def scene_table(cache: Path) -> str:
     """``rfw scenes list``: the built-in and fetchable scenes, what is cached (GLB size and
     triangles), each scene's license and description; the cache folder last."""
-    from .fetch.cache import cached
+    from .fetch.cache import byte_size, cached
     from .fetch.catalogue import SCENES
 
     rows = [("NAME", "KIND", "CACHED", "SIZE", "LICENSE", "DESCRIPTION")]
@@ -134,8 +134,7 @@ def scene_table(cache: Path) -> str:
         rows.append((name, "built-in", "-", "-", "rfw's own", text))
     for spec in SCENES.values():
         info = cached(spec, cache)
-        size = "-" if info is None else \
-            f"{info['glb_bytes'] / 1e6:.1f} MB, {info['triangles']:,} tris"
+        size = "-" if info is None else f"{byte_size(info['glb_bytes'])}, {info['triangles']:,} tris"
         rows.append((spec.name, f"fetch ({spec.source.registry})",
                      "no" if info is None else "yes", size, spec.license, spec.description))
     widths = [max(len(r[i]) for r in rows) for i in range(5)]

@@ -134,6 +134,9 @@ def test_scenes_list(tmp_path):
     assert "built-in" in rows["courtyard"]
     box = rows["boxtextured"].split()
     assert box[1:4] == ["fetch", "(debian)", "yes"] and "36 tris" in rows["boxtextured"]
+    # a small file in kB, not "0.0 MB"
+    size = (cache / "boxtextured.glb").stat().st_size
+    assert size < 1e6 and f"{size / 1e3:.1f} kB, 36 tris" in rows["boxtextured"]
     assert "CC-BY-4.0" in rows["boxtextured"]
     assert rows["dragon"].split()[3] == "no" and "non-commercial" in rows["dragon"]
     assert done.stdout.splitlines()[-1].startswith(f"cache: {cache}")

@@ -182,7 +182,7 @@ def fetch(names: Iterable[str] | None, cache: Path, *, force: bool = False,
                 r = Result(name, "cached", info["triangles"], info["meshes"],
                            info["glb_bytes"], 0.0, cache / f"{name}.glb")
                 report(f"{name}: up to date ({r.triangles:,} triangles, {_plural(r.meshes, 'mesh')}, "
-                       f"{_size(r.glb_bytes)}) {r.path}")
+                       f"{byte_size(r.glb_bytes)}) {r.path}")
                 results.append(r)
                 continue
             if work is None:
@@ -207,7 +207,7 @@ def fetch(names: Iterable[str] | None, cache: Path, *, force: bool = False,
             if damaged is not None:
                 warn(f"{damaged}: corrupt cache entry, rebuilt")
             report(f"{name}: fetched {r.triangles:,} triangles, {_plural(r.meshes, 'mesh')}, "
-                   f"{_size(r.glb_bytes)} in {r.seconds:.1f} s -> {r.path}")
+                   f"{byte_size(r.glb_bytes)} in {r.seconds:.1f} s -> {r.path}")
             for note in r.notes:
                 report(f"  note: {note}")
             results.append(r)
@@ -221,7 +221,8 @@ def _plural(n: int, word: str) -> str:
     return f"{n:,} {word}" + ("" if n == 1 else "es" if word.endswith("sh") else "s")
 
 
-def _size(n: int) -> str:
+def byte_size(n: int) -> str:
+    """``20.9 MB``, ``4.7 kB``: a file's size as ``rfw scenes`` says it."""
     return f"{n / 1e6:.1f} MB" if n >= 1e6 else f"{n / 1e3:.1f} kB"
 
 
