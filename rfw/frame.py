@@ -238,6 +238,10 @@ def camera_for(cfg: Config, scene: Any) -> Any:
     if values:
         cam = replace(cam, **{k: tuple(v) if isinstance(v, list) else v
                               for k, v in values.items()})
+    try:  # position and target apart and finite: said now, naming the config
+        cam.view()
+    except RfwError as e:
+        raise e.in_file(cfg.source if values else getattr(scene, "source", None)) from None
     if not cam.znear < cam.zfar:  # one of them from the scene's camera
         raise RfwError(f"znear {cam.znear:g} must be smaller than zfar {cam.zfar:g} (the "
                        f"other from the scene's camera)", file=cfg.source, element="camera")

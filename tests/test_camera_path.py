@@ -154,6 +154,8 @@ def test_set_camera_keys_render_like_the_config(tmp_path):
     ("camera.path.kind=spiral", ("--set camera.path.kind", "orbit")),
     ("camera.path.turns=many", ("--set camera.path.turns", "many")),
     ("camera.gltf=true", ("--set camera.gltf", "name or index")),
+    # the default camera's own position as target: the config's file is named
+    ("camera.target=-7.2,1.7,7.2", ("flat.toml: camera", "must be finite and apart")),
 ])
 def test_bad_camera_values_are_one_line(tmp_path, value, needles):
     refused(tmp_path, "--set", value, needles=needles)
