@@ -303,6 +303,11 @@ def cmd_new_pass(args: argparse.Namespace) -> int:
     for path in new_pass(args.name, Path(args.dir), kind=kind,
                          tests=Path(args.tests) if args.tests else None):
         print(f"wrote {path}")
+    # a folder is no plugin yet: configs find passes through the rfw.passes entry points
+    print(f"next: configs find a pass through its 'rfw.passes' entry point: add "
+          f"{args.name} = \"<module path of {args.name}.py>\" to your distribution's "
+          f"[project.entry-points.\"rfw.passes\"] and install it, or start from "
+          f"'rfw new-pass {args.name} --package DIR', which writes an installable one")
     return 0
 
 

@@ -62,6 +62,11 @@ sys.exit(main(sys.argv[1:]))
 def test_generated_pass_works(tmp_path, monkeypatch, kind, capsys):
     name = "my_effect" if kind == "--compute" else "my_draw"
     assert main(["new-pass", name, kind, "--dir", str(tmp_path / "plugins")]) == 0
+    # the last line says how configs will find it (a folder alone is no plugin)
+    said = capsys.readouterr().out.splitlines()
+    assert said[-1].startswith("next: ") and "'rfw.passes' entry point" in said[-1]
+    assert f"'rfw new-pass {name} --package DIR'" in said[-1]
+    assert all(x.startswith("wrote ") for x in said[:-1])
     folder = tmp_path / "plugins" / name
     assert {p.name for p in folder.iterdir()} >= {"__init__.py", f"{name}.py",
                                                  f"test_{name}.py"}
