@@ -330,20 +330,23 @@ def clear_frames(out_dir: Path) -> None:
     folder = inside(out_dir, FRAMES_DIR)
     if not folder.is_dir():
         return
-    for old in folder.glob("*.[0-9][0-9][0-9][0-9].png"):
-        if old.is_file() or old.is_symlink():
-            old.unlink()
+    for pattern in ("*.[0-9][0-9][0-9][0-9].png", "*.[0-9][0-9][0-9][0-9].exr"):
+        for old in folder.glob(pattern):
+            if old.is_file() or old.is_symlink():
+                old.unlink()
     if not any(folder.iterdir()):
         folder.rmdir()
 
 
-def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any], None]:
+def frame_writer(out_dir: Path, every: int, frames: int, *,
+                 exr: bool = False) -> Callable[[int, Any], None]:
     """An ``each_frame`` callback writing every output of timed frames ``0, every, 2 *
-    every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits).
-    Older images of this pattern are removed first: a run leaves only its own frames."""
+    every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits),
+    with ``exr`` also ``<output>.<k>.exr`` for each float output (as ``rfw run --exr``).
+    Older images of these patterns are removed first: a run leaves only its own frames."""
     from PIL import Image
 
-    from .fileio import atomic_write, inside, to_png_array
+    from .fileio import atomic_write, inside, is_float_image, to_png_array, write_exr
 
     clear_frames(out_dir)
     folder = inside(out_dir, FRAMES_DIR)
@@ -354,8 +357,11 @@ def frame_writer(out_dir: Path, every: int, frames: int) -> Callable[[int, Any],
         formats = {r.name: r.format for r in frame.plan.resources}
         folder.mkdir(parents=True, exist_ok=True)
         for name in frame.plan.outputs:
-            rgba = to_png_array(frame.read(name), formats[name])
+            image = frame.read(name)
+            rgba = to_png_array(image, formats[name])
             atomic_write(inside(out_dir, f"{FRAMES_DIR}/{name}.{k:04d}.png"),
                          lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+            if exr and is_float_image(image):  # the exact values, as --exr writes the last
+                write_exr(inside(out_dir, f"{FRAMES_DIR}/{name}.{k:04d}.exr"), image)
 
     return write

@@ -212,7 +212,7 @@ def _frame_images(args: argparse.Namespace, cfg: typing.Any, out: Path) -> typin
         return None
     from .camera_path import frame_writer
 
-    return frame_writer(out, args.save_every, args.frames or cfg.frames)
+    return frame_writer(out, args.save_every, args.frames or cfg.frames, exr=args.exr)
 
 
 @contextlib.contextmanager

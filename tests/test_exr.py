@@ -142,3 +142,28 @@ def test_exr_flag_only_for_run(tmp_path):
     done = rfw("view", "--exr", cwd=tmp_path)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1
     assert "unrecognized arguments: --exr" in done.stderr
+
+
+def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
+    (tmp_path / "hdr.toml").write_text(HDR)
+    done = rfw("run", "hdr.toml", "--exr", "--frames", "3", "--save-every", "1", "--set",
+               "camera.path=orbit", "--out", "out", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    frames = tmp_path / "out" / "frames"
+    names = sorted(p.name for p in frames.iterdir())
+    # float outputs get an EXR per saved frame beside the PNG; the 8-bit one PNG only
+    for k in range(3):
+        for out in ("lighting.hdr", "gbuffer.depth"):
+            assert f"{out}.{k:04d}.exr" in names and f"{out}.{k:04d}.png" in names
+        assert f"tonemap.ldr.{k:04d}.png" in names and f"tonemap.ldr.{k:04d}.exr" not in names
+    # the last saved frame is the run's last frame: the same bits as OUT/<output>.exr
+    for out in ("lighting.hdr", "gbuffer.depth"):
+        last = read_exr(frames / f"{out}.0002.exr")
+        assert np.array_equal(bits(last), bits(read_exr(tmp_path / "out" / f"{out}.exr")))
+        # negative control: the first frame, from another camera of the orbit, differs
+        assert not np.array_equal(bits(read_exr(frames / f"{out}.0000.exr")), bits(last))
+    # a run without --exr leaves no EXR of an earlier run among its frames
+    done = rfw("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
+               cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert not list(frames.glob("*.exr"))
