@@ -118,6 +118,11 @@ class Overlay:
     def _gui(self) -> None:
         imgui, v = self.imgui, self.viewer
         imgui.set_next_window_pos((4, 4), imgui.Cond_.first_use_ever)
+        # never larger than the window: what does not fit scrolls (a small window or a
+        # long list of counters and variants is not cut off)
+        w, h = self.io.display_size
+        imgui.set_next_window_size_constraints((0.0, 0.0), (max(64.0, w - 8.0),
+                                                            max(64.0, h - 8.0)))
         imgui.set_next_window_bg_alpha(0.75)
         imgui.begin("rfw", None, imgui.WindowFlags_.always_auto_resize)
         self._text(f"{v.cfg.name}  {v.cfg.size[0]}x{v.cfg.size[1]}  frame {v.frame_count}")

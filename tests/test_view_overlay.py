@@ -234,3 +234,13 @@ def test_overlay_shows_the_vk_culling_counters_of_the_view(tmp_path):
     # the first frame (it compiles the pipelines) is a warm-up, as in rfw run: its times
     # are not among the overlay's
     assert result["drawn"] == 10 and result["samples"] == 10 - 1
+
+
+def test_overlay_fits_a_small_window_and_scrolls(tmp_path):
+    # the overlay's content needs more than 200x120: its window stays inside and scrolls
+    small, _, _ = drive(tmp_path, "", sets=["size=200x120"], frames=3)
+    x0, y0, x1, y1 = small["rects"]["window"]
+    assert min(x0, y0) >= 0 and x1 <= 200 and y1 <= 120
+    # negative control: in a large window the same overlay is taller than the small one
+    large, _, _ = drive(tmp_path, "", sets=["size=640x480"], frames=3)
+    assert large["rects"]["window"][3] > 120
