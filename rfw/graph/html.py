@@ -10,6 +10,7 @@ visible. Every rectangle carries the plan's numbers as ``data-*`` attributes.
 from __future__ import annotations
 
 import html
+import math
 import re
 import shutil
 import subprocess
@@ -25,6 +26,33 @@ from .plan import CompiledGraph, ResourcePlan
 _COL = 70  # one pass column
 _ROW = 260  # one heap's height
 _LEFT, _TOP, _BOTTOM, _RIGHT = 80, 24, 130, 16
+_SLANT = math.radians(35)  # pass names under their columns
+
+# Helvetica's advance widths (1/1000 em, its AFM) for ' '..'~': labels are measured so the
+# SVG is made wide and tall enough for them; browsers draw Helvetica, Arial or a metric twin
+_HELVETICA = dict(zip(map(chr, range(32, 127)), (
+    278, 278, 355, 556, 556, 889, 667, 222, 333, 333, 389, 584, 278, 333, 278, 278, 556,
+    556, 556, 556, 556, 556, 556, 556, 556, 556, 278, 278, 584, 584, 584, 556, 1015, 667,
+    667, 722, 722, 667, 611, 778, 722, 278, 500, 667, 556, 833, 722, 778, 667, 778, 722,
+    667, 611, 722, 667, 944, 667, 667, 611, 278, 278, 278, 469, 556, 222, 556, 556, 500,
+    556, 556, 278, 556, 556, 222, 222, 500, 222, 833, 556, 556, 556, 556, 333, 500, 278,
+    556, 500, 722, 500, 500, 500, 334, 260, 334, 584), strict=True))
+_SLACK = 1.2  # a wider stand-in font (DejaVu Sans) still fits
+
+
+def text_width(text: str, size: float, *, bold: bool = False) -> float:
+    """How wide ``text`` is drawn at ``size`` in Helvetica, with slack for a wider font."""
+    em = sum(_HELVETICA.get(ch, 1000) for ch in text) / 1000
+    return em * size * _SLACK * (1.1 if bold else 1.0)
+
+
+def _fit(text: str, size: float, room: float) -> str | None:
+    """``text``, or its head and an ellipsis, in ``room`` units; None when nothing fits."""
+    if text_width(text, size) <= room:
+        return text
+    while text and text_width(text + "\u2026", size) > room:
+        text = text[:-1]
+    return text + "\u2026" if text else None
 
 
 def _mib(n: int) -> str:
@@ -141,31 +169,42 @@ def _colour(name: str) -> str:
 
 
 def timeline_svg(c: CompiledGraph) -> str:
-    """Passes on x, heap bytes on y (one band per heap), a rectangle per transient."""
+    """Passes on x, heap bytes on y (one band per heap), a rectangle per transient. The
+    margins are measured from the labels: nothing is drawn outside the SVG."""
     placed = _placed(c)
     col = {name: i for i, name in enumerate(c.order)}
     n = max(len(c.order), 1)
     heaps = list(c.heaps) or [0]
-    width = _LEFT + n * _COL + _RIGHT
-    height = _TOP + len(heaps) * (_ROW + _TOP) + _BOTTOM
+    ticks = [[f"{b * k / 4 / MiB:.1f} MiB" for k in range(5)] for b in heaps]
+    titles = [f"heap #{h}: {_mib(b)}" for h, b in enumerate(heaps)]
+    left = max([_LEFT] + [text_width(t, 11) + 12 for row in ticks for t in row])
+    base = _TOP + len(heaps) * (_ROW + _TOP) - _TOP + 10
+    cos, sin = math.cos(_SLANT), math.sin(_SLANT)
+    # a slanted name reaches right by its length and down by its length and ascent
+    right = [left + i * _COL + _COL / 2 + text_width(name, 11) * cos + 0.8 * 11 * sin
+             for name, i in col.items()]
+    right += [left + text_width(t, 11, bold=True) for t in titles]
+    width = math.ceil(max([left + n * _COL, *right]) + _RIGHT)
+    below = max([text_width(name, 11) * sin + 0.3 * 11 * cos for name in col] + [0.0])
+    height = math.ceil(max(_TOP + len(heaps) * (_ROW + _TOP) + _BOTTOM,
+                           base + below + _RIGHT))
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" class="timeline" width="{width}" '
            f'height="{height}" viewBox="0 0 {width} {height}" font-family="Helvetica" '
            'font-size="11">']
     for h, heap_bytes in enumerate(heaps):
         y0 = _TOP + h * (_ROW + _TOP)
         scale = _ROW / heap_bytes if heap_bytes else 0.0
-        out.append(f'<text x="{_LEFT}" y="{y0 - 6}" font-weight="bold">heap #{h}: '
-                   f'{_e(_mib(heap_bytes))}</text>')
-        out.append(f'<rect class="heap" x="{_LEFT}" y="{y0}" width="{n * _COL}" '
+        out.append(f'<text x="{left:g}" y="{y0 - 6}" font-weight="bold">{_e(titles[h])}</text>')
+        out.append(f'<rect class="heap" x="{left:g}" y="{y0}" width="{n * _COL}" '
                    f'height="{_ROW}" fill="#f6f6f6" stroke="#999"/>')
         for k in range(5):  # byte ticks, offsets grow downwards as in a memory map
             y = y0 + _ROW * k / 4
-            out.append(f'<line x1="{_LEFT - 4}" y1="{y:.1f}" x2="{_LEFT}" y2="{y:.1f}" '
+            out.append(f'<line x1="{left - 4:g}" y1="{y:.1f}" x2="{left:g}" y2="{y:.1f}" '
                        'stroke="#999"/>')
-            out.append(f'<text x="{_LEFT - 6}" y="{y + 4:.1f}" text-anchor="end">'
-                       f'{heap_bytes * k / 4 / MiB:.1f} MiB</text>')
+            out.append(f'<text x="{left - 6:g}" y="{y + 4:.1f}" text-anchor="end">'
+                       f'{ticks[h][k]}</text>')
         for r in (r for r in placed if r.heap == h):
-            x = _LEFT + col[r.first] * _COL
+            x = left + col[r.first] * _COL
             w = (col[r.last] - col[r.first] + 1) * _COL
             y, rh = y0 + r.offset * scale, max(r.bytes * scale, 1.0)
             tip = (f"{r.name}: {r.format or r.kind} {r.width}x{r.height}, {r.bytes:,} B at "
@@ -173,15 +212,16 @@ def timeline_svg(c: CompiledGraph) -> str:
             out.append(f'<rect class="transient" data-resource="{_e(r.name)}" data-heap="{h}" '
                        f'data-offset="{r.offset}" data-bytes="{r.bytes}" '
                        f'data-first="{col[r.first]}" data-last="{col[r.last]}" '
-                       f'x="{x + 2}" y="{y:.2f}" width="{w - 4}" height="{rh:.2f}" '
+                       f'x="{x + 2:g}" y="{y:.2f}" width="{w - 4}" height="{rh:.2f}" '
                        f'fill="{_colour(r.name)}" stroke="#333" stroke-width="0.6">'
                        f'<title>{_e(tip)}</title></rect>')
-            if rh >= 12:
-                out.append(f'<text x="{x + 6}" y="{y + min(rh, 26) / 2 + 4:.1f}" '
-                           f'font-size="10">{_e(r.name)}</text>')
-    base = _TOP + len(heaps) * (_ROW + _TOP) - _TOP + 10
+            # the name inside its rectangle, shortened to fit (the tooltip has it whole)
+            label = _fit(r.name, 10, w - 12) if rh >= 12 else None
+            if label:
+                out.append(f'<text x="{x + 6:g}" y="{y + min(rh, 26) / 2 + 4:.1f}" '
+                           f'font-size="10">{_e(label)}</text>')
     for name, i in col.items():  # pass names under their columns, slanted
-        x = _LEFT + i * _COL + _COL / 2
+        x = left + i * _COL + _COL / 2
         out.append(f'<text x="{x:.1f}" y="{base}" transform="rotate(35 {x:.1f} {base})">'
                    f'{_e(name)}</text>')
     out.append("</svg>")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 from ..units import MiB
@@ -136,18 +137,42 @@ def _q(s: str) -> str:
 _LEGEND = (
     '<<table border="0" cellborder="1" cellspacing="0" cellpadding="4">'
     '<tr><td colspan="2"><b>legend</b></td></tr>'
-    '<tr><td bgcolor="lightblue">pass</td><td>box; data flows top to bottom</td></tr>'
+    '<tr><td bgcolor="lightblue">pass</td><td>box; runs below every pass it depends on</td></tr>'
     '<tr><td bgcolor="palegreen">transient</td><td>lives within the frame (aliasable)</td></tr>'
-    '<tr><td bgcolor="lightgoldenrod">kept</td><td>external, history or persistent</td></tr>'
+    '<tr><td bgcolor="lightgoldenrod">kept</td><td>imported (external), history or persistent'
+    '</td></tr>'
+    '<tr><td border="3"><b>output</b></td><td>double outline: a graph output, its value at '
+    'the end of the frame</td></tr>'
     '<tr><td>solid edge</td><td>writes (pass to resource) or reads (resource to pass)</td></tr>'
-    '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: written back in '
-    'place</td></tr>'
+    '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: the next version '
+    '(v2, ...) of the same memory</td></tr>'
     '<tr><td>dashed edge</td><td>orders only, no data</td></tr></table>>')
+
+
+def _res_node(r: Any, node: str, version: int, writer: str | None, output: bool) -> str:
+    color = "palegreen" if r.transient else "lightgoldenrod"
+    if version > 1:  # a later version of the same memory: its name and who wrote it
+        label = f"{r.name} v{version}\\nafter {writer}"
+    elif r.kind == "image" and r.format:
+        fmt = r.format.removeprefix("VK_FORMAT_")  # Raptor's names: shorter boxes
+        label = f"{r.name}\\n{fmt} {r.width}x{r.height}"
+    elif r.kind in ("image", "buffer") and r.bytes:
+        label = f"{r.name}\\n{r.kind} {r.bytes} B"
+    else:  # undescribed: the application owns and sizes it (Raptor's externals)
+        label = f"{r.name}\\napplication-owned {r.kind}"
+    style = ", peripheries=2, penwidth=1.5, fontname=\"Helvetica-Bold\"" if output else ""
+    return (f"  {_q(node)} [shape=ellipse, style=filled, fillcolor={color}{style}, "
+            f"label=\"{label}\"];")
 
 
 def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str:
     """Passes as boxes, resources as ellipses; dashed edges order without data. Top to
-    bottom by default (a long frame stays readable), with a legend node."""
+    bottom by default (a long frame stays readable), with a legend node.
+
+    A resource written again (read-modify-write, or a second producer) gets a node per
+    version, so every edge points from what runs earlier to what runs later and dot ranks
+    each pass below everything it depends on; an invisible chain through the passes in
+    compiled order (``minlen=0``) keeps independent passes in that order too."""
     lines = [f"digraph {_q(c.name)} {{", f"  rankdir={rankdir};", "  newrank=true;",
              "  nodesep=0.2;", "  ranksep=0.35;", "  node [fontname=Helvetica];",
              "  edge [fontname=Helvetica];"]
@@ -156,28 +181,45 @@ def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str
     for name in c.order:
         lines.append(f"  {_q('pass:' + name)} [shape=box, style=filled, fillcolor=lightblue, "
                      f"label={_q(name)}];")
-    for r in c.resources:
-        color = "palegreen" if r.transient else "lightgoldenrod"
-        if r.kind == "image" and r.format:
-            fmt = r.format.removeprefix("VK_FORMAT_")  # Raptor's names: shorter boxes
-            label = f"{r.name}\\n{fmt} {r.width}x{r.height}"
-        elif r.kind in ("image", "buffer") and r.bytes:
-            label = f"{r.name}\\n{r.kind} {r.bytes} B"
-        else:  # undescribed: the application owns and sizes it (Raptor's externals)
-            label = f"{r.name}\\napplication-owned {r.kind}"
-        lines.append(f"  {_q('res:' + r.name)} [shape=ellipse, style=filled, "
-                     f"fillcolor={color}, label=\"{label}\"];")
+    outputs = set(c.outputs)
+    # each resource's versions: (node, writer); the first node is 'res:NAME'
+    versions: dict[str, list[tuple[str, str | None]]] = {r.name: [] for r in c.resources}
+    edges: list[str] = []
+
+    def current(res: str) -> str:
+        if not versions[res]:
+            versions[res].append(("res:" + res, None))
+        return versions[res][-1][0]
+
     for name in c.order:
+        p = _q("pass:" + name)
         for a in c.accesses[name]:
-            p, r = _q("pass:" + name), _q("res:" + a.resource)
+            if a.resource not in versions:
+                continue
             if a.role == "order":
-                lines.append(f"  {r} -> {p} [style=dashed];")
-            elif a.role == "modify":  # in place: the pass ranks below what it reads back
-                lines.append(f"  {r} -> {p};")
-                lines.append(f"  {p} -> {r} [color=gray, constraint=false];")
+                edges.append(f"  {_q(current(a.resource))} -> {p} [style=dashed];")
+            elif a.role == "modify":  # reads one version, writes the next
+                edges.append(f"  {_q(current(a.resource))} -> {p};")
+                node = f"res:{a.resource}@{len(versions[a.resource]) + 1}"
+                versions[a.resource].append((node, name))
+                edges.append(f"  {p} -> {_q(node)} [color=gray];")
             elif a.writes:
-                lines.append(f"  {p} -> {r};")
+                have = versions[a.resource]
+                node = "res:" + a.resource if not have else \
+                    f"res:{a.resource}@{len(have) + 1}"
+                have.append((node, name))
+                edges.append(f"  {p} -> {_q(node)};")
             else:
-                lines.append(f"  {r} -> {p};")
+                edges.append(f"  {_q(current(a.resource))} -> {p};")
+    for r in c.resources:
+        have = versions[r.name] or [("res:" + r.name, None)]
+        for k, (node, writer) in enumerate(have, start=1):
+            lines.append(_res_node(r, node, k, writer,
+                                   r.name in outputs and k == len(have)))
+    lines += edges
+    # independent passes keep the compiled order: each ranks no higher than the one before
+    for a, b in itertools.pairwise(c.order):
+        lines.append(f"  {_q('pass:' + a)} -> {_q('pass:' + b)} "
+                     "[style=invis, minlen=0, weight=0];")
     lines.append("}")
     return "\n".join(lines) + "\n"
