@@ -46,15 +46,6 @@ def text_width(text: str, size: float, *, bold: bool = False) -> float:
     return em * size * _SLACK * (1.1 if bold else 1.0)
 
 
-def _fit(text: str, size: float, room: float) -> str | None:
-    """``text``, or its head and an ellipsis, in ``room`` units; None when nothing fits."""
-    if text_width(text, size) <= room:
-        return text
-    while text and text_width(text + "\u2026", size) > room:
-        text = text[:-1]
-    return text + "\u2026" if text else None
-
-
 def _mib(n: int) -> str:
     return f"{n / MiB:.2f} MiB"
 
@@ -184,6 +175,7 @@ def timeline_svg(c: CompiledGraph) -> str:
     right = [left + i * _COL + _COL / 2 + text_width(name, 11) * cos + 0.8 * 11 * sin
              for name, i in col.items()]
     right += [left + text_width(t, 11, bold=True) for t in titles]
+    right += [left + col[r.first] * _COL + 6 + text_width(r.name, 10) for r in placed]
     width = math.ceil(max([left + n * _COL, *right]) + _RIGHT)
     below = max([text_width(name, 11) * sin + 0.3 * 11 * cos for name in col] + [0.0])
     height = math.ceil(max(_TOP + len(heaps) * (_ROW + _TOP) + _BOTTOM,
@@ -215,11 +207,9 @@ def timeline_svg(c: CompiledGraph) -> str:
                        f'x="{x + 2:g}" y="{y:.2f}" width="{w - 4}" height="{rh:.2f}" '
                        f'fill="{_colour(r.name)}" stroke="#333" stroke-width="0.6">'
                        f'<title>{_e(tip)}</title></rect>')
-            # the name inside its rectangle, shortened to fit (the tooltip has it whole)
-            label = _fit(r.name, 10, w - 12) if rh >= 12 else None
-            if label:
+            if rh >= 12:
                 out.append(f'<text x="{x + 6:g}" y="{y + min(rh, 26) / 2 + 4:.1f}" '
-                           f'font-size="10">{_e(label)}</text>')
+                           f'font-size="10">{_e(r.name)}</text>')
     for name, i in col.items():  # pass names under their columns, slanted
         x = left + i * _COL + _COL / 2
         out.append(f'<text x="{x:.1f}" y="{base}" transform="rotate(35 {x:.1f} {base})">'
