@@ -258,6 +258,9 @@ class _Loader:
             raise SceneError(f"{self.source}: file not found") from None
         except OSError as e:
             raise SceneError(f"{self.source}: cannot read: {e.strerror or e}") from None
+        if data[:4] != _GLB_MAGIC and self.path.suffix.lower() == ".glb":
+            # not read as JSON: a .glb that lacks the magic is some other file
+            self.fail("GLB", f"not a GLB file: it starts with {data[:4]!r}, not b'glTF'")
         text = self.split_glb(data) if data[:4] == _GLB_MAGIC else data
         try:
             raw = json.loads(bytes(text).decode("utf-8-sig"), parse_constant=reject_constant)

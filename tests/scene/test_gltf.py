@@ -752,6 +752,8 @@ GLB_CASES = {
     "version 1": lambda data: data[:4] + struct.pack("<I", 1) + data[8:],
     "bin chunk truncated": lambda data: data[:8] + struct.pack("<I", len(data) - 8)
     + data[12:-8],
+    # not read as a .gltf's JSON ("JSON: malformed") but named for what it is
+    "no magic": lambda data: b"\0gar" + data[4:],
 }
 
 
@@ -972,3 +974,14 @@ def test_read_uri_refuses_what_lies_outside_the_folder(tmp_path, uri):
     (tmp_path / "s").mkdir()
     with pytest.raises(SceneError, match=r"s\.gltf: images\[2\]: uri .* (outside|relative)"):
         read_uri(tmp_path / "s" / "s.gltf", uri, "images[2]")
+
+
+def test_a_gltf_is_json_and_a_glb_needs_its_magic(tmp_path):
+    # the same bytes without the magic: a .glb is "not a GLB file", a .gltf is JSON
+    data = b"\0garbage" * 8
+    for name, says in (("x.glb", "GLB: not a GLB file: it starts with b'\\x00gar'"),
+                       ("x.gltf", "JSON: ")):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(SceneError) as e:
+            load_gltf(tmp_path / name)
+        assert f"{name}: {says}" in str(e.value), str(e.value)
