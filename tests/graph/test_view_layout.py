@@ -211,6 +211,10 @@ def test_every_timeline_label_lies_inside_the_svg(tmp_path):
     # the review's case: chapter 13's last pass name, slanted under the last column
     svg = timeline_of(CHAPTER13, tmp_path)
     assert "temporal_anti_aliasing_pass</text>" in svg
+    # and the page's DAG is the one drawn downwards
+    page = (tmp_path / "plan.html").read_text(encoding="utf-8")
+    dag = page[page.index("<svg"):page.index("</svg>") + len("</svg>")]
+    assert "pass:lighting_pass" in dag and upward(dag) == []
 
 
 def test_a_clipped_label_is_caught(tmp_path):
