@@ -6,7 +6,7 @@ import itertools
 from typing import Any
 
 from ..units import MiB
-from .compile import Barrier, CompiledGraph
+from .compile import Barrier, CompiledGraph, ResourcePlan
 
 
 def _mib(n: int) -> str:
@@ -141,7 +141,8 @@ _LEGEND = (
     '<tr><td bgcolor="palegreen">transient</td><td>lives within the frame (aliasable)</td></tr>'
     '<tr><td bgcolor="lightgoldenrod">kept</td><td>imported (external), history or persistent'
     '</td></tr>'
-    '<tr><td border="3"><b>output</b></td><td>double outline: a graph output, its value at '
+    '<tr><td cellpadding="1"><table border="1" cellborder="0" cellpadding="2"><tr><td>'
+    '<b>output</b></td></tr></table></td><td>double outline: a graph output, its value at '
     'the end of the frame</td></tr>'
     '<tr><td>solid edge</td><td>writes (pass to resource) or reads (resource to pass)</td></tr>'
     '<tr><td><font color="gray">gray edge</font></td><td>read-modify-write: the next version '
@@ -149,7 +150,7 @@ _LEGEND = (
     '<tr><td>dashed edge</td><td>orders only, no data</td></tr></table>>')
 
 
-def _res_node(r: Any, node: str, version: int, writer: str | None, output: bool) -> str:
+def _res_node(r: ResourcePlan, node: str, version: int, writer: str | None, output: bool) -> str:
     color = "palegreen" if r.transient else "lightgoldenrod"
     if version > 1:  # a later version of the same memory: its name and who wrote it
         label = f"{r.name} v{version}\\nafter {writer}"
