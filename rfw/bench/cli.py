@@ -4,6 +4,7 @@
         [--executor ray [--ray-address ADDR]]  its runs as Ray tasks, one per GPU
     rfw bench compare OLD NEW [--out D]  per-pass changes beyond the noise (D: md/html)
     rfw bench report DIR [--reference]   re-write the reports from DIR/results.jsonl
+    --diff-scale shared                  difference images on one scale (default: own)
 
 Relative paths (configs, scenes, ``--out``, folders to compare) mean what they mean in the
 caller's working directory, and the runs happen there. Exit code: 0 when every run worked,
@@ -52,6 +53,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="timed frames of a peer run (default: --frames)")
     p.add_argument("--reference", help="variant the images are compared against: index or "
                    "label (default: the first)")
+    p.add_argument("--diff-scale", choices=["own", "shared"], default="own",
+                   help="difference images: each from 0 to its own largest difference "
+                        "(own, default), or all on the largest of the report (shared) to "
+                        "compare magnitudes across variants; also for compare and report")
     p.add_argument("--order", choices=["rotate", "shuffle"], default="rotate",
                    help="order of variants within a repeat (default rotate)")
     p.add_argument("--seed", type=int, default=0, help="seed of --order shuffle")
@@ -107,14 +112,14 @@ def run(args: argparse.Namespace) -> int:
         return compare(Path(rest[0]), Path(rest[1]), threshold=threshold,
                        fail_on_regression=args.fail_on_regression, show_all=args.all,
                        out=_out_dir(args.out) if args.out else None,
-                       allow_mismatch=args.allow_mismatch)
+                       allow_mismatch=args.allow_mismatch, diff_scale=args.diff_scale)
     if head == "report":
         from .report import main_report
 
         if len(rest) != 1:
             raise GraphError("usage: rfw bench report DIR")
         try:
-            return main_report(rest[0], reference=args.reference)
+            return main_report(rest[0], reference=args.reference, diff_scale=args.diff_scale)
         except ValueError as e:
             if isinstance(e, RfwError):
                 raise
@@ -149,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
 
         executor = partial(ray_runs, address=args.ray_address)
     results = run_plan(plan, out, progress=not args.no_progress, executor=executor)
-    return _finish(out, results, args.reference)
+    return _finish(out, results, args.reference, args.diff_scale)
 
 
 def _out_dir(text: str) -> Path:
@@ -195,14 +200,14 @@ def _check_reference(reference: str | None, labels: list[str]) -> None:
                    suggest=(reference, labels))
 
 
-def _finish(out: Path, results: Path, reference: str | None) -> int:
+def _finish(out: Path, results: Path, reference: str | None, diff_scale: str = "own") -> int:
     """Write the report of the runs that worked; list the failed runs, one line each."""
     from .report import write_report
     from .runner import load_results
 
     records = load_results(results)
     failed = [r for r in records if r.get("error")]
-    md, page = write_report(out, reference=reference)
+    md, page = write_report(out, reference=reference, diff_scale=diff_scale)
     print(f"wrote {results}, {md}, {page}")
     if not failed:
         return 0

@@ -145,7 +145,7 @@ def mismatches(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[str
 
 def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression: bool = False,
             show_all: bool = False, out: Path | None = None,
-            allow_mismatch: bool = False) -> int:
+            allow_mismatch: bool = False, diff_scale: str = "own") -> int:
     """Print the flagged changes (and write ``compare.md``/``.html`` into ``out``); returns
     the exit code (1 on a regression when asked). OLD and NEW measured differently (size,
     frames, warm-up, scene, settings, executor or device) are refused unless
@@ -160,7 +160,8 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
     for line in differ:
         print(f"MISMATCH: {line}")
     if out is not None:
-        md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold)
+        md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold,
+                                 diff_scale=diff_scale)
         print(f"wrote {md}, {page}")
     flagged = [(c, c.verdict(threshold)) for c in found]
     rows = [(c, v) for c, v in flagged if show_all or v in ("regression", "improvement")]
@@ -194,12 +195,14 @@ def _run_folder(path: Path) -> Path:
 
 def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
                   new_records: list[dict[str, Any]], out: Path, *,
-                  threshold: float = 0.05) -> tuple[Path, Path]:
+                  threshold: float = 0.05, diff_scale: str = "own") -> tuple[Path, Path]:
     """``out/compare.md`` and ``out/compare.html``: per-pass changes with significance and
-    the image differences between the two runs (images copied into ``out/images``)."""
+    the image differences between the two runs (images copied into ``out/images``); an image
+    rendered from another camera than its OLD one is not compared. ``diff_scale``: as in
+    :func:`rfw.bench.report.write_report`."""
     from .images import compare as compare_images
-    from .images import diff_legend, load_png, save_png
-    from .report import Cells, Doc, Img, change_text, ci, db, ms
+    from .images import load_png, save_png
+    from .report import Doc, Img, change_text, ci, db, diff_cell, image_camera, ms, write_diffs
 
     out.mkdir(parents=True, exist_ok=True)
     found, notes = changes(old_records, new_records)
@@ -230,26 +233,46 @@ def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
     if both:
         doc.h(2, "Images")
         doc.p("Each variant's NEW image against its OLD one: |OLD - NEW|, max over RGB, "
-              "colour-mapped from black (0) to the largest difference (legend below).")
-        table = []
+              + ("colour-mapped from black (0) to the largest difference of all the images "
+                 "(`--diff-scale shared`; each legend states the scale and the image's own "
+                 "largest difference)." if diff_scale == "shared" else
+                 "colour-mapped from black (0) to the largest difference of that image: each "
+                 "image has its own scale, stated below it (`scale 0-4/255`); "
+                 "`--diff-scale shared` draws them all on one."))
+        table, rows = [], []
         for n, label in enumerate(both):
             a = load_png(inside(_run_folder(old), olds[label].image))
             b = load_png(inside(_run_folder(new), news[label].image))
-            files = {k: Path("images") / f"{n}_{k}.png" for k in ("old", "new", "diff",
-                                                               "legend")}
+            files = {k: Path("images") / f"{n}_{k}.png" for k in ("old", "new")}
             save_png(inside(out, files["old"]), a)
             save_png(inside(out, files["new"]), b)
             cells: list[Any] = [label, Img(str(files["old"]), "old"),
                                 Img(str(files["new"]), "new")]
-            if a.shape != b.shape:
-                table.append([*cells, "other size", "-"])
-                continue
-            c = compare_images(a, b)
-            save_png(inside(out, files["diff"]), c["diff"])
-            diff_legend(inside(out, files["legend"]), c["diff_max"])
-            table.append([*cells, Cells([Img(str(files["diff"]), "diff"),
-                                         Img(str(files["legend"]), "legend", 160)]),
-                          db(c["psnr"])])
+            (cam_a, text_a), (cam_b, text_b) = image_camera(olds[label]), image_camera(news[label])
+            row: dict[str, Any] = {"cells": cells}
+            if cam_a != cam_b:  # another view: a PSNR would measure the views, not the code
+                what = "scenes" if cam_a[1] != cam_b[1] else "cameras"
+                row["camera"] = (f"different {what}: not compared (OLD: {text_a}; "
+                                 f"NEW: {text_b})")
+            elif a.shape == b.shape:
+                c = compare_images(a, b)
+                row.update(psnr=c["psnr"], diff_max=c["diff_max"], abs_diff=c["abs_diff"],
+                           files=(Path("images") / f"{n}_diff.png",
+                                  Path("images") / f"{n}_legend.png"))
+            rows.append(row)
+        write_diffs(out, rows, diff_scale)  # images/<n>_diff.png, <n>_legend.png
+        for row in rows:
+            if row.get("camera"):
+                table.append([*row["cells"], row["camera"], "not compared"])
+            elif row.get("diff"):
+                table.append([*row["cells"], diff_cell(row), db(row["psnr"])])
+            else:
+                table.append([*row["cells"], "other size", "-"])
+        if any(row.get("camera") for row in rows):
+            doc.p("**Different cameras:** a NEW image rendered from another camera than its "
+                  "OLD one (a camera path's last frame, another static camera or another "
+                  "scene) is not compared: a PSNR between two views measures the views, not "
+                  "the code.")
         doc.table(["variant", "OLD", "NEW", "difference", "PSNR"], table)
     md, page = out / "compare.md", out / "compare.html"
     md.write_text(doc.markdown(), encoding="utf-8")

@@ -1,6 +1,7 @@
 """Image differences for the report: PSNR, FLIP (NVIDIA's perceptual error; SSIM where the
-``flip-evaluator`` package is missing) and colour-mapped difference images, auto-scaled to
-their largest difference and drawn with a legend."""
+``flip-evaluator`` package is missing) and colour-mapped difference images, scaled to their
+own largest difference (or to one scale shared by a report's images: ``--diff-scale
+shared``), each drawn with a legend stating its scale."""
 
 from __future__ import annotations
 
@@ -31,16 +32,39 @@ def psnr(reference: np.ndarray, test: np.ndarray, *, peak: float = 255.0) -> flo
     return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
 
 
-def diff_image(reference: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, int]:
-    """``|reference - test|`` (max over RGB) colour-mapped, and the scale's top: the largest
-    difference, so it neither saturates (a change of 200 stays apart from one of 100) nor
-    vanishes (a one-step change takes the map's top colour). Zero maps to black."""
+def abs_diff(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+    """``|reference - test|`` in 8-bit steps, max over RGB."""
     a, b = _rgb(reference).astype(np.int16), _rgb(test).astype(np.int16)
     if a.shape != b.shape:
         raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
-    d = np.abs(a - b).max(axis=2)
+    return np.abs(a - b).max(axis=2).astype(np.uint8)
+
+
+def diff_image(reference: np.ndarray, test: np.ndarray, *,
+               scale: int | None = None) -> tuple[np.ndarray, int]:
+    """``|reference - test|`` (max over RGB) colour-mapped, and its largest difference.
+
+    The scale's top is that largest difference unless ``scale`` is given (one scale for
+    several images), so it neither saturates (a change of 200 stays apart from one of 100)
+    nor vanishes (a one-step change takes the map's top colour). Zero maps to black."""
+    d = abs_diff(reference, test)
     top = int(d.max())
-    return colorize(d / max(top, 1)), top
+    return scaled_diff(d, top if scale is None else scale), top
+
+
+def scaled_diff(d: np.ndarray, top: int) -> np.ndarray:
+    """An :func:`abs_diff` colour-mapped from black (0) to ``top`` 8-bit steps."""
+    return colorize(d / max(int(top), 1))
+
+
+def scale_text(top: int, *, own_max: int | None = None) -> str:
+    """The scale of a difference image in words: ``scale 0-4/255 (this image's max)``, or
+    with a scale shared by several images ``scale 0-78/255 (shared; this image's max 4)``."""
+    if own_max is None:
+        if int(top) == 0:
+            return "no difference (max 0/255)"
+        return f"scale 0-{int(top)}/255 (this image's max)"
+    return f"scale 0-{max(int(top), 1)}/255 (shared; this image's max {int(own_max)})"
 
 
 def colorize(x: np.ndarray) -> np.ndarray:
@@ -52,21 +76,24 @@ def colorize(x: np.ndarray) -> np.ndarray:
     return (rgb * 255 + 0.5).astype(np.uint8)
 
 
-def diff_legend(path: Path, top: int) -> None:
-    """A colour bar for a difference image: 0 to ``top`` 8-bit steps."""
+def diff_legend(path: Path, top: int, *, own_max: int | None = None) -> None:
+    """A colour bar for a difference image: 0 to ``top`` 8-bit steps, its title the scale
+    (:func:`scale_text`; ``own_max`` where the scale is shared by several images)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import Normalize
+    from matplotlib.ticker import MaxNLocator
 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig, ax = plt.subplots(figsize=(2.6, 0.55))
     norm = Normalize(0, max(top, 1))
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=DIFF_CMAP), cax=ax,
                  orientation="horizontal")
-    ax.set_title(f"|difference|, 8-bit steps (max {top})", fontsize=7)
+    ax.set_title(f"|difference|, {scale_text(top, own_max=own_max)}", fontsize=6)
     ax.tick_params(labelsize=6)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # 8-bit steps are whole
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
 
@@ -97,9 +124,12 @@ def ssim(reference: np.ndarray, test: np.ndarray) -> float | None:
 
 
 def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
-    """PSNR plus FLIP (or SSIM) and the difference images of ``test`` against ``reference``."""
-    diff, top = diff_image(reference, test)
-    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": diff, "diff_max": top}
+    """PSNR plus FLIP (or SSIM) and the difference images of ``test`` against ``reference``
+    (``diff`` on its own scale; ``abs_diff`` to draw it on another with :func:`scaled_diff`)."""
+    d = abs_diff(reference, test)
+    top = int(d.max())
+    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": scaled_diff(d, top),
+                           "diff_max": top, "abs_diff": d}
     f = flip(reference, test)
     if f is not None:
         out["flip"], out["flip_map"] = f

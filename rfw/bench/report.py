@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import csv
 import html
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ from typing import Any
 
 from ..errors import check_identifier
 from ..fileio import inside
-from .images import compare, diff_legend, load_png, psnr, save_png
+from .images import compare, diff_legend, load_png, psnr, save_png, scale_text, scaled_diff
 from .path_chart import path_charts
 from .runner import load_results
 from .stats import MIN_RUNS, MIN_SAMPLES, change_text, no_mark
@@ -201,9 +202,12 @@ def db(v: float | None) -> str:
 # the report
 
 
-def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[Path, Path]:
+def write_report(out_dir: Path, *, reference: str | int | None = None,
+                 diff_scale: str = "own") -> tuple[Path, Path]:
     """Read ``out_dir/results.jsonl``, write the charts, image comparisons, ``report.md`` and
-    ``report.html`` into ``out_dir``; returns the two report paths."""
+    ``report.html`` into ``out_dir``; returns the two report paths. ``diff_scale``: ``own``
+    draws each difference image from 0 to its own largest difference, ``shared`` all of
+    them to the largest of the report."""
     out_dir = Path(out_dir)
     records = load_results(out_dir)
     variants = summarize_results(records)
@@ -221,12 +225,12 @@ def write_report(out_dir: Path, *, reference: str | int | None = None) -> tuple[
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
-    _images(doc, out_dir, rfw, reference, pooled)
+    _images(doc, out_dir, rfw, reference, pooled, diff_scale=diff_scale)
     _counters(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
     _devices(doc, pooled)
     _failures(doc, variants)
-    _method(doc, records)
+    _method(doc, records, _report_devices(pooled))
     md, page = out_dir / "report.md", out_dir / "report.html"
     md.write_text(doc.markdown(), encoding="utf-8")
     page.write_text(doc.html("rfw benchmark", out_dir), encoding="utf-8")
@@ -312,10 +316,10 @@ def _devices(doc: Doc, rfw: list[VariantSummary]) -> None:
     """Per-device tables side by side: one column group per device, one row per variant and
     pass; shown when the runs measured more than one device."""
     done = [v for v in rfw if v.ok]
-    split = {v.label: dict(_by_device(v)) for v in done}
-    devices = list(dict.fromkeys(d for parts in split.values() for d in parts))
-    if len(devices) < 2:
+    devices = _report_devices(done)
+    if len(devices) < 2:  # "How this was measured" points here only then
         return
+    split = {v.label: dict(_by_device(v)) for v in done}
     doc.h(2, "Per device")
     doc.p("The same variants measured on each device (GPU ms, median and 95% CI); "
           "`-`: not run there.")
@@ -535,58 +539,153 @@ def _pick_reference(rfw: list[VariantSummary], reference: str | int | None) -> V
                      f"({', '.join(v.label for v in rfw)})")
 
 
+def image_camera(v: VariantSummary) -> tuple[Any, str]:
+    """The camera of ``v``'s image (its run's last timed frame): a key that is equal for two
+    runs that rendered the same view, and the camera in words."""
+    record = next((r for r in v.records if r.get("image")), v.first)
+    return camera_of(record)
+
+
+def camera_of(record: dict[str, Any]) -> tuple[Any, str]:
+    """The camera a run's image was rendered from, as :func:`image_camera` gives it: along a
+    camera path the path's last frame (``camera_path`` of the record), else the static camera
+    (the config's ``[camera]`` and the run's ``camera.*`` settings, on the run's scene)."""
+    scene = record.get("scene")
+    path = record.get("camera_path") or {}
+    frames = path.get("frames") or []
+    if frames:
+        last = frames[-1]
+        key = ("path", scene, *(tuple(round(float(x), 5) for x in last.get(k) or ())
+                                for k in ("position", "target")),
+               round(float(last.get("yfov") or 0.0), 4))
+        return key, (f"{path.get('kind', 'camera')} path, last frame, "
+                     f"t={float(last.get('t', 1.0)):.3g}")
+    table = _static_camera(record)
+    shown = ", ".join(f"{k}={_short(v)}" for k, v in table.items())
+    return ("static", scene, json.dumps(table, sort_keys=True)), (
+        "static camera" + (f" ({shown})" if shown else ""))
+
+
+def _short(value: Any) -> str:
+    if isinstance(value, list):
+        return "[" + ",".join(_short(x) for x in value) + "]"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _static_camera(record: dict[str, Any]) -> dict[str, Any]:
+    """The static camera's keys of a run: its config's ``[camera]`` with the run's
+    ``camera.*`` settings applied, without the path (the config read as the run read it;
+    where it cannot be read any more, the settings as written)."""
+    sets = [s for s in record.get("settings") or []
+            if s.partition("=")[0].strip() == "camera"
+            or s.partition("=")[0].strip().startswith("camera.")]
+    if record.get("config_path"):
+        from ..config import apply_overrides, load_config
+
+        try:
+            cfg = apply_overrides(load_config(record["config_path"]), sets)
+        except (OSError, ValueError):  # moved or changed since: the settings are all we have
+            pass
+        else:
+            return {k: v for k, v in (cfg.camera or {}).items() if k != "path"}
+    out: dict[str, Any] = {}
+    for s in sets:
+        key, _, value = s.partition("=")
+        key = key.strip()
+        if key != "camera.path" and not key.startswith("camera.path."):
+            out[key.removeprefix("camera.") or key] = value.strip()
+    return out
+
+
 def image_comparisons(out_dir: Path, rfw: list[VariantSummary],
                       reference: str | int | None = None,
-                      pooled: list[VariantSummary] | None = None
+                      pooled: list[VariantSummary] | None = None, *,
+                      diff_scale: str = "own"
                       ) -> tuple[VariantSummary | None, list[dict[str, Any]]]:
     """Each variant's output against the reference: PSNR, FLIP, difference PNGs (written to
-    ``out_dir/images``). Variants whose image has another shape are compared with nothing.
+    ``out_dir/images``). Variants whose image has another shape, or was rendered from another
+    camera (:func:`image_camera`), are compared with nothing (``camera`` says which).
     ``rfw`` may hold per-device rows (:func:`split_devices`); ``--reference`` then names or
-    numbers a variant of ``pooled``, the variants as run."""
+    numbers a variant of ``pooled``, the variants as run. ``diff_scale``: see
+    :func:`write_report`; each row's ``scale`` is the top of its difference image's scale."""
     if not any(v.ok and v.image for v in rfw):
         return None, []
     ref = _pick_reference(pooled if pooled is not None else rfw, reference)
     if not ref.image:
         return ref, []
     ref_img = load_png(inside(out_dir, ref.image))
+    ref_cam, ref_text = image_camera(ref)
     rows = []
     for i, v in enumerate(rfw):
         if not v.image:
             continue
         img = load_png(inside(out_dir, v.image))
         row: dict[str, Any] = {"variant": v, "image": v.image}
-        if img.shape == ref_img.shape:
+        cam, text = image_camera(v)
+        if cam != ref_cam:  # another view: a PSNR would measure the views, not the technique
+            row["camera"] = (f"different {'scenes' if cam[1] != ref_cam[1] else 'cameras'}: "
+                             f"not compared (reference: {ref_text}; this: {text})")
+        elif img.shape == ref_img.shape:
             c = compare(ref_img, img)
             name = check_identifier("variant id", v.records[0].get("variant_id"))
             if v.base:  # one device's row: its files apart from the variant's other rows
                 name += f".{i}"
-            diff = Path("images") / f"{name}.diff.png"
-            save_png(inside(out_dir, diff), c["diff"])
-            legend = Path("images") / f"{name}.diff_legend.png"
-            diff_legend(inside(out_dir, legend), c["diff_max"])
-            row.update(psnr=c["psnr"], diff=str(diff), legend=str(legend),
-                       diff_max=c["diff_max"], flip=c.get("flip"), ssim=c.get("ssim"))
+            row.update(psnr=c["psnr"], diff_max=c["diff_max"], flip=c.get("flip"),
+                       ssim=c.get("ssim"), name=name, abs_diff=c["abs_diff"])
             if "flip_map" in c:
                 fmap = Path("images") / f"{name}.flip.png"
                 save_png(inside(out_dir, fmap), c["flip_map"])
                 row["flip_map"] = str(fmap)
         rows.append(row)
+    write_diffs(out_dir, rows, diff_scale)
     return ref, rows
 
 
+def write_diffs(out_dir: Path, rows: list[dict[str, Any]], diff_scale: str) -> None:
+    """Each compared row's difference image and legend (``images/<name>.diff.png`` and
+    ``.diff_legend.png``, or the row's ``files``): from 0 to its own largest difference
+    (``own``), or to the largest of all ``rows`` (``shared``); sets the row's ``diff``,
+    ``legend`` and ``scale``."""
+    if diff_scale not in ("own", "shared"):
+        raise ValueError(f"diff_scale: expected 'own' or 'shared', not {diff_scale!r}")
+    compared = [r for r in rows if "abs_diff" in r]
+    shared = max((r["diff_max"] for r in compared), default=0)
+    for r in compared:
+        top = shared if diff_scale == "shared" else r["diff_max"]
+        own = r["diff_max"] if diff_scale == "shared" else None
+        diff, legend = r.get("files") or (Path("images") / f"{r['name']}.diff.png",
+                                          Path("images") / f"{r['name']}.diff_legend.png")
+        save_png(inside(out_dir, diff), scaled_diff(r.pop("abs_diff"), top))
+        diff_legend(inside(out_dir, legend), top, own_max=own)
+        r.update(diff=str(diff), legend=str(legend), scale=scale_text(top, own_max=own))
+
+
+def diff_cell(r: dict[str, Any]) -> Cell:
+    """A row's difference image with its legend and its scale in words."""
+    return Cells([Img(r["diff"], "diff"), Img(r["legend"], "legend", 160), r["scale"]])
+
+
 def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
-            reference: str | int | None, pooled: list[VariantSummary]) -> None:
-    ref, rows = image_comparisons(out_dir, rfw, reference, pooled)
+            reference: str | int | None, pooled: list[VariantSummary], *,
+            diff_scale: str = "own") -> None:
+    ref, rows = image_comparisons(out_dir, rfw, reference, pooled, diff_scale=diff_scale)
     if ref is None:
         return
     doc.h(2, "Images")
     has_flip = any(r.get("flip") is not None for r in rows)
     devices = _report_devices(pooled)
     ref_on = dict(_by_device(ref))  # the reference's statistics on each device it ran on
+    scale = ("colour-mapped from black (0) to the largest difference of all the report's "
+             "images (`--diff-scale shared`: colours compare across rows; each legend states "
+             "the scale and the image's own largest difference)"
+             if diff_scale == "shared" else
+             "colour-mapped from black (0) to the largest difference of that image: each "
+             "image has its own scale, stated below it (`scale 0-4/255`), so the same colour "
+             "means different differences in different rows (`--diff-scale shared` draws "
+             "them all on one scale)")
     doc.p(f"Reference: **{ref.label}**; image differences next to the time differences "
-          "(frame GPU ms, median). Difference: |reference - variant|, max over RGB, "
-          "colour-mapped from black (0) to the largest difference of that image (its legend "
-          "below it). `vs reference`: `*` where the 95% CIs of the two medians do not overlap, "
+          f"(frame GPU ms, median). Difference: |reference - variant|, max over RGB, {scale}. "
+          "`vs reference`: `*` where the 95% CIs of the two medians do not overlap, "
           f"`(n.s.)` where they do (not a result), no mark below {MIN_SAMPLES} samples or "
           f"{MIN_RUNS} runs (e.g. `(n=3<6: no mark)`). "
           + ("The runs measured several devices: each row is compared with the reference's "
@@ -595,6 +694,13 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
           + ("FLIP: NVIDIA's perceptual error (LDR, 67 pixels per degree; 0 = identical), "
              "magma error map." if has_flip else "SSIM from scikit-image (FLIP is not "
                                                  "installed)."))
+    if any(r.get("camera") for r in rows):
+        doc.p("**Different cameras:** a row marked `different cameras: not compared` rendered "
+              "another view than the reference (a camera path's last frame, another static "
+              "camera or another scene; from `camera_path` and the camera settings in "
+              "`results.jsonl`). A PSNR or FLIP between two views measures the views, not the "
+              "technique, so none is given; compare it with a variant run from the same "
+              "camera (`--reference`).")
     headers = ["variant", "image", "difference", *(["FLIP map"] if has_flip else []), "PSNR",
                "FLIP" if has_flip else "SSIM", "GPU ms", "vs reference"]
     ref_gpu = ref.frame.get("gpu_ms")
@@ -604,13 +710,14 @@ def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
         own_gpu = r["variant"].frame.get("gpu_ms")
         own_ms = (own_gpu or {}).get("median")
         cells: list[Cell] = [label, Img(r["image"], label)]
-        cells.append(Cells([Img(r["diff"], "diff"), Img(r["legend"], "legend", 160)])
-                     if r.get("diff") else "other size")
+        cells.append(r["camera"] if r.get("camera") else
+                     diff_cell(r) if r.get("diff") else "other size")
         if has_flip:
             cells.append(Img(r["flip_map"], "flip") if r.get("flip_map") else "-")
-        cells.append(db(r.get("psnr")))
+        cells.append("not compared" if r.get("camera") else db(r.get("psnr")))
         metric = r.get("flip") if has_flip else r.get("ssim")
-        cells.append("-" if metric is None else f"{metric:.4f}")
+        cells.append("not compared" if r.get("camera") else
+                     "-" if metric is None else f"{metric:.4f}")
         cells.append("-" if own_ms is None else f"{own_ms:.3f}")
         if r["variant"] is ref or r["variant"].base == ref.label:
             cells.append("reference")
@@ -786,10 +893,10 @@ def _failures(doc: Doc, variants: list[VariantSummary]) -> None:
                 "; ".join(dict.fromkeys(v.errors))] for v in bad])
 
 
-def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
+def _method(doc: Doc, records: list[dict[str, Any]], devices: list[str]) -> None:
     doc.h(2, "How this was measured")
     doc.bullets([
-        _how_runs_ran(records),
+        _how_runs_ran(records, devices),
         "GPU ms are timestamp queries around each pass (wgpu timestamp queries; "
         "`vkCmdWriteTimestamp2` on vk); CPU record ms is the host time of the pass's "
         "`record()`; wall ms per frame is a run's wall time over its timed frames (record, "
@@ -804,9 +911,10 @@ def _method(doc: Doc, records: list[dict[str, Any]]) -> None:
     ])
 
 
-def _how_runs_ran(records: list[dict[str, Any]]) -> str:
+def _how_runs_ran(records: list[dict[str, Any]], devices: list[str]) -> str:
     """The first bullet of "How this was measured": one process after another here, or Ray
-    tasks running concurrently (``--executor ray``)."""
+    tasks running concurrently (``--executor ray``); ``devices``: those the rfw runs that
+    worked measured (the "Per device" section exists for two or more)."""
     worker = ("load the config, build the scene, render warm-up frames, then the timed "
               "frames; nothing is shared between runs but the shader cache on disk")
     rays = [r for r in records if r.get("executor") == "ray"]
@@ -824,10 +932,22 @@ def _how_runs_ran(records: list[dict[str, Any]]) -> str:
             f"{min(submitted, slots)} ran at the same time (cluster resources: "
             f"{gpus:g} GPU, {cpus:g} CPU; {hosts} host(s)). Each task ran its run in its own "
             f"process (`python -m rfw.bench.worker`): {worker}. Runs sharing a machine "
-            "could slow each other down: compare devices in the per-device table.")
+            f"could slow each other down{_devices_pointer(devices)}.")
 
 
-def main_report(out_dir: str, reference: str | None = None) -> int:
-    md, page = write_report(Path(out_dir), reference=reference)
+def _devices_pointer(devices: list[str]) -> str:
+    """Where a Ray report sends the reader to compare devices: the "Per device" section,
+    which exists only when the runs measured two devices or more."""
+    if len(devices) > 1:
+        return (f": compare the {len(devices)} devices in the per-device table "
+                "(\"Per device\")")
+    if devices:
+        return (f"; all runs measured one device ({devices[0]}), so there is no per-device "
+                "table")
+    return ""
+
+
+def main_report(out_dir: str, reference: str | None = None, diff_scale: str = "own") -> int:
+    md, page = write_report(Path(out_dir), reference=reference, diff_scale=diff_scale)
     print(f"wrote {md}, {page}")
     return 0

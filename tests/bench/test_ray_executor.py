@@ -55,6 +55,10 @@ def test_ray_executor_runs_the_matrix_as_tasks_and_merges_one_report(tmp_path):
     md = (out / "report.md").read_text()
     assert f"| forward@wgpu | {device} | wgpu |" in md
     assert "## Images" in md and "flat_wgpu.diff.png" in md
+    # both runs on one device: the report says so and points to no per-device table
+    # (test_report_views has the two-device control)
+    assert "## Per device" not in md and "per-device table (" not in md
+    assert f"all runs measured one device ({device}), so there is no per-device table" in md
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert {r["device"] for r in rows} == {device}
     assert relative_refs((out / "report.html").read_text()) == []
