@@ -214,12 +214,16 @@ def load_scene_for(cfg: Config, scene: Any = None) -> Any:
         return default_scene()
     if is_builtin(cfg.scene) and not Path(cfg.scene).exists():  # stress, stress:COUNT
         return load_scene(cfg.scene)
-    if not Path(cfg.scene).exists():
+    path = Path(cfg.scene)
+    if not path.exists() and not path.suffix:
         # a fetched scene's name (rfw.run(scene="dragon"), scene = "dragon" in a config): its
         # cached GLB; else one line naming the config, with the close names
         from .scene.names import resolve_scene
 
         return load_scene(resolve_scene(cfg.scene, file=cfg.source, element="scene"))
+    if not path.exists():  # say which config (or --scene) asked for it
+        raise RfwError(f"scene file not found: {cfg.scene}", file=cfg.source,
+                       element="scene")
     return load_scene(cfg.scene)
 
 
