@@ -13,6 +13,16 @@ import pytest
 from rfw.scene.model import Camera, Instance, Light, Material, Mesh, Scene
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def tree_env() -> dict[str, str]:
+    """The environment for a subprocess that runs this tree's rfw: the tree first on
+    PYTHONPATH, then whatever PYTHONPATH made rfw's dependencies importable (the GPU
+    machine has them there, not installed)."""
+    import os
+
+    path = [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
 SEED = 20261201
 # 2027-01-15 08:00:00 UTC: what time.strftime() without a time says during a test
 FIXED_TIME = time.gmtime(1_800_000_000)

@@ -7,7 +7,6 @@ stop keeping, and is only made when that plan leaves no input without its produc
 """
 
 import json
-import os
 import re
 import subprocess
 import sys
@@ -17,6 +16,8 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from ..conftest import tree_env
+
 ROOT = Path(__file__).resolve().parents[2]
 RAPTOR = sorted((ROOT / "tests" / "data" / "raptor").glob("*.json"))
 LOST = "no kept pass produces"
@@ -25,7 +26,7 @@ LOST = "no kept pass produces"
 def rfw(*args, cwd):
     return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, check=False,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+                          env=tree_env())
 
 
 def plan(graph, *extra, cwd):

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from ..conftest import tree_env
+
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "deferred_ssao_shadows.toml"
 RAPTOR = ROOT / "tests" / "data" / "raptor" / "chapter8_graph.json"
@@ -23,7 +25,7 @@ pytestmark = pytest.mark.skipif(__import__("shutil").which("dot") is None,
 def rfw(*args, cwd):
     return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, check=False,
-                          env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+                          env=tree_env())
 
 
 def page(tmp_path, graph, *extra):

@@ -4,7 +4,6 @@ order), graph outputs are drawn apart from transients, and no timeline label lea
 Each check is also run on a hand-made drawing it must catch."""
 
 import math
-import os
 import re
 import shutil
 import subprocess
@@ -14,6 +13,8 @@ from pathlib import Path
 
 import pytest
 from PIL import ImageFont
+
+from ..conftest import tree_env
 
 ROOT = Path(__file__).resolve().parents[2]
 BOOK = ROOT.parent / "shared" / "data" / "raptor-graphs"
@@ -29,7 +30,7 @@ pytestmark = pytest.mark.skipif(shutil.which("dot") is None, reason="graphviz do
 def rfw(*args, cwd):
     done = subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, check=False, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+                          env=tree_env())
     assert done.returncode == 0, done.stderr
     return done.stdout
 
