@@ -91,8 +91,7 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
 # what a run's record says about how it was measured: two runs differing here measured
 # different work, or on another device, or side by side with other runs (Ray runs tasks
 # concurrently), so their time differences are not changes of the code
-PLAN_FIELDS = {"size": "size", "frames": "frames", "warmup": "warmup", "scene": "scene",
-               "settings": "settings", "executor": "executor", "device": "device"}
+PLAN_FIELDS = ("size", "frames", "warmup", "scene", "settings", "executor", "device")
 
 
 def _plan_of(record: dict[str, Any]) -> dict[str, Any]:
@@ -136,7 +135,7 @@ def mismatches(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[str
     out = []
     for label in [k for k in first_old if k in first_new]:
         a, b = first_old[label], first_new[label]
-        diff = [f"{PLAN_FIELDS[k]} {_show(a[k])} vs {_show(b[k])}" for k in PLAN_FIELDS
+        diff = [f"{k} {_show(a[k])} vs {_show(b[k])}" for k in PLAN_FIELDS
                 if a[k] != b[k]]
         if diff:
             out.append(f"{label}: measured differently: {'; '.join(diff)}")
