@@ -166,19 +166,18 @@ def _res_node(r: ResourcePlan, node: str, version: int, writer: str | None, outp
             f"label=\"{label}\"];")
 
 
-def to_dot(c: CompiledGraph, *, rankdir: str = "TB", legend: bool = True) -> str:
+def to_dot(c: CompiledGraph) -> str:
     """Passes as boxes, resources as ellipses; dashed edges order without data. Top to
-    bottom by default (a long frame stays readable), with a legend node.
+    bottom (a long frame stays readable), with a legend node.
 
     A resource written again (read-modify-write, or a second producer) gets a node per
     version, so every edge points from what runs earlier to what runs later and dot ranks
     each pass below everything it depends on; an invisible chain through the passes in
     compiled order (``minlen=0``) keeps independent passes in that order too."""
-    lines = [f"digraph {_q(c.name)} {{", f"  rankdir={rankdir};", "  newrank=true;",
+    lines = [f"digraph {_q(c.name)} {{", "  rankdir=TB;", "  newrank=true;",
              "  nodesep=0.2;", "  ranksep=0.35;", "  node [fontname=Helvetica];",
-             "  edge [fontname=Helvetica];"]
-    if legend:
-        lines.append(f"  legend [shape=plaintext, fontsize=10, label={_LEGEND}];")
+             "  edge [fontname=Helvetica];",
+             f"  legend [shape=plaintext, fontsize=10, label={_LEGEND}];"]
     for name in c.order:
         lines.append(f"  {_q('pass:' + name)} [shape=box, style=filled, fillcolor=lightblue, "
                      f"label={_q(name)}];")
