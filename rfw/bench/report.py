@@ -23,7 +23,6 @@ from .images import compare, diff_legend, load_png, psnr, save_png, scale_text, 
 from .path_chart import path_charts
 from .runner import load_results
 from .stats import MIN_RUNS, MIN_SAMPLES, change_text, no_mark
-from .stats import significant as significant  # the rule lives in stats.py; callers import it here
 from .summary import RAYCAST_PEERS, VariantSummary, mib, summarize_results
 
 

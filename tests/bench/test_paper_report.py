@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from rfw.bench.images import diff_image
-from rfw.bench.report import significant, write_report
+from rfw.bench.report import write_report
+from rfw.bench.stats import significant
 from rfw.bench.summary import summarize_results
 
 from .synthetic import record
