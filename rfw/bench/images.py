@@ -124,12 +124,11 @@ def ssim(reference: np.ndarray, test: np.ndarray) -> float | None:
 
 
 def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
-    """PSNR plus FLIP (or SSIM) and the difference images of ``test`` against ``reference``
-    (``diff`` on its own scale; ``abs_diff`` to draw it on another with :func:`scaled_diff`)."""
+    """PSNR plus FLIP (or SSIM) and the difference of ``test`` against ``reference``
+    (``abs_diff`` and its largest value ``diff_max``: draw it with :func:`scaled_diff`)."""
     d = abs_diff(reference, test)
-    top = int(d.max())
-    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff": scaled_diff(d, top),
-                           "diff_max": top, "abs_diff": d}
+    out: dict[str, Any] = {"psnr": psnr(reference, test), "diff_max": int(d.max()),
+                           "abs_diff": d}
     f = flip(reference, test)
     if f is not None:
         out["flip"], out["flip_map"] = f
