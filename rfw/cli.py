@@ -7,8 +7,6 @@ import contextlib
 import json
 import os
 import shlex
-import shutil
-import subprocess
 import sys
 import typing
 from collections.abc import Sequence
@@ -19,7 +17,7 @@ from .config import MAX_FRAMES, is_run_config
 from .errors import RfwError
 from .fileio import atomic_write
 from .graph import CompiledGraph, Graph, GraphError, MemoryOptions, compile, load_graph, to_toml
-from .graph.inspect import describe, to_dot
+from .graph.inspect import describe, dot_to_svg, to_dot
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "deferred.toml"
 
@@ -105,15 +103,12 @@ def cmd_dot(args: argparse.Namespace) -> int:
     out = Path(args.o)
     _write_atomic(out, dot)
     print(f"wrote {out}")
-    exe = shutil.which("dot")
-    if exe is None:
+    text = dot_to_svg(dot, file=str(out))
+    if text is None:
         print("graphviz 'dot' is not installed: no SVG written", file=sys.stderr)
         return 0
     svg = out.with_suffix(".svg")
-    done = subprocess.run([exe, "-Tsvg"], input=dot, capture_output=True, text=True, check=False)
-    if done.returncode != 0:
-        raise GraphError(f"dot failed: {done.stderr.strip()}", file=str(out))
-    _write_atomic(svg, done.stdout)
+    _write_atomic(svg, text)
     print(f"wrote {svg}")
     return 0
 

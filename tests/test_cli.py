@@ -576,7 +576,7 @@ def test_dot_to_file(capsys, tmp_path):
 
 
 def test_dot_without_graphviz_writes_no_svg(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli.shutil, "which", lambda name: None)
+    monkeypatch.setattr(shutil, "which", lambda name: None)
     out_dot = tmp_path / "out.dot"
     rc, _, err = rfw(capsys, "graph", "dot", RAPTOR_DIR / "chapter4_graph.json", "-o", out_dot)
     assert rc == 0
@@ -587,7 +587,7 @@ def test_dot_without_graphviz_writes_no_svg(capsys, tmp_path, monkeypatch):
 
 
 def test_dot_creates_missing_parent_directories(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli.shutil, "which", lambda name: None)
+    monkeypatch.setattr(shutil, "which", lambda name: None)
     out_dot = tmp_path / "a" / "b" / "out.dot"
     rc, _, _ = rfw(capsys, "graph", "dot", RAPTOR_DIR / "chapter4_graph.json", "-o", out_dot)
     assert rc == 0 and out_dot.is_file()

@@ -12,14 +12,12 @@ from __future__ import annotations
 import html
 import math
 import re
-import shutil
-import subprocess
 import zlib
 
 from ..units import MiB
 from .errors import GraphError
 from .graph import Graph
-from .inspect import to_dot
+from .inspect import _mib, dot_to_svg, to_dot
 from .plan import CompiledGraph, ResourcePlan
 
 # timeline geometry, in SVG user units
@@ -44,10 +42,6 @@ def text_width(text: str, size: float, *, bold: bool = False) -> float:
     """How wide ``text`` is drawn at ``size`` in Helvetica, with slack for a wider font."""
     em = sum(_HELVETICA.get(ch, 1000) for ch in text) / 1000
     return em * size * _SLACK * (1.1 if bold else 1.0)
-
-
-def _mib(n: int) -> str:
-    return f"{n / MiB:.2f} MiB"
 
 
 def _e(text: object) -> str:
@@ -135,15 +129,10 @@ def _culled(graph: Graph, culled: list[str], pick: str) -> str:
 
 def dag_svg(c: CompiledGraph) -> str:
     """The DAG as inline SVG (``dot -Tsvg``, top to bottom, legend included)."""
-    exe = shutil.which("dot")
-    if exe is None:
+    svg = dot_to_svg(to_dot(c), element="--html")
+    if svg is None:
         raise GraphError("graphviz 'dot' is not installed: the HTML view needs it for the "
                          "pass DAG", element="--html")
-    done = subprocess.run([exe, "-Tsvg"], input=to_dot(c), capture_output=True, text=True,
-                          check=False)
-    if done.returncode != 0:
-        raise GraphError(f"dot failed: {done.stderr.strip()}", element="--html")
-    svg = done.stdout
     # inline: no XML prolog, doctype or generator comments inside HTML
     return svg[svg.index("<svg"):]
 

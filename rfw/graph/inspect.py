@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import itertools
+import shutil
+import subprocess
 from typing import Any
 
 from ..units import MiB
 from .compile import Barrier, CompiledGraph, ResourcePlan
+from .errors import GraphError
 
 
 def _mib(n: int) -> str:
@@ -223,3 +226,15 @@ def to_dot(c: CompiledGraph) -> str:
                      "[style=invis, minlen=0, weight=0];")
     lines.append("}")
     return "\n".join(lines) + "\n"
+
+
+def dot_to_svg(dot: str, **where: str) -> str | None:
+    """``dot -Tsvg`` of a DOT text; None when graphviz is not installed. A failing dot
+    raises GraphError, ``where`` (``file=``, ``element=``) saying what it was drawing."""
+    exe = shutil.which("dot")
+    if exe is None:
+        return None
+    done = subprocess.run([exe, "-Tsvg"], input=dot, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise GraphError(f"dot failed: {done.stderr.strip()}", **where)
+    return done.stdout
