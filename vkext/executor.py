@@ -552,9 +552,8 @@ class VkExecutor(FrameExecutor):
     def _prefix(self, name: str) -> int:
         # a pass's barriers and begin timestamp; its position
         cmd, ts, k = self.cmd, self.timestamps, self._position[name]
+        # (async compute: vkext.queues.async_queues put them as the pass's queue records them)
         barriers = (self._frame_barriers if len(self.in_flight) > 1 else self._barriers)[name]
-        if self.queues is not None:  # as the pass's queue can record them
-            barriers = self.queues.barriers_for(name, barriers)
         if self.poison is not None:  # fill what starts its lifetime here first
             barriers = self.poison.fill(cmd, name, barriers, self._frame_resources)
         record_barriers(cmd, barriers, self._frame_resources)

@@ -95,7 +95,8 @@ def async_queues(device: VkDevice, plan: CompiledGraph,
     its GPU span is measured the same way, the baseline ``benchmarks/bench_async.py``
     compares against). The
     barriers an ownership acquire replaces are taken out of each ``barriers`` dict (pass ->
-    its barriers, the executor's)."""
+    its barriers, the executor's), and those of a pass on another family than the graphics
+    one are put as its queue can record them (:meth:`AsyncQueues.barriers_for`)."""
     q = plan.queues
     if q is None or (COMPUTE not in q.queues and os.environ.get(SPAN_ENV, "0") != "1"):
         return None
@@ -104,6 +105,8 @@ def async_queues(device: VkDevice, plan: CompiledGraph,
         for t in q.transfers:
             table[t.before] = [b for b in table.get(t.before, ())
                                if b.resource != t.resource]
+        for p in runner.elsewhere & table.keys():  # as the pass's queue records them: once
+            table[p] = runner.barriers_for(p, table[p])
     return runner
 
 
@@ -207,11 +210,12 @@ class AsyncQueues:
         self.elsewhere = frozenset(p for p, k in self.sub_of.items()
                                    if self.family[plan.submissions[k].queue]
                                    != device.queue_family)
-        self.acquires: dict[str, list[Transfer]] = {}
-        self.releases: dict[str, list[Transfer]] = {}
+        # each transfer with its barrier as the queue recording it can name it (once)
+        self.acquires: dict[str, list[tuple[Transfer, Any]]] = {}
+        self.releases: dict[str, list[tuple[Transfer, Any]]] = {}
         for t in plan.transfers:
-            self.acquires.setdefault(t.before, []).append(t)
-            self.releases.setdefault(t.after, []).append(t)
+            self.acquires.setdefault(t.before, []).append((t, self._on_queue(t.acquire, t.dst)))
+            self.releases.setdefault(t.after, []).append((t, self._on_queue(t.release, t.src)))
         self.frames = 0  # frames submitted
         # records a frame's first commands (the executor's: the cameras' copy) into a command
         # buffer of its own, given the executor's frame slot; None: no prologue batch
@@ -275,10 +279,14 @@ class AsyncQueues:
         s.begun.clear()
         self._slot, self._last = s, None
 
-    def _transfer_barrier(self, cmd: Any, t: Transfer, b: Any, queue: str) -> None:
-        # ``queue``: the one whose command buffer ``cmd`` is (the release's or the acquire's)
+    def _on_queue(self, b: Any, queue: str) -> Any:
+        # ``b`` as a command buffer of ``queue`` (the release's or the acquire's) can record it
         if self.family[queue] != self.device.queue_family:
-            b = replace(b, src=on_compute_family(b.src), dst=on_compute_family(b.dst))
+            return replace(b, src=on_compute_family(b.src), dst=on_compute_family(b.dst))
+        return b
+
+    def _transfer_barrier(self, cmd: Any, t: Transfer, b: Any) -> None:
+        # ``b``: the transfer's barrier as ``cmd``'s queue can record it (see _on_queue)
         res = self._resources[t.resource]
         dep = ffi.new("VkDependencyInfo*")
         dep.sType = const("VK_STRUCTURE_TYPE_DEPENDENCY_INFO")
@@ -297,12 +305,12 @@ class AsyncQueues:
         vk.vkCmdPipelineBarrier2(cmd, dep)
 
     def _acquire(self, cmd: Any, name: str) -> None:
-        for t in self.acquires.get(name, ()):
-            self._transfer_barrier(cmd, t, t.acquire, t.dst)
+        for t, b in self.acquires.get(name, ()):
+            self._transfer_barrier(cmd, t, b)
 
     def _release(self, name: str) -> None:
-        for t in self.releases.get(name, ()):
-            self._transfer_barrier(self._slot.cmds[self.sub_of[name]], t, t.release, t.src)
+        for t, b in self.releases.get(name, ()):
+            self._transfer_barrier(self._slot.cmds[self.sub_of[name]], t, b)
 
     # submitting ---------------------------------------------------------------------------
     def submit(self, last: Any) -> Any:
