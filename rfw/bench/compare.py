@@ -71,8 +71,14 @@ def changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> tuple[list[
                                                                             list[str]]:
     """Every (variant, pass, metric) in both result sets, and notes on what is in one only
     or measured with different drivers (other devices are a mismatch: :func:`mismatches`)."""
-    olds = {v.label: v for v in summarize_results(old) if v.ok}
-    news = {v.label: v for v in summarize_results(new) if v.ok}
+    return _changes(summarize_results(old), summarize_results(new))
+
+
+def _changes(old: list[VariantSummary], new: list[VariantSummary]) -> tuple[list[Change],
+                                                                          list[str]]:
+    """:func:`changes` of two sets already summarized."""
+    olds = {v.label: v for v in old if v.ok}
+    news = {v.label: v for v in new if v.ok}
     notes = []
     out = []
     for label in olds.keys() | news.keys():
@@ -155,11 +161,13 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
         more = f" (and {len(differ) - 1} more variant(s))" if len(differ) > 1 else ""
         raise RfwError(f"{differ[0]}{more}: their times are not comparable; pass "
                        "--allow-mismatch to compare anyway", element="bench compare")
-    found, notes = changes(old_records, new_records)
+    old_summaries, new_summaries = summarize_results(old_records), summarize_results(new_records)
+    found, notes = _changes(old_summaries, new_summaries)
     for line in differ:
         print(f"MISMATCH: {line}")
     if out is not None:
-        md, page = write_compare(old, new, old_records, new_records, out, threshold=threshold,
+        md, page = write_compare(old, new, old_summaries, new_summaries, out, found=found,
+                                 notes=notes, differ=differ, threshold=threshold,
                                  diff_scale=diff_scale)
         print(f"wrote {md}, {page}")
     flagged = [(c, c.verdict(threshold)) for c in found]
@@ -192,22 +200,22 @@ def _run_folder(path: Path) -> Path:
     return path if path.is_dir() else path.parent
 
 
-def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
-                  new_records: list[dict[str, Any]], out: Path, *,
-                  threshold: float = 0.05, diff_scale: str = "own") -> tuple[Path, Path]:
+def write_compare(old: Path, new: Path, old_summaries: list[VariantSummary],
+                  new_summaries: list[VariantSummary], out: Path, *, found: list[Change],
+                  notes: list[str], differ: list[str], threshold: float = 0.05,
+                  diff_scale: str = "own") -> tuple[Path, Path]:
     """``out/compare.md`` and ``out/compare.html``: per-pass changes with significance and
     the image differences between the two runs (images copied into ``out/images``); an image
-    rendered from another camera than its OLD one is not compared. ``diff_scale``: as in
-    :func:`rfw.bench.report.write_report`."""
+    rendered from another camera than its OLD one is not compared. ``found`` and ``notes``:
+    :func:`changes` of the two summaries, ``differ``: their :func:`mismatches`, as
+    :func:`compare` computed them. ``diff_scale``: as in :func:`rfw.bench.report.write_report`."""
     from .images import compare as compare_images
     from .images import load_png, save_png
     from .report import Doc, Img, change_text, ci, db, diff_cell, image_camera, ms, write_diffs
 
     out.mkdir(parents=True, exist_ok=True)
-    found, notes = changes(old_records, new_records)
     doc = Doc()
     doc.h(1, "rfw bench compare")
-    differ = mismatches(old_records, new_records)
     if differ:
         doc.p("**Mismatch: OLD and NEW were not measured the same way** (compared with "
               "`--allow-mismatch`); the time differences below mix that with any change of "
@@ -226,8 +234,8 @@ def write_compare(old: Path, new: Path, old_records: list[dict[str, Any]],
              change_text(c.old, c.new), c.verdict(threshold)] for c in found]
     doc.table(["variant", "pass", "metric", "OLD ms", "OLD 95% CI", "NEW ms", "NEW 95% CI",
                "change", "verdict"], rows)
-    olds = {v.label: v for v in summarize_results(old_records) if v.ok and v.image}
-    news = {v.label: v for v in summarize_results(new_records) if v.ok and v.image}
+    olds = {v.label: v for v in old_summaries if v.ok and v.image}
+    news = {v.label: v for v in new_summaries if v.ok and v.image}
     both = [k for k in olds if k in news]
     if both:
         doc.h(2, "Images")
