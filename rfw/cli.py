@@ -48,8 +48,10 @@ def _load(args: argparse.Namespace) -> Graph:
     return load_graph(args.file, strict=args.strict)
 
 
-def _compile_file(args: argparse.Namespace) -> CompiledGraph:
-    graph = _load(args)
+def _compile_file(args: argparse.Namespace, graph: Graph | None = None) -> CompiledGraph:
+    """The plan of the file's graph (``graph``, when loaded already) with ``--output``."""
+    if graph is None:
+        graph = _load(args)
     if getattr(args, "output", None):
         graph = graph.with_outputs(args.output)
     caps = None if getattr(args, "caps", None) is None else \
@@ -60,8 +62,9 @@ def _compile_file(args: argparse.Namespace) -> CompiledGraph:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    c = _compile_file(args)
-    note = _outputs_note(args, c)
+    graph = _load(args)
+    c = _compile_file(args, graph)
+    note = _outputs_note(args, graph, c)
     page = None
     if args.html:  # made (and checked) before anything is printed
         from .graph.html import to_html
@@ -78,20 +81,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def _outputs_note(args: argparse.Namespace, c: CompiledGraph) -> str | None:
+def _outputs_note(args: argparse.Namespace, graph: Graph, c: CompiledGraph) -> str | None:
     # a graph without declared outputs (Raptor's): name what became outputs, suggest --output
-    from .graph.html import outputs_note, suggested_output
+    from .graph.html import dangling_outputs, outputs_note, suggested_output
 
-    graph = _load(args)
-    if args.output or graph.outputs is not None or suggested_output(c) is None:
-        return None
-    args.output = [suggested_output(c)]
+    pick = suggested_output(c)
+    if args.output or not dangling_outputs(graph, c) or pick is None:
+        return None  # no note, so no second compile
     try:
-        kept = _compile_file(args)
+        kept = _compile_file(args, graph.with_outputs([pick]))
     except GraphError:  # the note then goes without what --output would save
         kept = None
-    finally:
-        args.output = None
     return outputs_note(graph, c, kept)
 
 
