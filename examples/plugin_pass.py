@@ -19,6 +19,7 @@ from _common import out_problem  # this folder is on the path: the script runs f
 
 import rfw
 from rfw import ComputePass, Settings, Tex2D, register_pass
+from rfw.argtypes import size as wxh
 from rfw.passes import Range, Slot
 
 
@@ -41,12 +42,11 @@ class InvertPass(ComputePass):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", default="320x180", help="WxH")
+    ap.add_argument("--size", type=wxh, default="320x180", help="WxH")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--backend", default="wgpu")
     ap.add_argument("--out", default="out/plugin", help="folder for the images")
     args = ap.parse_args()
-    w, h = (int(v) for v in args.size.split("x"))
     why = out_problem(Path(args.out))
     if why:
         print(f"plugin_pass: error: {why}", file=sys.stderr)
@@ -57,7 +57,7 @@ def main() -> int:
             "plugin_demo",
             [{"name": "flat"},  # a built-in pass: the scene, flat shaded
              {"name": "invert", "inputs": {"color": "flat.color"}}],
-            outputs=["flat.color", "invert.inverted"], size=(w, h))
+            outputs=["flat.color", "invert.inverted"], size=args.size)
         result = rfw.run(cfg, *args.set, backend=args.backend)
         written = result.save(args.out)
     except rfw.RfwError as e:

@@ -179,6 +179,14 @@ def test_plugin_pass_bad_setting_is_one_line(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_plugin_pass_bad_size_is_a_usage_error(tmp_path):
+    done = example("plugin_pass.py", "--size", "32xq", "--out", "out", cwd=tmp_path)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.splitlines()[-1] == ("plugin_pass.py: error: argument --size: "
+                                            "expected WxH (e.g. 1920x1080), got '32xq'")
+    assert not (tmp_path / "out").exists()
+
+
 def test_notebook_runs_and_shows_results(tmp_path):
     # executed in a real kernel, as Jupyter would: each result displays as PNG and HTML
     import base64
