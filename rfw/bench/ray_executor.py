@@ -26,7 +26,7 @@ from typing import Any
 from ..backend import GPU_ENV
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
-from .runner import ROOT, Job, Plan, run_one
+from .runner import ROOT, Job, Plan, clear_run_files, run_one
 
 INSTALL = "pip install 'rfw[scale]' (or: pip install ray)"
 
@@ -66,11 +66,10 @@ def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
 
     scratch = Path(tempfile.mkdtemp(prefix="rfw-bench-"))
     gpus = [str(g) for g in ray.get_gpu_ids()]
-    before = os.environ.get(GPU_ENV)
-    if gpus:  # the worker opens the GPU Ray gave this task, not the machine's first one
-        os.environ[GPU_ENV] = str(int(gpus[0]))
+    # the worker opens the GPU Ray gave this task, not the machine's first one
+    env = {GPU_ENV: str(int(gpus[0]))} if gpus else None
     try:
-        record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None)
+        record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None, env=env)
         image, log = scratch / "image.png", scratch / "log.txt"
         ctx = ray.get_runtime_context()
         record["executor"] = "ray"
@@ -81,20 +80,15 @@ def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
                 "log": log.read_text(errors="replace") if log.is_file() else ""}
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-        if gpus:  # a Ray worker process runs task after task
-            if before is None:
-                os.environ.pop(GPU_ENV, None)
-            else:
-                os.environ[GPU_ENV] = before
 
 
 def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,
              address: str | None = None) -> Iterator[tuple[int, Path, dict[str, Any]]]:
     """Connect to (or start) Ray now, so a missing Ray or a bad address fails before any run;
     the returned iterator submits every run at once and yields ``(seq, run folder, record)``
-    in schedule order as the runs finish, then disconnects (and stops a local instance)."""
-    if address:  # needs no Ray: a bad address says so wherever Ray is missing too
-        check_address(address)
+    in schedule order as the runs finish, then disconnects (and stops a local instance).
+    ``address`` is probed by the caller first (:func:`check_address`, as ``rfw bench`` does
+    before its header): Ray itself retries a dead one for minutes."""
     ray = _import_ray()
     start_local = not address
     try:
@@ -129,8 +123,7 @@ def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
             r, _, job = schedule[seq]
             run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
             run_dir.mkdir(parents=True, exist_ok=True)
-            for stale in ("record.json", "image.png", "log.txt"):
-                (run_dir / stale).unlink(missing_ok=True)
+            clear_run_files(run_dir)
             try:
                 done = ray.get(ref)
             except Exception as e:  # the task itself died (node lost, worker killed)

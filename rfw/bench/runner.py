@@ -337,15 +337,21 @@ def _command(job: Job, plan: Plan, out: Path) -> list[str]:
     return cmd
 
 
-def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None) -> dict[str, Any]:
+def clear_run_files(folder: Path) -> None:
+    """Delete a run folder's record, image and log, so a failed run shows no old image."""
+    for stale in ("record.json", "image.png", "log.txt"):
+        (folder / stale).unlink(missing_ok=True)
+
+
+def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
+            env: dict[str, str] | None = None) -> dict[str, Any]:
     """Run one job in a fresh process, in the caller's working directory (relative paths in
-    ``--set`` mean what they mean to ``rfw run``) or ``cwd``; its record (``error`` set when
-    it failed)."""
+    ``--set`` mean what they mean to ``rfw run``) or ``cwd``, with this process's environment
+    plus ``env``; its record (``error`` set when it failed)."""
     out.mkdir(parents=True, exist_ok=True)
-    for stale in ("record.json", "image.png", "log.txt"):  # a failed run shows no old image
-        (out / stale).unlink(missing_ok=True)
+    clear_run_files(out)
     t = time.perf_counter()
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+    env = {**os.environ, **(env or {}), "PYTHONPATH": os.pathsep.join(
         [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
     try:
         done = subprocess.run(_command(job, plan, out), capture_output=True, text=True,

@@ -83,3 +83,33 @@ def test_without_ray_installed_one_line_and_nothing_written(tmp_path, monkeypatc
     assert err == ["rfw: error: --executor: --executor ray needs Ray, which is not installed: "
                    "pip install 'rfw[scale]' (or: pip install ray)"]
     assert not out.exists()
+
+
+def test_a_ray_task_hands_its_gpu_to_the_worker_and_leaves_its_environment(tmp_path,
+                                                                              monkeypatch):
+    # the GPU Ray gave the task reaches the worker process through run_one's env; the Ray
+    # worker's own environment (it runs task after task) is not changed
+    import types
+
+    from rfw.backend import GPU_ENV
+    from rfw.bench import ray_executor, runner
+
+    seen = {}
+
+    def fake_run(cmd, **kw):
+        seen["env"] = kw["env"]
+        return subprocess.CompletedProcess(cmd, 1, "", "no worker here")
+
+    ctx = types.SimpleNamespace(get_node_id=lambda: "node")
+    fake_ray = types.SimpleNamespace(get_gpu_ids=lambda: [2],
+                                     get_runtime_context=lambda: ctx)
+    monkeypatch.setitem(sys.modules, "ray", fake_ray)
+    monkeypatch.setattr(runner.subprocess, "run", fake_run)
+    monkeypatch.setenv(GPU_ENV, "7")
+    job = runner.Job("rfw", "flat", "flat", config="configs/flat.toml")
+    plan = runner.Plan([job], (8, 8), 1, 0, 1)
+    done = ray_executor.run_task(job, plan, str(tmp_path))
+    assert seen["env"][GPU_ENV] == "2"
+    assert ray_executor.os.environ[GPU_ENV] == "7"
+    assert done["record"]["ray"]["gpu_ids"] == ["2"]
+    assert done["record"]["error"] == "exit 1: no worker here"
