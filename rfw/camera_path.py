@@ -277,9 +277,7 @@ def _queued_writes(scene: Any) -> bool:
     (``camera_per_frame``) hands each frame the cameras it began with, copied in by the
     frame's own command buffer. Anything else is written by the CPU at once and must wait
     for the frames that read it."""
-    from .backends.gpu_scene import GpuScene
-
-    return type(scene) is GpuScene or getattr(type(scene), "camera_per_frame", False) is True
+    return getattr(type(scene), "camera_per_frame", False) is True
 
 
 def set_frame_camera(frame: Any, camera: Any) -> None:
@@ -344,9 +342,7 @@ def frame_writer(out_dir: Path, every: int, frames: int, *,
     every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits),
     with ``exr`` also ``<output>.<k>.exr`` for each float output (as ``rfw run --exr``).
     Older images of these patterns are removed first: a run leaves only its own frames."""
-    from PIL import Image
-
-    from .fileio import atomic_write, inside, is_float_image, to_png_array, write_exr
+    from .fileio import atomic_write, inside, is_float_image, png_bytes, write_exr
 
     clear_frames(out_dir)
     folder = inside(out_dir, FRAMES_DIR)
@@ -354,13 +350,12 @@ def frame_writer(out_dir: Path, every: int, frames: int, *,
     def write(k: int, frame: Any) -> None:
         if k % every and k != frames - 1:
             return
-        formats = {r.name: r.format for r in frame.plan.resources}
         folder.mkdir(parents=True, exist_ok=True)
         for name in frame.plan.outputs:
             image = frame.read(name)
-            rgba = to_png_array(image, formats[name])
+            data = png_bytes(image, frame.plan.resource(name).format)
             atomic_write(inside(out_dir, f"{FRAMES_DIR}/{name}.{k:04d}.png"),
-                         lambda f, a=rgba: Image.fromarray(a, "RGBA").save(f, format="PNG"))
+                         lambda f, d=data: f.write(d))
             if exr and is_float_image(image):  # the exact values, as --exr writes the last
                 write_exr(inside(out_dir, f"{FRAMES_DIR}/{name}.{k:04d}.exr"), image)
 

@@ -348,6 +348,13 @@ class Frame:
 
     drain_after_frame = False  # the last frame of a run drains (inside frame(): the bench's clock)
 
+    def keep_in_flight(self, frames: int) -> None:
+        """Keep up to ``frames`` frames in flight on every executor that has frames in
+        flight (one without them waits for each frame)."""
+        for ex in self.executors.values():
+            if hasattr(ex, "keep_in_flight") and len(ex.in_flight) != frames:
+                ex.keep_in_flight(frames)
+
     def drain(self) -> None:
         """Wait for every executor's frames in flight (their timings are appended)."""
         for ex in self.executors.values():

@@ -80,9 +80,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
         frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size, alias=alias)
-        for ex in frame.executors.values():  # a backend without frames in flight waits
-            if hasattr(ex, "keep_in_flight") and len(ex.in_flight) != in_flight:
-                ex.keep_in_flight(in_flight)
+        frame.keep_in_flight(in_flight)
         n = frames or cfg.frames
         if path is None and each_frame is None:
             frame.run(warmup)

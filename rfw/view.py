@@ -39,7 +39,14 @@ from .backend import Devices, get_backend
 from .camera_path import path_for
 from .config import Config, apply_overrides, build, resolve_auto
 from .errors import RfwError
-from .frame import camera_for, load_scene_for, pinned_elsewhere, prepare, start
+from .frame import (
+    camera_for,
+    frames_in_flight,
+    load_scene_for,
+    pinned_elsewhere,
+    prepare,
+    start,
+)
 from .graph import compile
 from .overlay import Overlay
 from .render import backend_for
@@ -130,6 +137,7 @@ class Viewer:
         self._later: list[tuple[Any, tuple]] = []
         self._tried: dict[str, str] = {}  # variant group -> the option V tried last
         self._shown: Any = None  # the texture the window blits: the output's copy
+        self._shown_group: Any = None  # the blit's bind group of that texture
         self._blit = self._blit_pipeline()
         try:
             self._rebuild(cfg)
@@ -168,6 +176,7 @@ class Viewer:
                 self.uploads[name] = side.backend.scene(side.device, self.scene, self.camera,
                                                         cfg.size)
         frame = start(mixed, sides, uploads=self.uploads)
+        frame.keep_in_flight(frames_in_flight(cfg.frames_in_flight))  # as rfw run does
         output = mixed.plan.outputs[0]
         old = self.frame
         if old is not None:
@@ -185,7 +194,12 @@ class Viewer:
         self.output_format = mixed.plan.resource(output).format
         self.stats = {}
         self._warm = False  # the first frame compiles pipelines: its times are dropped
-        self._shown = self._shown_texture()
+        shown = self._shown_texture()
+        if shown is not self._shown or self._shown_group is None:  # made once per texture
+            self._shown_group = self.device.device.create_bind_group(
+                layout=self._blit.get_bind_group_layout(0),
+                entries=[{"binding": 0, "resource": shown.create_view()}])
+        self._shown = shown
         self.say(f"graph: {' -> '.join(mixed.plan.order)}"
                  + (f" (off: {', '.join(mixed.plan.disabled)})" if mixed.plan.disabled else "")
                  + ("" if self.backend == "wgpu" and not mix else
@@ -430,15 +444,12 @@ class Viewer:
     def _present(self, *, capture: bool) -> None:
         target = self.context.get_current_texture()
         dev = self.device.device
-        bg = dev.create_bind_group(layout=self._blit.get_bind_group_layout(0),
-                                   entries=[{"binding": 0,
-                                             "resource": self._shown.create_view()}])
         enc = dev.create_command_encoder(label="rfw:present")
         rp = enc.begin_render_pass(color_attachments=[{
             "view": target.create_view(), "load_op": "clear", "store_op": "store",
             "clear_value": (0, 0, 0, 1)}])
         rp.set_pipeline(self._blit)
-        rp.set_bind_group(0, bg)
+        rp.set_bind_group(0, self._shown_group)
         rp.draw(3)
         if self.overlay is not None and self.overlay.visible:
             self.overlay.draw(rp, (target.width, target.height))
@@ -529,11 +540,10 @@ def read_target(dev: Any, texture: Any, fmt: str) -> np.ndarray:
 
 
 def save_png(path: Path, rgba: np.ndarray) -> None:
-    from PIL import Image
+    from .fileio import atomic_write, png_bytes
 
-    from .fileio import atomic_write
-
-    atomic_write(path, lambda f: Image.fromarray(rgba, "RGBA").save(f, format="png"))
+    data = png_bytes(rgba, "rgba8unorm")  # RGBA bytes: written as they are
+    atomic_write(path, lambda f: f.write(data))
 
 
 def check_screenshot(path: Path | None) -> None:

@@ -63,6 +63,10 @@ def check_instance_limits(scene: Scene, limits: dict[str, int]) -> int:
 
 
 class GpuScene:
+    # a camera set between frames is the next frame's alone: queue.write_buffer lands after
+    # every frame submitted before it (rfw.camera_path.set_frame_camera needs no drain)
+    camera_per_frame = True
+
     def __init__(self, device: Any, scene: Scene, camera: Camera | None = None):
         self.device = device
         self.scene = scene = scene.drawable()  # singular transforms: skipped, with a warning
