@@ -32,20 +32,19 @@ def median_ms(values: list[float]) -> float | None:
 
 
 def texture_bytes(executor: Any) -> int:
-    """Bytes of the textures ``executor`` holds (each mip, layer and sample counted)."""
-    from .graph.formats import format_info
+    """Bytes of the textures ``executor`` holds (each mip, layer and sample counted, whole
+    blocks of compressed formats): :func:`rfw.graph.formats.image_bytes` of each."""
+    from .graph.formats import image_bytes
 
     total = 0
     for tex in getattr(executor, "_textures", {}).values():
         w, h, layers = tex.size
-        size = 0
-        for mip in range(tex.mip_level_count):
-            size += max(1, w >> mip) * max(1, h >> mip)
         try:
-            texel = format_info(str(tex.format)).block_bytes
+            total += image_bytes(str(tex.format), w, h, mips=tex.mip_level_count,
+                                 layers=layers, samples=tex.sample_count)
         except ValueError:  # a format the table does not know: counted at 4 bytes a texel
-            texel = 4
-        total += size * layers * tex.sample_count * texel
+            total += image_bytes("rgba8unorm", w, h, mips=tex.mip_level_count,
+                                 layers=layers, samples=tex.sample_count)
     return total
 
 
@@ -65,6 +64,7 @@ class Overlay:
         self.io = self.backend.io
         self.frame_ms: deque[float] = deque(maxlen=HISTORY)
         self.visible = True
+        self._held: tuple[Any, int] = (None, 0)  # (wgpu executor, bytes of its textures)
         # what the last frame showed: its text lines, and where each control lies (for
         # tests and scripts, which click through the window's own events)
         self.lines: list[str] = []
@@ -197,7 +197,9 @@ class Overlay:
                    f"{_mib(plan.unaliased_bytes)} unaliased")
         wgpu_ex = v.executors.get("wgpu")
         if wgpu_ex is not None:
-            self._text(f"        textures held {_mib(texture_bytes(wgpu_ex))}")
+            if self._held[0] is not wgpu_ex:  # an executor makes its textures once
+                self._held = (wgpu_ex, texture_bytes(wgpu_ex))
+            self._text(f"        textures held {_mib(self._held[1])}")
         for name, mem in v.memory().items():
             if "transient_allocated_bytes" in mem:
                 self._text(f"        {name}: transients allocated "
