@@ -27,12 +27,7 @@ from .config import (
     MAX_FRAMES,
     Config,
     PassEntry,
-    _apply_variant,
-    _boolean_option,
-    _camera,
-    _check_variant,
-    _pass_entry,
-    _size_of,
+    _config_from,
     apply_overrides,
     load_config,
     pass_class,
@@ -84,33 +79,22 @@ def make_config(name: str, passes: Iterable[PassEntry | Mapping[str, Any]], outp
     error messages (default ``<python: NAME>``)."""
     src = source or f"<python: {name}>"
     check_identifier("config", name, file=src, element="name")
-    entries = []
-    for i, p in enumerate(passes):
+    tables = []
+    for p in passes:
         if isinstance(p, PassEntry):
             p = {"name": p.name, "use": p.use, "enabled": p.enabled, "inputs": dict(p.inputs),
                  "settings": dict(p.settings), **({"backend": p.backend} if p.backend else {})}
-        entries.append(_pass_entry(dict(p), i, src))
-    if not entries:
+        tables.append(dict(p))
+    if not tables:
         raise RfwError("the config has no passes", file=src, element="passes")
-    outs = [check_identifier("output", o, file=src, element="outputs") for o in outputs]
-    variants = {k: dict(v) for k, v in (variants or {}).items()}
-    for vname, v in variants.items():
-        _check_variant(vname, v, src)
     if not isinstance(scene, str) or not scene:
         raise RfwError(f"must be a scene name or path, not {scene!r}", file=src,
                        element="scene")
-    cfg = Config(name, entries, outs, scene, _size_of(list(_pair(size, src)), src),
-                 None if camera is None else _camera(dict(camera), src), variants,
-                 check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=src,
-                              element="frames"), src, base=list(entries))
-    for vname, v in variants.items():  # as load_config: each variant's default in force
-        default = v.get("default")
-        if isinstance(default, bool):
-            default = _boolean_option(str(default).lower(), [k for k in v if k != "default"])
-        if not isinstance(default, str) or default not in v:
-            raise RfwError(f"variants.{vname}: 'default' must name one of its options",
-                           file=src, element="variants")
-        cfg = _apply_variant(cfg, vname, default)
+    data = {"name": name, "pass": tables, "outputs": list(outputs), "scene": scene,
+            "size": list(_pair(size, src)), "frames": frames,
+            "variants": {k: dict(v) for k, v in (variants or {}).items()},
+            **({} if camera is None else {"camera": dict(camera)})}
+    cfg = _config_from(data, src, None)  # checked and built as load_config does
     for entry in cfg.passes:  # an unknown pass id fails here, not at the first render
         pass_class(cfg, entry)
     return cfg

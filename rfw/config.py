@@ -297,8 +297,13 @@ def is_run_config(path: str | Path) -> bool:
 
 def load_config(path: str | Path) -> Config:
     path = Path(path)
-    data = _read_toml(path)
-    source = str(path)
+    return _config_from({"name": path.stem, **_read_toml(path)}, str(path), path.parent)
+
+
+def _config_from(data: dict[str, Any], source: str, base_dir: Path | None) -> Config:
+    """The config of a TOML file's table (``rfw.make_config`` builds one): checked, each
+    variant's default in force. ``base_dir``: the folder a scene path is relative to (None:
+    as given)."""
     _check_keys(data, _KEYS, "config", source)
     tables = data.get("pass", [])
     if not isinstance(tables, list):
@@ -316,11 +321,11 @@ def load_config(path: str | Path) -> Config:
     for vname, v in variants.items():
         _check_variant(vname, v, source)
     scene = _string(data.get("scene", "default"), "scene", source)
-    if scene != "default":
-        scene = str(path.parent / scene)  # a config's scene is relative to the config
+    if scene != "default" and base_dir is not None:
+        scene = str(base_dir / scene)  # a config's scene is relative to the config
     frames = check_number(data.get("frames", 1), "frames", kind=int, lo=1, hi=MAX_FRAMES,
                           file=source, element="frames")
-    cfg = Config(_string(data.get("name", path.stem), "name", source), passes, list(outputs),
+    cfg = Config(_string(data["name"], "name", source), passes, list(outputs),
                  scene, _size_of(data.get("size", [1280, 720]), source), camera, variants,
                  frames, source, base=list(passes),
                  async_compute=_async_compute(data.get("async_compute", "auto"), source,
