@@ -216,9 +216,8 @@ def _title(name: str) -> str:
 def new_package(name: str, root: Path, *, kind: str = "compute") -> list[Path]:
     """Write an installable distribution in ``root``: ``pyproject.toml`` (entry point
     ``rfw.passes``, shaders as package data), ``rfw_<name>/`` with the pass, ``tests/`` with
-    its test and a README; returns the files. ``root`` must not exist or be empty."""
-    _check_name(name)
-    _check_free(name)
+    its test and a README; returns the files. ``root`` must not exist or be empty (checked
+    first; new_pass checks the name before it writes anything)."""
     if root.exists() and (not root.is_dir() or any(root.iterdir())):
         raise GraphError("already exists and is not an empty folder: not overwritten",
                          file=str(root), element="--package")
@@ -238,8 +237,7 @@ def new_pass(name: str, folder: Path, *, kind: str = "compute",
     """Write ``folder/<name>/`` (module, shader, ``__init__``) and a test; returns the files.
     ``package`` names the folder (an import package) instead of ``<name>``."""
     _check_name(name)
-    if package is None:  # new_package checked it
-        _check_free(name)
+    _check_free(name)
     target = inside(folder, package or name)  # every file below is checked to stay in it
     if target.exists():
         raise GraphError("already exists: not overwritten", file=str(target))
