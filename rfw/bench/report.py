@@ -211,7 +211,8 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     records = load_results(out_dir)
     variants = summarize_results(records)
     pooled = [v for v in variants if v.kind == "rfw"]
-    rfw = split_devices(pooled)  # a variant measured on several devices: one row per device
+    parts = {id(v): _by_device(v) for v in pooled}  # each device's runs summarized once
+    rfw = split_devices(pooled, parts=parts)  # several devices: one row per device
     peers = [v for v in variants if v.kind == "peer"]
     doc = Doc()
     doc.h(1, "rfw benchmark")
@@ -224,10 +225,10 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
-    _images(doc, out_dir, rfw, reference, pooled, diff_scale=diff_scale)
+    _images(doc, out_dir, rfw, reference, pooled, diff_scale=diff_scale, parts=parts)
     _counters(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
-    _devices(doc, pooled)
+    _devices(doc, pooled, parts=parts)
     _failures(doc, variants)
     _method(doc, records, _report_devices(pooled))
     md, page = out_dir / "report.md", out_dir / "report.html"
@@ -290,17 +291,22 @@ def _by_device(v: VariantSummary) -> list[tuple[str, VariantSummary]]:
     return out
 
 
-def split_devices(variants: list[VariantSummary]) -> list[VariantSummary]:
+Parts = dict[int, list[tuple[str, VariantSummary]]]  # id(variant): its _by_device
+
+
+def split_devices(variants: list[VariantSummary], *,
+                  parts: Parts | None = None) -> list[VariantSummary]:
     """One row per (variant, device) where a variant's runs measured more than one device,
     labelled ``variant [device]`` with statistics over that device's runs only (pooled
-    numbers would mix devices); a variant measured on one device stays as it is."""
+    numbers would mix devices); a variant measured on one device stays as it is. ``parts``:
+    each variant's :func:`_by_device` where the caller has it already."""
     out = []
     for v in variants:
-        parts = _by_device(v)
-        if len(parts) == 1:
+        parts_of = parts[id(v)] if parts is not None else _by_device(v)
+        if len(parts_of) == 1:
             out.append(v)
             continue
-        for device, part in parts:
+        for device, part in parts_of:
             part.label, part.base, part.device = f"{v.label} [{device}]", v.label, device
             out.append(part)
     return out
@@ -311,14 +317,14 @@ def _report_devices(rfw: list[VariantSummary]) -> list[str]:
     return list(dict.fromkeys(device_of(r) for v in rfw for r in v.records))
 
 
-def _devices(doc: Doc, rfw: list[VariantSummary]) -> None:
+def _devices(doc: Doc, rfw: list[VariantSummary], *, parts: Parts) -> None:
     """Per-device tables side by side: one column group per device, one row per variant and
     pass; shown when the runs measured more than one device."""
     done = [v for v in rfw if v.ok]
     devices = _report_devices(done)
     if len(devices) < 2:  # "How this was measured" points here only then
         return
-    split = {v.label: dict(_by_device(v)) for v in done}
+    split = {v.label: dict(parts[id(v)]) for v in done}
     doc.h(2, "Per device")
     doc.p("The same variants measured on each device (GPU ms, median and 95% CI); "
           "`-`: not run there.")
@@ -666,14 +672,15 @@ def diff_cell(r: dict[str, Any]) -> Cell:
 
 def _images(doc: Doc, out_dir: Path, rfw: list[VariantSummary],
             reference: str | int | None, pooled: list[VariantSummary], *,
-            diff_scale: str = "own") -> None:
+            diff_scale: str = "own", parts: Parts) -> None:
     ref, rows = image_comparisons(out_dir, rfw, reference, pooled, diff_scale=diff_scale)
     if ref is None:
         return
     doc.h(2, "Images")
     has_flip = any(r.get("flip") is not None for r in rows)
     devices = _report_devices(pooled)
-    ref_on = dict(_by_device(ref))  # the reference's statistics on each device it ran on
+    # the reference's statistics on each device it ran on (a per-device row: its one)
+    ref_on = dict(parts[id(ref)] if id(ref) in parts else _by_device(ref))
     scale = ("colour-mapped from black (0) to the largest difference of all the report's "
              "images (`--diff-scale shared`: colours compare across rows; each legend states "
              "the scale and the image's own largest difference)"
