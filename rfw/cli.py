@@ -155,13 +155,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     cfg = apply_overrides(cfg, sets)
-    from dataclasses import replace
+    from .scene.names import config_scene  # --scene dragon: the cached (or fetched) GLB
 
-    from .scene.names import resolve_scene  # --scene dragon: the cached (or fetched) GLB
-
-    cfg = replace(cfg, scene=resolve_scene(cfg.scene, fetch=args.fetch, file=cfg.source,
-                                           element="--scene" if args.scene is not None
-                                           else "scene"))
+    cfg = config_scene(cfg, fetch=args.fetch, flag=args.scene is not None)
     backend = args.backend or backend_for(cfg)
     get_backend(backend)  # an unknown name: one line naming the installed ones
     if backend != "vk" and (args.validate or args.no_alias):
@@ -235,19 +231,11 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
     view(Path(args.config or DEFAULT_CONFIG), sets,
-         scene=_scene_name(args.scene, fetch=args.fetch),
-         frames=args.frames,
+         scene=args.scene, fetch=args.fetch, frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
          screenshot=Path(args.screenshot) if args.screenshot else None,
          backend=args.backend, validation=args.validate)
     return 0
-
-
-def _scene_name(scene: str | None, *, fetch: bool = False) -> str | None:
-    # --scene dragon: the cached GLB (fetched first with --fetch, or when RFW_FETCH=1 allows)
-    from .scene.names import resolve_scene
-
-    return resolve_scene(scene, fetch=fetch, element="--scene") if scene is not None else None
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:

@@ -561,8 +561,9 @@ def check_screenshot(path: Path | None) -> None:
 def view(config: Path, sets: list[str], *, scene: str | None = None,
          frames: int | None = None, script: list[str] = (), overlay: bool = True,
          screenshot: Path | None = None, backend: str | None = None,
-         validation: bool = False) -> Viewer:
+         validation: bool = False, fetch: bool = False) -> Viewer:
     from .config import load_config
+    from .scene.names import config_scene
 
     check_screenshot(screenshot)
     present_format("bgra8unorm")  # a bad RFW_VIEW_FORMAT fails before a window opens
@@ -570,6 +571,9 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
     if scene:
         sets = [*sets, f"scene={scene}"]
     cfg = apply_overrides(cfg, sets)
+    # --scene dragon or scene = "dragon": the cached GLB (fetched first with --fetch), as in
+    # rfw run
+    cfg = config_scene(cfg, fetch=fetch, flag=scene is not None)
     compile(build(cfg).graph)  # config and scene errors first, with or without a display
     backend = backend or backend_for(cfg)
     get_backend(backend, file=cfg.source)  # an unknown name: one line naming the installed

@@ -13,11 +13,22 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from ..errors import close_matches
 from .model import SceneError
 
 FETCH_ENV = "RFW_FETCH"  # 1: fetch a named scene that is not cached yet
+
+
+def config_scene(cfg: Any, *, fetch: bool = False, flag: bool = False) -> Any:
+    """``cfg`` with its scene resolved as the loaders take it (:func:`resolve_scene`: a
+    fetched scene's name becomes its cached GLB, fetched first with ``fetch``). ``flag``:
+    the name came from ``--scene`` (an error names that, else the config's ``scene``)."""
+    from dataclasses import replace
+
+    return replace(cfg, scene=resolve_scene(cfg.scene, fetch=fetch, file=cfg.source,
+                                            element="--scene" if flag else "scene"))
 
 
 def fetch_allowed(flag: bool = False) -> bool:
