@@ -568,7 +568,7 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
     check_screenshot(screenshot)
     present_format("bgra8unorm")  # a bad RFW_VIEW_FORMAT fails before a window opens
     cfg = load_config(config)
-    if scene:
+    if scene is not None:  # "" too: config_scene names --scene for it
         sets = [*sets, f"scene={scene}"]
     cfg = apply_overrides(cfg, sets)
     # --scene dragon or scene = "dragon": the cached GLB (fetched first with --fetch), as in
