@@ -18,6 +18,8 @@ after ``rfw: error:``. ``rfw.run`` is a one-off :class:`Session`.
 
 from __future__ import annotations
 
+import operator
+import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -32,7 +34,17 @@ from .config import (
     load_config,
     pass_class,
 )
-from .errors import RfwError, check_identifier, check_number
+from .errors import (
+    RfwError,
+    RfwTypeError,
+    RfwValueError,
+    check_bool,
+    check_identifier,
+    check_number,
+    check_path,
+    check_type,
+    type_name,
+)
 from .frame import Result, load_scene_for
 from .render import backend_for, render
 
@@ -43,24 +55,33 @@ def load(path: str | Path, *sets: str, scene: str | None = None,
          size: tuple[int, int] | None = None) -> Config:
     """The config in ``path`` (TOML, as ``rfw run`` reads it) with ``sets`` applied, then
     ``scene`` and ``size`` (as ``--scene`` and ``--size`` apply them)."""
-    return override(load_config(path), *sets, scene=scene, size=size)
+    return override(_load(check_path(path, "path", element="rfw.load")), *sets,
+                    scene=scene, size=size)
 
 
 def override(cfg: Config, *sets: str | Mapping[str, Any], scene: str | None = None,
              size: tuple[int, int] | None = None) -> Config:
     """A copy of ``cfg`` with ``sets`` applied in order: ``"key=value"`` strings as
     ``--set`` takes them, or mappings ``{key: value}`` (each item one ``key=value``)."""
+    if not isinstance(cfg, Config):
+        hint = " (rfw.load reads a config file)" if isinstance(cfg, str | os.PathLike) else ""
+        raise RfwTypeError(f"'cfg' must be an rfw.Config{hint}, not {type_name(cfg)}",
+                           element="rfw.override")
+    _check_config(cfg, "cfg", "rfw.override")
     items: list[str] = []
     for s in sets:
         if isinstance(s, Mapping):
-            items += [f"{k}={_text(v)}" for k, v in s.items()]
+            for k, v in s.items():
+                check_type(k, "sets", str, "a mapping with str keys ('pass.setting')",
+                           file=cfg.source, element="rfw.override")
+                items.append(f"{k}={_text(v)}")
         elif isinstance(s, str):
             items.append(s)
         else:
-            raise RfwError(f"an override is a 'key=value' string or a mapping, not {s!r}",
-                           file=cfg.source, element="--set")
+            raise RfwTypeError(f"'sets' must be 'key=value' strings or mappings, not "
+                               f"{type_name(s)}", file=cfg.source, element="rfw.override")
     if scene is not None:
-        items.append(f"scene={scene}")
+        items.append(f"scene={_scene_arg(scene, cfg.source)}")
     if size is not None:
         w, h = _pair(size, cfg.source)
         items.append(f"size={w}x{h}")
@@ -77,20 +98,35 @@ def make_config(name: str, passes: Iterable[PassEntry | Mapping[str, Any]], outp
     ``use``, ``enabled``, ``inputs``, ``settings``, ``backend``); ``variants`` as a config's
     ``[variants.NAME]`` tables (each with its ``default``). ``source`` names the config in
     error messages (default ``<python: NAME>``)."""
+    where = "rfw.make_config"
+    if source is not None:
+        check_type(source, "source", str, "a str naming the config in errors", element=where)
+    check_type(name, "name", str, "a config name (str)", element=where)
     src = source or f"<python: {name}>"
     check_identifier("config", name, file=src, element="name")
     tables = []
-    for p in passes:
+    for p in _items(passes, "passes", "PassEntry objects or mappings", src):
         if isinstance(p, PassEntry):
             p = {"name": p.name, "use": p.use, "enabled": p.enabled, "inputs": dict(p.inputs),
                  "settings": dict(p.settings), **({"backend": p.backend} if p.backend else {})}
+        elif not isinstance(p, Mapping):
+            raise RfwTypeError(f"'passes' must hold PassEntry objects or mappings, not "
+                               f"{type_name(p)}", file=src, element=where)
         tables.append(dict(p))
     if not tables:
         raise RfwError("the config has no passes", file=src, element="passes")
-    if not isinstance(scene, str) or not scene:
-        raise RfwError(f"must be a scene name or path, not {scene!r}", file=src,
-                       element="scene")
-    data = {"name": name, "pass": tables, "outputs": list(outputs), "scene": scene,
+    outs = _items(outputs, "outputs", "output names ('pass.slot')", src)
+    for o in outs:
+        check_type(o, "outputs", str, "output names ('pass.slot') as str", file=src,
+                   element=where)
+    scene = _scene_arg(scene, src)
+    for key, value in (("camera", camera), ("variants", variants)):
+        if value is not None:
+            check_type(value, key, Mapping, "a mapping", file=src, element=where)
+    for key, value in (variants or {}).items():
+        check_type(value, "variants", Mapping, f"a mapping of mappings (variant {key!r})",
+                   file=src, element=where)
+    data = {"name": name, "pass": tables, "outputs": outs, "scene": scene,
             "size": list(_pair(size, src)), "frames": frames,
             "variants": {k: dict(v) for k, v in (variants or {}).items()},
             **({} if camera is None else {"camera": dict(camera)})}
@@ -112,10 +148,10 @@ class Session:
     (or use it in ``with``) to destroy its devices."""
 
     def __init__(self, backend: str | None = None, *, validation: bool = False):
-        if backend is not None:
-            get_backend(backend)  # an unknown name: one line naming the installed ones
+        if backend is not None:  # an unknown name: one line naming the installed ones
+            get_backend(_backend_arg(backend, "rfw.Session"))
         self.backend = backend
-        self.validation = validation
+        self.validation = check_bool(validation, "validation", element="rfw.Session")
         self.devices: dict[str, Any] = {}
         self.scenes: dict[str, Any] = {}
         self.devices_made = 0
@@ -125,6 +161,7 @@ class Session:
     def device(self, backend: str) -> Any:
         """This session's device of ``backend``, made on first use."""
         self._check_open()
+        backend = _backend_arg(backend, "Session.device")
         if backend not in self.devices:
             self.devices[backend] = get_backend(backend).make_device(
                 validation=self.validation)
@@ -134,6 +171,7 @@ class Session:
     def scene(self, cfg: Config) -> Any:
         """The scene ``cfg`` names (``default``, ``stress:N``, a file), loaded on first use."""
         self._check_open()
+        check_type(cfg, "cfg", Config, "an rfw.Config", element="Session.scene")
         key = cfg.scene if cfg.scene in ("default",) or not Path(cfg.scene).exists() \
             else str(Path(cfg.scene).resolve())
         if key not in self.scenes:
@@ -148,10 +186,13 @@ class Session:
         """Render ``config`` (a :class:`Config` or a TOML path) with ``sets`` applied:
         ``warmup`` frames, then ``frames`` timed ones (default: the config's)."""
         self._check_open()
-        cfg = config if isinstance(config, Config) else load_config(config)
-        cfg = override(cfg, *sets, scene=scene, size=size)
+        cfg = override(_config_arg(config, "Session.render"), *sets, scene=scene, size=size)
+        if backend is not None:
+            _backend_arg(backend, "Session.render")
         name = backend or self.backend or backend_for(cfg)
         get_backend(name, file=cfg.source)
+        if frames is not None:
+            check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
         check_number(warmup, "warmup", kind=int, lo=0, hi=MAX_FRAMES, file=cfg.source)
         needed = {name} | {e.backend or pass_class(cfg, e).backend
                            for e in cfg.passes if e.enabled} - {None}
@@ -187,22 +228,97 @@ def run(config: ConfigLike, *sets: str | Mapping[str, Any], frames: int | None =
         validation: bool = False) -> Result:
     """One render in a :class:`Session` of its own (its device destroyed after): the
     Python face of ``rfw run``. ``result.save(folder)`` writes what ``rfw run`` writes."""
+    cfg = _config_arg(config, "rfw.run")
     with Session(backend, validation=validation) as s:
-        return s.render(config, *sets, frames=frames, scene=scene, size=size, warmup=warmup)
+        return s.render(cfg, *sets, frames=frames, scene=scene, size=size, warmup=warmup)
 
 
 def _text(value: Any) -> str:
-    # a Python value as --set spells it
+    # a Python value as --set spells it: a tuple or list of numbers as "1,2,3"
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, tuple | list):
+        return ",".join(_text(v) for v in value)
     return str(value)
 
 
 def _pair(size: Any, source: str) -> tuple[int, int]:
-    if not isinstance(size, (tuple, list)) or len(size) != 2:
-        raise RfwError(f"must be (width, height), not {size!r}", file=source, element="size")
-    return (check_number(size[0], "size", kind=int, lo=1, file=source, element="size"),
-            check_number(size[1], "size", kind=int, lo=1, file=source, element="size"))
+    if not isinstance(size, tuple | list) or len(size) != 2:
+        raise RfwTypeError(f"'size' must be (width, height), not {type_name(size)}",
+                           file=source, element="size")
+    return tuple(check_number(_integer(v), "size", kind=int, lo=1, file=source,
+                              element="size") for v in size)  # type: ignore[return-value]
+
+
+def _integer(value: Any) -> Any:
+    # numpy's integers count as integers; anything else is left for check_number to refuse
+    if isinstance(value, bool) or isinstance(value, int):
+        return value
+    try:
+        return operator.index(value)
+    except TypeError:
+        return value
+
+
+def _items(value: Any, name: str, what: str, source: str) -> list[Any]:
+    # a list, tuple or other iterable of items, never a str (whose characters would do)
+    if isinstance(value, str | bytes | Mapping) or not isinstance(value, Iterable):
+        raise RfwTypeError(f"'{name}' must be a list of {what}, not {type_name(value)}",
+                           file=source, element="rfw.make_config")
+    return list(value)
+
+
+def _scene_arg(scene: Any, source: str) -> str:
+    # a scene name or path; as --scene takes it
+    check_type(scene, "scene", (str, os.PathLike), "a scene name or path", file=source,
+               element="scene")
+    text = os.fspath(scene)
+    if not isinstance(text, str) or not text:
+        raise RfwValueError(f"'scene' must be a scene name or path, not {scene!r}",
+                            file=source, element="scene")
+    return text
+
+
+def _backend_arg(backend: Any, where: str) -> str:
+    return check_type(backend, "backend", str, "a backend name ('wgpu', 'vk')",
+                      element=where)
+
+
+def _load(path: Path) -> Config:
+    # a config file as rfw run reads it; what the file system refuses is one line too
+    if path.exists() and not (path.is_file() or path.is_dir()):
+        raise RfwValueError("is not a regular file (a device, FIFO or socket?)",
+                            file=str(path))
+    try:
+        return load_config(path)
+    except OSError as e:
+        raise RfwError(f"cannot read the config: {e.strerror or e}", file=str(path)) from None
+
+
+def _config_arg(config: Any, where: str) -> Config:
+    # a Config, or the path of a config file
+    if isinstance(config, Config):
+        return _check_config(config, "config", where)
+    if isinstance(config, str | os.PathLike):
+        return _load(check_path(config, "config", element=where))
+    raise RfwTypeError(f"'config' must be an rfw.Config or a config file path, not "
+                       f"{type_name(config)}", element=where)
+
+
+def _check_config(cfg: Config, name: str, where: str) -> Config:
+    # a Config made by hand (rfw.Config(...)) gets the shape checks a loaded one passed
+    fields = (("name", str), ("passes", list), ("outputs", list), ("scene", str),
+              ("size", tuple | list), ("source", str))
+    for key, kind in fields:
+        if not isinstance(getattr(cfg, key), kind):
+            raise RfwTypeError(f"'{name}' has a bad {key}: {type_name(getattr(cfg, key))} "
+                               "(make configs with rfw.load or rfw.make_config)",
+                               element=where)
+    for entry in cfg.passes:
+        if not isinstance(entry, PassEntry):
+            raise RfwTypeError(f"'{name}' has a pass that is no rfw.PassEntry: "
+                               f"{type_name(entry)}", element=where)
+    return cfg
 
 
 __all__ = ["Config", "PassEntry", "Result", "Session", "load", "make_config", "override", "run"]

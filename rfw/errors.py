@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import sys
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 # pass, resource, output and variant names: they become file names and labels
@@ -74,6 +76,53 @@ class RfwError(ValueError):
         return self
 
 
+class RfwTypeError(RfwError, TypeError):
+    """An argument of the wrong type (``rfw.load(5)``): an RfwError that is a TypeError too."""
+
+
+class RfwValueError(RfwError):
+    """An argument of the right type but a bad value (an RfwError, so a ValueError)."""
+
+
+def type_name(value: Any) -> str:
+    """``int 5``, ``str 'x'``: what an argument was, for "expected ..., not ..." messages."""
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 60 else text[:57] + '...'}"
+
+
+def check_type(value: Any, name: str, types: type | tuple[type, ...], expected: str, *,
+               element: str | None = None, file: str | None = None) -> Any:
+    """``value`` if it is one of ``types`` (booleans only where ``bool`` is named), else an
+    RfwTypeError: ``'name' must be EXPECTED, not int 5``."""
+    kinds = types if isinstance(types, tuple) else (types,)
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        raise RfwTypeError(f"'{name}' must be {expected}, not {type_name(value)}",
+                           file=file, element=element)
+    return value
+
+
+def check_bool(value: Any, name: str, *, element: str | None = None) -> bool:
+    """``value`` if it is True or False (numpy's too); ``'yes'`` or 1 are refused."""
+    if type(value).__name__ == "bool_" and type(value).__module__ == "numpy":
+        return bool(value)
+    return check_type(value, name, bool, "True or False", element=element)
+
+
+def check_path(value: Any, name: str, *, element: str | None = None) -> Path:
+    """``value`` (a str or os.PathLike naming a file or folder) as a Path; bytes, empty
+    names and NUL characters are refused."""
+    check_type(value, name, (str, os.PathLike), "a path (str or os.PathLike)",
+               element=element)
+    text = os.fspath(value)
+    if not isinstance(text, str):
+        raise RfwTypeError(f"'{name}' must be a path (str or os.PathLike), not "
+                           f"{type_name(value)}", element=element)
+    if not text or "\0" in text:
+        raise RfwValueError(f"'{name}' must name a file or folder, not {text!r}",
+                            element=element)
+    return Path(text)
+
+
 @contextmanager
 def naming(element: str) -> Iterator[None]:
     """RfwErrors raised inside name ``element`` (see ``RfwError.about``)."""
@@ -106,7 +155,7 @@ def check_number(value: Any, key: str, *, kind: type = float, lo: float | None =
     and strings are refused. The error names ``key`` (and ``file``/``element``)."""
     ok_types = (int,) if kind is int else (int, float)
     if isinstance(value, bool) or not isinstance(value, ok_types):
-        raise RfwError(f"'{key}' must be {'an integer' if kind is int else 'a number'}, "
+        raise RfwTypeError(f"'{key}' must be {'an integer' if kind is int else 'a number'}, "
                        f"not {value!r}", file=file, element=element)
     if kind is float and not math.isfinite(value):
         raise RfwError(f"'{key}' must be finite, not {value!r}", file=file, element=element)

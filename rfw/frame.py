@@ -158,14 +158,22 @@ class Result:
     def save(self, out: str | Path, *, exr: bool = False) -> list[Path]:
         """Write what ``rfw run --out OUT [--exr]`` writes into folder ``out``; returns the
         paths written."""
+        from .errors import check_bool, check_path
         from .fileio import write_run
 
-        return write_run(Path(out), self.images, self.formats, self.timings, exr=exr,
+        out = check_path(out, "out", element="Result.save")
+        exr = check_bool(exr, "exr", element="Result.save")
+        return write_run(out, self.images, self.formats, self.timings, exr=exr,
                          source=self.config.source)
 
     def _name(self, name: str | None) -> str:
         if name is None:
             return next(iter(self.images))
+        if not isinstance(name, str):  # an output's name ('tonemap.ldr')
+            from .errors import RfwTypeError, type_name
+
+            raise RfwTypeError(f"'name' must be an output name (str), not {type_name(name)}",
+                               file=self.config.source, element="Result")
         if name not in self.images:
             from .errors import did_you_mean
 
