@@ -252,7 +252,7 @@ def _pair(size: Any, source: str) -> tuple[int, int]:
 
 def _integer(value: Any) -> Any:
     # numpy's integers count as integers; anything else is left for check_number to refuse
-    if isinstance(value, bool) or isinstance(value, int):
+    if isinstance(value, int):  # bool included: check_number refuses it
         return value
     try:
         return operator.index(value)

@@ -27,18 +27,28 @@ The compiler plans the barriers between steps as it plans those between passes, 
 ``record`` calls ``ctx.step(i)`` before recording step ``i``'s work: on Vulkan that records
 the barriers planned before step ``i``, on wgpu (which orders a pass's dispatches itself)
 nothing. A pass that declares steps must write its resources in them.
+
+A pass defined where there is no file (a notebook cell, the REPL, ``python -c``) gives its
+shaders as text, ``shader_source = "#version 460 ..."`` (the one file ``shader`` names) or
+``{"blur.comp.glsl": ..., "common.glsl": ...}``, or names the folder they are in with
+``@register_pass("id", folder=...)``; see :meth:`Pass.folder`.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import inspect
 import math
+import os
 import re
 import struct
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
+from .errors import RfwTypeError, check_number, check_type, is_identifier, type_name, warn
 from .graph.errors import GraphError, did_you_mean
 from .graph.resources import SizeRule, Slot, Step, _slot
 
@@ -229,6 +239,14 @@ def Tex2D(format: str | None = None, *, size_of: str | None = None,
           format_of: str | None = None, scale: float = 1.0, **kw: Any) -> Slot:
     """A 2D texture slot; ``size_of`` and ``format_of`` name another slot of the same pass
     whose resource's size (times ``scale``) or format this output takes."""
+    for key, value in (("format", format), ("size_of", size_of), ("format_of", format_of)):
+        if value is not None:
+            check_type(value, key, str, "a str", element="rfw.Tex2D")
+    scale = check_number(scale, "scale", lo=1e-6, hi=1e6, element="rfw.Tex2D")
+    unknown = sorted(set(kw) - {f.name for f in dataclasses.fields(Slot)} - {"type"})
+    if unknown:
+        raise RfwTypeError(f"no slot property '{unknown[0]}'" + did_you_mean(
+            unknown[0], [f.name for f in dataclasses.fields(Slot)]), element="rfw.Tex2D")
     if format_of is not None:
         kw["format_of"] = format_of
     if size_of is not None:
@@ -272,14 +290,42 @@ class Pass:
     class Params(Settings):
         pass
 
+    # where the shaders are when no file holds the class: their text (one file's, named by
+    # ``shader``, or {file name: text}) or a folder (``@register_pass(id, folder=...)``)
+    shader_source: ClassVar[str | Mapping[str, str] | None] = None
+    shader_folder: ClassVar[Path | None] = None
+
     def __init__(self, name: str, params: Settings | None = None, **settings: Any):
+        check_type(name, "name", str, "a pass name (str)", element=type(self).__name__)
+        if params is not None and not isinstance(params, Settings):
+            raise RfwTypeError(f"'params' must be {type(self).__name__}.Params settings, not "
+                               f"{type_name(params)}", element=f"pass '{name}'")
         self.name = name
         self.params = params if params is not None else self.Params(f"pass '{name}'",
                                                                     **settings)
 
     @classmethod
     def folder(cls) -> Path:
-        return Path(inspect.getfile(cls)).parent
+        """The folder of the pass's shaders: ``shader_source`` written once into a
+        content-addressed folder of the shader cache, else ``shader_folder``, else the
+        folder of the file that defines the class. A class with none of these (defined in
+        a notebook or the REPL, shaders as files) is a GraphError saying what to give."""
+        sources = shader_sources(cls)
+        if sources:
+            return _written(sources)
+        if cls.shader_folder is not None:
+            return Path(cls.shader_folder)
+        try:
+            file = inspect.getfile(cls)
+        except (OSError, TypeError):  # __main__ of a notebook, the REPL, python -c
+            file = "<none>"
+        if file.startswith("<") or not os.path.isfile(file):  # '<stdin>', '<string>'
+            raise GraphError(
+                f"pass class {cls.__qualname__} is not defined in a file (a notebook cell or "
+                "the REPL?), so its shader files cannot be found beside it: give the shader "
+                "as text (shader_source = '...') or its folder (@register_pass(id, "
+                "folder=...))", element=f"pass '{cls.id or cls.__name__}'")
+        return Path(file).parent
 
     @classmethod
     def describe(cls) -> str:
@@ -299,6 +345,78 @@ class Pass:
 
     def record(self, ctx: Any) -> None:
         raise NotImplementedError(f"{type(self).__name__}.record")
+
+
+def shader_sources(cls: type[Pass]) -> dict[str, str]:
+    """``cls.shader_source`` as {file name: text}, checked (empty: the pass has none)."""
+    src = cls.__dict__.get("_checked_sources")
+    if src is not None and src[0] is cls.shader_source:
+        return src[1]
+    where = f"pass '{cls.id or cls.__name__}'"
+    value = cls.shader_source
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        name = cls.shader
+        if not (isinstance(name, str) and name.endswith((".glsl", ".wgsl"))):
+            raise GraphError("a str shader_source is the text of the one file 'shader' "
+                             f"names (shader = 'x.comp.glsl'), not of {name!r}: give several "
+                             "files as {file name: text}", element=where)
+        value = {name: value}
+    check_type(value, "shader_source", Mapping, "the shader's text (str) or {file name: text}",
+               element=where)
+    if not value:
+        raise GraphError("'shader_source' is empty", element=where)
+    for name, text in value.items():
+        if not is_identifier(name) or not name.endswith((".glsl", ".wgsl")):
+            raise GraphError(f"'shader_source' file name {name!r} is not a plain file name "
+                             "ending in .glsl or .wgsl (x.comp.glsl, common.glsl)",
+                             element=where)
+        check_type(text, f"shader_source[{name!r}]", str, "the file's text (str)",
+                   element=where)
+    out = dict(value)
+    type.__setattr__(cls, "_checked_sources", (cls.shader_source, out))
+    return out
+
+
+_WRITTEN: dict[str, Path] = {}
+
+
+def _written(sources: dict[str, str]) -> Path:
+    # one folder per content, so the SPIR-V cache, #include and error lines work as for
+    # files on disk; written through a temporary name, so concurrent writers agree
+    from .spirv import cache_dir
+
+    h = hashlib.sha256()
+    for name, text in sorted(sources.items()):
+        h.update(name.encode() + b"\0" + text.encode() + b"\0")
+    key = h.hexdigest()[:24]
+    folder = _WRITTEN.get(key)
+    if folder is not None and all((folder / n).is_file() for n in sources):
+        return folder
+    for root in (cache_dir() / "sources", Path(_tempdir()) / "rfw-shader-sources"):
+        folder = root / key
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            for name, text in sources.items():
+                path = folder / name
+                if path.is_file() and path.read_text(encoding="utf-8") == text:
+                    continue
+                tmp = folder / f".{name}.{os.getpid()}.tmp"
+                tmp.write_text(text, encoding="utf-8")
+                os.replace(tmp, path)
+        except OSError as e:
+            warn(f"{root}: cannot write shader sources ({e.strerror or e}); trying another")
+            continue
+        _WRITTEN[key] = folder
+        return folder
+    raise GraphError("cannot write the shader sources anywhere (see the warnings above)")
+
+
+def _tempdir() -> str:
+    import tempfile
+
+    return tempfile.gettempdir()
 
 
 class DepthPrepassMixin:
