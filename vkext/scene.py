@@ -35,6 +35,7 @@ from rfw.backends.scene_data import (
 )
 from rfw.graph.sync import State
 from rfw.scene.model import Camera, Scene, SceneError
+from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
@@ -353,7 +354,8 @@ class VkScene:
     def __init__(self, device: VkDevice, scene: Scene, camera: Camera | None = None, *,
                  block_size: int = 32 * MiB):
         self.device = device
-        self.scene = scene = scene.drawable()  # singular transforms: skipped, with a warning
+        # singular transforms: skipped, with a warning; double-sided materials: back faces
+        self.scene = scene = with_back_faces(scene.drawable())
         self.camera = camera or scene.default_camera()
         self.size = (1, 1)
         self._objects: list[Any] = []

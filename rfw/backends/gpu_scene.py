@@ -14,6 +14,7 @@ import numpy as np
 import wgpu
 
 from ..scene.model import Camera, Scene, SceneError
+from ..scene.sides import with_back_faces
 from ..units import align_up
 from .scene_data import (
     INSTANCE_BYTES,
@@ -69,7 +70,8 @@ class GpuScene:
 
     def __init__(self, device: Any, scene: Scene, camera: Camera | None = None):
         self.device = device
-        self.scene = scene = scene.drawable()  # singular transforms: skipped, with a warning
+        # singular transforms: skipped, with a warning; double-sided materials: back faces
+        self.scene = scene = with_back_faces(scene.drawable())
         self.camera = camera or scene.default_camera()
         self._buffers: list[Any] = []
         self._textures: list[Any] = []

@@ -30,6 +30,7 @@ import urllib.parse
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path, PureWindowsPath
 from typing import Any, NoReturn
 
@@ -57,7 +58,18 @@ SUPPORTED_EXTENSIONS = frozenset({
     "KHR_materials_emissive_strength",
     "KHR_mesh_quantization",  # integer positions / normals: any component type is read
     "EXT_texture_webp",  # Pillow decodes WebP
+    "KHR_texture_transform",  # applied to the primitive's texture coordinates
 })
+
+
+class SceneWarning(UserWarning):
+    """Something in a scene file that is not drawn as the file means it (a skin, a point
+    primitive). Each is also one ``rfw: warning:`` line on stderr; as a Python warning it is
+    ignored unless a caller asks for it (``warnings.catch_warnings``, ``pytest.warns``), so
+    the line is not said twice."""
+
+
+warnings.filterwarnings("ignore", category=SceneWarning)
 
 # componentType -> (numpy dtype, bytes)
 _COMPONENTS = {
@@ -82,6 +94,15 @@ _MIN_FILTERS = {
     9986: ("nearest", "linear"), 9987: ("linear", "linear"),
 }
 _WRAPS = {33071: "clamp-to-edge", 33648: "mirror-repeat", 10497: "repeat"}
+
+# what load() reads past, and how its warning says so
+_UNREAD = {
+    "points": "POINTS primitives skipped (only triangles are drawn)",
+    "lines": "LINES, LINE_LOOP or LINE_STRIP primitives skipped (only triangles are drawn)",
+    "skins": "skins not read: skinned meshes are drawn unposed, by their nodes' transforms",
+    "morphs": "morph targets not read: meshes are drawn with their base shape",
+    "animations": "animations not read: the scene is drawn as the file poses it",
+}
 
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = b"JSON"
@@ -182,7 +203,15 @@ class _Loader:
         self.images: dict[int, np.ndarray] = {}
         self.textures: dict[tuple[int, bool], int | None] = {}
         self.materials: dict[int, int] = {}
-        self.primitives: dict[tuple[int, int], int] = {}
+        self.primitives: dict[tuple[int, int], int | None] = {}
+        # what the file holds that is not drawn as it means, said in one line each after
+        # build(): kind -> the elements (first few named)
+        self.unread: dict[str, list[str]] = {k: [] for k in _UNREAD}
+        self.tinted: dict[tuple[int, tuple[float, ...]], int] = {}
+        # per scene material with textures: (TEXCOORD set, KHR_texture_transform 2x3 or None)
+        self.uv_sets: dict[int, tuple[int, np.ndarray | None]] = {}
+        self.material_names: dict[int, str] = {}
+        self.texture_uses: list[tuple[str, int, np.ndarray | None]] = []
         self.default_material: int | None = None
         self.warned: set[str] = set()
         self.scene = Scene(name=path.stem, materials=[], source=self.source)
@@ -195,7 +224,9 @@ class _Loader:
     def warn(self, message: str) -> None:
         if message not in self.warned:
             self.warned.add(message)
-            warnings.warn(f"{self.source}: {message}", stacklevel=4)
+            warn_once(f"{self.source}: {message}")
+            # as well, for callers that collect them (the fetch cache's notes)
+            warnings.warn(f"{self.source}: {message}", SceneWarning, stacklevel=4)
 
     def skipped(self, where: str, message: str) -> None:
         """A valid but unusable element (a zero-scale node's camera): one warning line."""
@@ -279,6 +310,7 @@ class _Loader:
             self.fail("JSON", "nested too deeply")
         self.check_extensions()
         self.build()
+        self.say_unread()
         # zero-scale nodes are valid glTF: skipped with a warning that names them
         return self.scene.drawable()
 
@@ -348,6 +380,21 @@ class _Loader:
             self.fail("extensionsRequired", f"{', '.join(missing)} "
                       f"{'is' if len(missing) == 1 else 'are'} not supported (supported: "
                       f"{', '.join(sorted(SUPPORTED_EXTENSIONS))})")
+
+    def say_unread(self) -> None:
+        """One warning line per kind of thing read past; a file whose primitives were all
+        points or lines is refused, as a mesh file without triangles is."""
+        skipped = self.unread["points"] + self.unread["lines"]
+        if skipped and not self.scene.meshes:
+            self.fail("meshes", f"no triangles to draw: all {len(skipped)} primitives the "
+                                "scene uses are points or lines")
+        if self.doc.animations:
+            self.unread["animations"].append("animations")
+        for kind, message in _UNREAD.items():
+            where = self.unread[kind]
+            if where:
+                more = f" and {len(where) - 1} more" if len(where) > 1 else ""
+                self.warn(f"{where[0]}{more}: {message}")
 
     # -- bytes ----------------------------------------------------------------------------
 
@@ -585,18 +632,25 @@ class _Loader:
         prims = mesh.primitives or []
         if not prims:
             self.fail(f"meshes[{node.mesh}]", "has no primitives")
+        if node.skin is not None:
+            self.unread["skins"].append(f"nodes[{index}]")
         for p in range(len(prims)):
             key = (node.mesh, p)
             if key not in self.primitives:
-                self.primitives[key] = len(self.scene.meshes)
-                self.scene.meshes.append(self.primitive(node.mesh, p))
+                mesh_out = self.primitive(node.mesh, p)
+                self.primitives[key] = None if mesh_out is None else len(self.scene.meshes)
+                if mesh_out is not None:
+                    self.scene.meshes.append(mesh_out)
+            if self.primitives[key] is None:  # points or lines: said once, after build()
+                continue
             self.scene.instances.append(Instance(
                 self.primitives[key], np.ascontiguousarray(world, np.float32),
                 node.name or f"nodes[{index}]"))
 
     # -- geometry -------------------------------------------------------------------------
 
-    def primitive(self, mi: int, pi: int) -> Mesh:
+    def primitive(self, mi: int, pi: int) -> Mesh | None:
+        """The primitive as a Mesh; None for points and lines (valid glTF, not drawn)."""
         mesh = self.doc.meshes[mi]
         prim = mesh.primitives[pi]
         where = f"meshes[{mi}].primitives[{pi}]"
@@ -604,10 +658,13 @@ class _Loader:
             attrs = {k: v for k, v in vars(prim.attributes).items() if v is not None} \
                 if prim.attributes is not None else {}
             mode = self.integer(prim.mode, where, "mode", default=4)
-            if mode not in (4, 5, 6):
-                name = _MODES.get(mode, "unknown")
-                self.fail(where, f"mode {mode} ({name}) is not supported: only triangles, "
-                                 "triangle strips and triangle fans are")
+            if mode not in _MODES:
+                self.fail(where, f"mode {mode} is not a glTF primitive mode (0 to 6)")
+            if mode in (0, 1, 2, 3):
+                self.unread["points" if mode == 0 else "lines"].append(where)
+                return None
+            if prim.targets:
+                self.unread["morphs"].append(where)
             if "POSITION" not in attrs:
                 self.fail(where, "has no POSITION attribute")
             pos = self.accessor(attrs["POSITION"], f"POSITION of {where}", ("VEC3",))
@@ -624,7 +681,20 @@ class _Loader:
 
             normals = attribute("NORMAL", ("VEC3",))
             tangents = attribute("TANGENT", ("VEC4",))
-            uvs = attribute("TEXCOORD_0", ("VEC2",))
+            material = self.material(prim.material, f"{where}.material")
+            texcoord, uv_matrix = self.uv_sets.get(material, (0, None))
+            uvs = attribute(f"TEXCOORD_{texcoord}", ("VEC2",))
+            if uvs is None and texcoord != 0:
+                uvs = attribute("TEXCOORD_0", ("VEC2",))
+            if uvs is None and material in self.uv_sets:
+                self.warn(f"{where}: has no TEXCOORD_{texcoord}, which the textures of "
+                          f"{self.material_names[material]} use: they are sampled at (0, 0)")
+            elif uvs is not None and uv_matrix is not None:
+                # KHR_texture_transform is affine, so it may be applied per vertex
+                uvs = uvs @ uv_matrix[:, :2].T + uv_matrix[:, 2]
+            colors = attribute("COLOR_0", ("VEC3", "VEC4"))
+            if colors is not None:
+                material = self.tint(material, colors, where)
 
             if prim.indices is not None:
                 iwhere = f"accessors[{prim.indices}] (indices of {where})"
@@ -649,7 +719,6 @@ class _Loader:
             else:
                 tangents[:, :3] = normalize(tangents[:, :3])
                 tangents[:, 3] = np.where(tangents[:, 3] < 0, -1.0, 1.0)
-            material = self.material(prim.material, f"{where}.material")
             name = mesh.name or f"meshes[{mi}]"
             if len(mesh.primitives) > 1:
                 name = f"{name}.{pi}"
@@ -695,6 +764,7 @@ class _Loader:
             return self.materials[index]
         m = self.item("materials", index, where)
         mwhere = f"materials[{index}]"
+        self.texture_uses = []
         with self.element(mwhere):
             pbr = m.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
             out = Material(name=m.name or mwhere)
@@ -732,18 +802,85 @@ class _Loader:
             out.alpha_mode = mode
             out.alpha_cutoff = self.number(m.alphaCutoff, mwhere, "alphaCutoff", 0.5)
             out.double_sided = bool(m.doubleSided)
-        self.materials[index] = len(self.scene.materials)
+        self.materials[index] = k = len(self.scene.materials)
         self.scene.materials.append(out)
-        return self.materials[index]
+        self.material_names[k] = mwhere
+        if self.texture_uses:
+            self.uv_sets[k] = self.uv_set(mwhere)
+        return k
+
+    def uv_set(self, mwhere: str) -> tuple[int, np.ndarray | None]:
+        """The one TEXCOORD set and transform the material's textures are sampled with: the
+        model has one per vertex, so where they differ the first texture's wins (warned)."""
+        first, texcoord, matrix = self.texture_uses[0]
+        for where, t, m in self.texture_uses[1:]:
+            same = (m is None and matrix is None) or (
+                m is not None and matrix is not None and np.allclose(m, matrix))
+            if t != texcoord or not same:
+                self.warn(f"{where} uses other texture coordinates than {first} (TEXCOORD or "
+                          f"KHR_texture_transform); only one set per material is read, "
+                          f"{first}'s")
+        return texcoord, matrix
+
+    def tint(self, material: int, colors: np.ndarray, where: str) -> int:
+        """``material`` times a primitive's COLOR_0, which the model cannot carry per vertex:
+        its mean (exact for one colour), warned where the colours vary."""
+        rgba = np.ones((len(colors), 4))
+        rgba[:, :colors.shape[1]] = np.clip(colors, 0.0, 1.0)
+        mean = rgba.mean(axis=0)
+        if np.abs(rgba - mean).max() > 1.0 / 255.0:
+            self.warn(f"{where}: COLOR_0 varies per vertex; drawn with its mean "
+                      "(vertex colours are not interpolated)")
+        if np.all(np.abs(mean - 1.0) <= 0.5 / 255.0):
+            return material  # white: the material as it is
+        key = (material, tuple(np.round(mean, 6)))
+        if key not in self.tinted:
+            base = self.scene.materials[material]
+            color = tuple(float(c * m) for c, m in zip(base.base_color, mean, strict=True))
+            self.tinted[key] = len(self.scene.materials)
+            self.scene.materials.append(replace(base, name=f"{base.name} (COLOR_0)",
+                                                base_color=color))
+            if material in self.uv_sets:
+                self.uv_sets[self.tinted[key]] = self.uv_sets[material]
+                self.material_names[self.tinted[key]] = self.material_names[material]
+        return self.tinted[key]
 
     def texture_info(self, info: Any, srgb: bool, where: str) -> int | None:
         if info is None:
             return None
         if info.index is None:
             self.fail(where, "has no index")
-        if info.texCoord not in (None, 0):
-            self.warn(f"{where} uses TEXCOORD_{info.texCoord}; only TEXCOORD_0 is read")
-        return self.texture(info.index, srgb, where)
+        texcoord = self.integer(info.texCoord, where, "texCoord", default=0)
+        ext = (info.extensions or {}).get("KHR_texture_transform")
+        matrix = None
+        if ext is not None:
+            texcoord, matrix = self.texture_transform(ext, texcoord,
+                                                      f"{where}.extensions.KHR_texture_transform")
+        if texcoord > 1:
+            self.warn(f"{where} uses TEXCOORD_{texcoord}; only TEXCOORD_0 and TEXCOORD_1 are "
+                      "read (TEXCOORD_0 is used)")
+            texcoord = 0
+        out = self.texture(info.index, srgb, where)
+        if out is not None:
+            self.texture_uses.append((where, texcoord, matrix))
+        return out
+
+    def texture_transform(self, ext: Any, texcoord: int,
+                          where: str) -> tuple[int, np.ndarray | None]:
+        """KHR_texture_transform's texCoord and its matrix T * R * S (2x3), None for the
+        identity."""
+        if not isinstance(ext, dict):
+            self.fail(where, "must be an object")
+        ox, oy = self.numbers(ext.get("offset"), 2, where, "offset", (0.0, 0.0))
+        sx, sy = self.numbers(ext.get("scale"), 2, where, "scale", (1.0, 1.0))
+        r = self.number(ext.get("rotation"), where, "rotation", 0.0)
+        texcoord = self.integer(ext.get("texCoord"), where, "texCoord", default=texcoord)
+        c, s_ = math.cos(r), math.sin(r)
+        # the extension's matrices: translation, then rotation (clockwise in uv), then scale
+        m = np.array([[c * sx, s_ * sy, ox], [-s_ * sx, c * sy, oy]])
+        if np.array_equal(m, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]):
+            return texcoord, None
+        return texcoord, m
 
     def texture(self, index: Any, srgb: bool, where: str) -> int | None:
         key = (index, srgb)

@@ -5,10 +5,15 @@ Each trimesh geometry becomes one ``Mesh`` and each scene-graph node using it on
 materials give a base colour, a roughness from the specular exponent and the diffuse map;
 vertex or face colours, which the model cannot carry per vertex, are averaged into the base
 colour. Textures are only read from the file's folder (trimesh's resolver enforces it).
+
+These formats say nothing about which side of a triangle is its front: a mesh that is not a
+closed surface wound outward (``sides.closed_outward``) gets a double-sided material, so a
+triangle seen from behind is drawn (``sides.with_back_faces``).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +21,7 @@ import numpy as np
 import trimesh
 
 from .model import Instance, Material, Mesh, Scene, SceneError, Texture
+from .sides import closed_outward
 from .util import compute_normals, compute_tangents, normalize, srgb_to_linear
 
 # trimesh formats that are not triangle meshes, or are handled elsewhere
@@ -78,6 +84,7 @@ class _Converter:
         self.materials: dict[int, int] = {}
         self.textures: dict[tuple[int, bool], int] = {}
         self.default: int | None = None
+        self.two_sided: dict[int, int] = {}  # material -> its double-sided copy
         self.keep: list[Any] = []  # keeps id()-keyed objects alive while converting
 
     def convert(self, loaded: Any) -> Scene:
@@ -140,6 +147,9 @@ class _Converter:
                 # trimesh keeps OBJ's v-up; the model's images are top row first (glTF)
                 uvs = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
         tangents = compute_tangents(positions, normals, uvs, indices)
+        material = self.material(name, visual)
+        if not closed_outward(positions, faces):
+            material = self.double_sided(material)
         return Mesh(
             name=str(name),
             positions=np.ascontiguousarray(positions, np.float32),
@@ -148,7 +158,7 @@ class _Converter:
                                      np.float32),
             tangents=np.ascontiguousarray(tangents, np.float32),
             indices=np.ascontiguousarray(indices, np.uint32),
-            material=self.material(name, visual),
+            material=material,
         )
 
     # -- materials -------------------------------------------------------------------------
@@ -173,6 +183,15 @@ class _Converter:
         if self.default is None:
             self.default = self.add(Material(name="default"))
         return self.default
+
+    def double_sided(self, index: int) -> int:
+        """``index``, or a double-sided copy of it (one per material)."""
+        mat = self.scene.materials[index]
+        if mat.double_sided:
+            return index
+        if index not in self.two_sided:
+            self.two_sided[index] = self.add(replace(mat, double_sided=True))
+        return self.two_sided[index]
 
     def add(self, material: Material) -> int:
         self.scene.materials.append(material)
