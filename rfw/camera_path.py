@@ -53,11 +53,70 @@ TARGET_INTERPOLATIONS = ("linear", "slerp")
 MAX_KEYS = 10_000
 
 
-def _vector(value: Any, where: str, source: str | None) -> list[float]:
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def check_vector(value: Any, where: str, source: str | None) -> list[float]:
+    """Three numbers, each finite as a 32-bit float (the GPU's): ``1e39`` is refused here,
+    naming ``where``, not an OverflowError when the camera is packed."""
     if not (isinstance(value, list) and len(value) == 3):
         raise RfwError(f"must be three numbers [x, y, z], not {value!r}", file=source,
                        element=where)
-    return [float(check_number(x, where, file=source, element=where)) for x in value]
+    out = [float(check_number(x, where, file=source, element=where)) for x in value]
+    for x in out:
+        if abs(x) > FLOAT32_MAX:
+            raise RfwError(f"'{where}' must fit a 32-bit float (at most {FLOAT32_MAX:.4g} "
+                           f"in size), not {x!r}", file=source, element=where)
+    return out
+
+
+_vector = check_vector
+
+
+def check_camera(cam: Any, *, file: str | None, element: str, aspect: float = 16 / 9,
+                 up_given: bool = False, up_element: str | None = None) -> None:
+    """Refuse a camera (:class:`rfw.scene.Camera`) whose float32 matrices keep no picture,
+    naming ``element`` (``camera.position``): its position so far out that 32-bit floats
+    step by more than the depth range there (every depth is then rounding noise), a
+    view-projection that is singular or not finite as float32, or, when the up vector was
+    given (``up_given``), an up along the view direction."""
+    eye = np.asarray(cam.position, np.float64)
+    step = float(np.spacing(np.float32(np.max(np.abs(eye)))))
+    depth = float(cam.zfar) - float(cam.znear)
+    if not step < depth:
+        raise RfwError(f"{_shown(cam.position)} is too far from the origin for 32-bit floats: "
+                       f"they step by {step:.3g} there, not less than the depth range "
+                       f"zfar - znear = {depth:.4g}, so no depth survives", file=file,
+                       element=element)
+    if up_given:
+        view = np.asarray(cam.target, np.float64) - eye
+        up = np.asarray(cam.up, np.float64)
+        if np.linalg.norm(np.cross(view, up)) <= 1e-6 * np.linalg.norm(view) * \
+                np.linalg.norm(up):
+            raise RfwError(f"{_shown(cam.up)} is parallel to the view direction (target - "
+                           f"position = {_shown(view)}): it gives the image no top", file=file,
+                           element=up_element or element)
+    with np.errstate(all="ignore"):
+        try:
+            view = cam.view()
+        except RfwError as e:  # position and target not apart
+            raise RfwError(e.message, file=file, element=element) from None
+        proj = cam.projection(aspect)
+        vp = proj.astype(np.float64) @ view.astype(np.float64)  # as the camera uniform is
+        try:
+            inv = np.linalg.inv(vp)
+        except np.linalg.LinAlgError:
+            inv = None
+        finite = all(np.all(np.isfinite(np.asarray(m, np.float32)))
+                     for m in (view, proj, vp) + (() if inv is None else (inv,)))
+    if inv is None or not finite:
+        why = "singular" if inv is None else "not finite as 32-bit floats"
+        raise RfwError(f"the camera's view-projection is {why} (position {_shown(cam.position)}, target {_shown(cam.target)}, znear "
+                       f"{cam.znear:g}, zfar {cam.zfar:g})", file=file, element=element)
+
+
+def _shown(v: Any) -> str:
+    return "[" + ", ".join(f"{float(x):.6g}" for x in v) + "]"
 
 
 def check_path(value: Any, source: str | None, where: str = "camera.path") -> dict[str, Any]:
@@ -260,7 +319,27 @@ def path_for(cfg: Any, base: Any) -> CameraPath | None:
     spec = (cfg.camera or {}).get("path")
     if not spec:
         return None
-    return CameraPath(spec, base)
+    path = CameraPath(spec, base)
+    check_cameras(path, cfg)
+    return path
+
+
+def check_cameras(path: CameraPath, cfg: Any) -> None:
+    """Every keyframe's camera (the cameras between two keys lie between theirs), or eight
+    of an orbit's, through :func:`check_camera`, naming the key: a path that would leave
+    the float32 range mid-run is refused before its first frame."""
+    up_given = "up" in (cfg.camera or {})
+    aspect = cfg.size[0] / cfg.size[1]
+    if path.kind == "keyframes":
+        for i, key in enumerate(path.spec["keys"]):
+            where = f"camera.path.keys[{i}]"
+            check_camera(path._key(key), file=cfg.source, aspect=aspect, up_given=up_given,
+                         element=f"{where}.position" if "position" in key else where,
+                         up_element=where)
+        return
+    for k in range(8):
+        check_camera(path.at(k / 8), file=cfg.source, element="camera.path", aspect=aspect,
+                     up_given=up_given)
 
 
 def describe(camera: Any, t: float) -> dict[str, Any]:
@@ -317,6 +396,15 @@ def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
 
 
 FRAMES_DIR = "frames"  # per-frame images go here, inside --out
+
+
+def old_frames(out_dir: Path) -> list[Path]:
+    """The per-frame images (``<output>.<k>.png`` and ``.exr``) in ``<out_dir>/frames``."""
+    folder = out_dir / FRAMES_DIR
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    return sorted(p for pattern in ("*.[0-9][0-9][0-9][0-9].png", "*.[0-9][0-9][0-9][0-9].exr")
+                  for p in folder.glob(pattern) if p.is_file() or p.is_symlink())
 
 
 def clear_frames(out_dir: Path) -> None:

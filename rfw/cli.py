@@ -15,7 +15,7 @@ from pathlib import Path
 from . import argtypes
 from .config import MAX_FRAMES, is_run_config
 from .errors import RfwError
-from .fileio import atomic_write
+from .fileio import atomic_write, check_target
 from .graph import CompiledGraph, Graph, GraphError, MemoryOptions, compile, load_graph, to_toml
 from .graph.inspect import describe, dot_to_svg, to_dot
 
@@ -69,8 +69,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.html:  # made (and checked) before anything is printed
         from .graph.html import to_html
 
-        if Path(args.html).is_dir():
-            raise RfwError("is a folder, not a file to write", file=args.html, element="--html")
+        check_target(args.html, element="--html")  # a folder, device or FIFO: refused
         page = to_html(c, note=note)
     print(json.dumps(c.to_json(), indent=2) if args.json else describe(c))
     if note and not args.json:
@@ -96,6 +95,9 @@ def _outputs_note(args: argparse.Namespace, graph: Graph, c: CompiledGraph) -> s
 
 
 def cmd_dot(args: argparse.Namespace) -> int:
+    if args.o is not None:  # both files it may write, before either is
+        check_target(args.o, element="-o")
+        check_target(Path(args.o).with_suffix(".svg"), element="-o")
     dot = to_dot(_compile_file(args))
     if args.o is None:
         sys.stdout.write(dot)
@@ -114,6 +116,8 @@ def cmd_dot(args: argparse.Namespace) -> int:
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
+    if args.o is not None:
+        check_target(args.o, element="-o")
     text = to_toml(_load(args))
     if args.o is None:
         sys.stdout.write(text)
@@ -124,62 +128,28 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .render import mark_failed
+    from .outdir import OutputFolder
+    from .render import render, table, write_outputs
 
     if not args.out:
         raise RfwError("the output folder must not be empty", element="--out")
-    done = False
-    try:
-        rc = _run(args)
-        done = True
-        return rc
-    finally:
-        if not done:  # whatever failed: no timings.json, older files marked as such
-            with contextlib.suppress(RfwError, OSError):  # the first error is the one to tell
-                mark_failed(Path(args.out), _why(sys.exc_info()[1]))
-
-
-def _why(error: BaseException | None) -> str:
-    return f"{type(error).__name__}: {error}" if error is not None else ""
-
-
-def _run(args: argparse.Namespace) -> int:
-    from .backend import get_backend
-    from .config import apply_overrides, load_config
-    from .render import backend_for, clear_outputs, render, table, write_outputs
-
-    cfg = load_config(args.config or DEFAULT_CONFIG)
-    sets = list(args.set or [])
-    if args.scene is not None:  # "" too: resolve_scene names --scene for it
-        sets.append(f"scene={args.scene}")
-    if args.size:
-        sets.append(f"size={args.size[0]}x{args.size[1]}")
-    cfg = apply_overrides(cfg, sets)
-    from .scene.names import config_scene  # --scene dragon: the cached (or fetched) GLB
-
-    cfg = config_scene(cfg, fetch=args.fetch, flag=args.scene is not None)
-    backend = args.backend or backend_for(cfg)
-    get_backend(backend)  # an unknown name: one line naming the installed ones
-    if backend != "vk" and (args.validate or args.no_alias):
-        raise GraphError("--validate and --no-alias need --backend vk", file=cfg.source)
-    if backend != "vk" and (args.poison or args.order_seed is not None):
-        raise GraphError("--order-seed and --poison need --backend vk", file=cfg.source)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise RfwError("is not a folder", file=str(out), element="--out")
-    # this run's paths, checked and cleared first: a failed run leaves no stale results
-    clear_outputs(out, cfg.outputs)
-    from .camera_path import clear_frames
-
-    clear_frames(out)  # OUT/frames/*.png too, with --save-every or without
-    with _fuzzing(args):
-        result = render(cfg, frames=args.frames, backend=backend, validation=args.validate,
-                        alias=not args.no_alias, each_frame=_frame_images(args, cfg, out))
-    formats = {r.name: r.format for r in result.executor.plan.resources}
-    written = write_outputs(result, out, formats, exr=args.exr)
+    cfg, backend = _run_config(args)
+    folder = OutputFolder(args.out)
+    _check_run_targets(folder, cfg)  # all before the folder is touched
+    with folder:
+        with _fuzzing(args):
+            result = render(cfg, frames=args.frames, backend=backend,
+                            validation=args.validate, alias=not args.no_alias,
+                            each_frame=_frame_images(args, cfg, folder.staging))
+        formats = {r.name: r.format for r in result.executor.plan.resources}
+        staged = write_outputs(result, folder.staging, formats, exr=args.exr)
+        written = [folder.out / p.relative_to(folder.staging) for p in staged]
+        folder.commit(last=["timings.json"], merge=[FRAMES], remove=_superseded(
+            folder.out, cfg.outputs, written))
+    _remove_if_empty(folder.out / FRAMES)
     if args.exr:  # 8-bit and integer outputs keep their exact values in the PNG
         print("".join(f"  {n}: {formats[n]}, not float: PNG only (--exr)\n"
-                      for n in result.images if not (out / f"{n}.exr").is_file()), end="")
+                      for n in result.images if folder.out / f"{n}.exr" not in written), end="")
     print(table(result.timings))
     memory = result.timings.get("memory")
     if memory:
@@ -195,6 +165,64 @@ def _run(args: argparse.Namespace) -> int:
         print(f"validation: {checked['messages']} message(s)")
         return 1 if checked["messages"] else 0
     return 0
+
+
+FRAMES = "frames"  # rfw.camera_path.FRAMES_DIR: --save-every's images
+
+
+def _run_config(args: argparse.Namespace) -> tuple[typing.Any, str]:
+    """The run's config with every --set, --scene and --size applied and its backend, all
+    checked: what can be refused is refused before the output folder is touched."""
+    from .backend import get_backend
+    from .config import apply_overrides, load_config
+    from .render import backend_for, check_outputs
+    from .scene.names import config_scene  # --scene dragon: the cached (or fetched) GLB
+
+    cfg = load_config(args.config or DEFAULT_CONFIG)
+    sets = list(args.set or [])
+    if args.scene is not None:  # "" too: resolve_scene names --scene for it
+        sets.append(f"scene={args.scene}")
+    if args.size:
+        sets.append(f"size={args.size[0]}x{args.size[1]}")
+    cfg = apply_overrides(cfg, sets)
+    cfg = config_scene(cfg, fetch=args.fetch, flag=args.scene is not None)
+    check_outputs(cfg)
+    backend = args.backend or backend_for(cfg)
+    get_backend(backend)  # an unknown name: one line naming the installed ones
+    if backend != "vk" and (args.validate or args.no_alias):
+        raise GraphError("--validate and --no-alias need --backend vk", file=cfg.source)
+    if backend != "vk" and (args.poison or args.order_seed is not None):
+        raise GraphError("--order-seed and --poison need --backend vk", file=cfg.source)
+    return cfg, backend
+
+
+def _check_run_targets(folder: typing.Any, cfg: typing.Any) -> None:
+    # every path the run may write, inside --out and a regular file (or nothing) there
+    for name in cfg.outputs:
+        folder.target(f"{name}.png")
+        folder.target(f"{name}.exr")
+    folder.target("timings.json")
+    frames = folder.out / FRAMES
+    if frames.exists() and not frames.is_dir():
+        raise RfwError("exists and is not a folder: --save-every writes its images there",
+                       file=str(frames), element="--out")
+
+
+def _superseded(out: Path, outputs: typing.Any, written: list[Path]) -> list[Path]:
+    # earlier results this run replaces without rewriting them: the EXR of an output this
+    # run writes as PNG only, earlier frame images, an earlier version's failure mark
+    from .camera_path import old_frames
+    from .fileio import FAILED_MARK
+
+    keep = set(written)
+    old = [out / f"{n}.exr" for n in outputs] + old_frames(out) + [out / FAILED_MARK]
+    return [p for p in old if p not in keep]
+
+
+def _remove_if_empty(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        if folder.is_dir() and not folder.is_symlink() and not any(folder.iterdir()):
+            folder.rmdir()
 
 
 def _frame_images(args: argparse.Namespace, cfg: typing.Any, out: Path) -> typing.Any:
@@ -230,6 +258,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     sets = list(args.set or [])
     if args.size:
         sets.append(f"size={args.size[0]}x{args.size[1]}")
+    if args.screenshot:  # before a window opens
+        check_target(args.screenshot, element="--screenshot")
     view(Path(args.config or DEFAULT_CONFIG), sets,
          scene=args.scene, fetch=args.fetch, frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
@@ -451,15 +481,22 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from .signals import installed
+
     argv = list(sys.argv[1:] if argv is None else argv)
+    with installed():  # SIGINT/SIGTERM: cleanup as for an error, then one line, 130/143
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
+    from .signals import Interrupted
+
     try:
-        args = parser().parse_args(argv)
-    except SystemExit as e:
-        if e.code and argv[:1] == ["run"]:  # a run that failed on its command line
-            _mark_failed_run(argv)
-        raise
-    try:
+        args = parser().parse_args(argv)  # a refused command line touches no output folder
         return args.func(args)
+    except Interrupted as e:
+        print(e.line(), file=sys.stderr)
+        return e.exit_code
     except RfwError as e:  # every error a user can cause (vkext's included) is one
         return _fail(str(e))
     except BrokenPipeError:
@@ -469,20 +506,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as e:
         where = f"{e.filename}: " if e.filename else ""
         return _fail(f"{where}{e.strerror or e}")
-
-
-def _mark_failed_run(argv: list[str]) -> None:
-    from .render import mark_failed
-
-    out = "out"
-    for i, arg in enumerate(argv):  # the last --out wins, as in argparse
-        if arg == "--out" and i + 1 < len(argv):
-            out = argv[i + 1]
-        elif arg.startswith("--out="):
-            out = arg[len("--out="):]
-    if out:
-        with contextlib.suppress(RfwError, OSError):  # the argparse error is the one to report
-            mark_failed(Path(out), "the command line was refused")
 
 
 def _fail(line: str) -> int:

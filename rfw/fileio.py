@@ -3,16 +3,46 @@
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
 
 
+def check_target(path: str | Path, *, element: str | None = None) -> Path:
+    """Refuse an output path that exists and is no regular file (a device, FIFO, socket or
+    folder): writing there would replace it, or block, or write into a device. A symlink
+    counts as what it points to. Returns ``path``."""
+    from .errors import RfwError
+
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return path
+    except OSError as e:
+        raise RfwError(e.strerror or str(e), file=str(path), element=element) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise RfwError(f"exists and is {_kind(st.st_mode)}, not a regular file: refused as "
+                       "an output", file=str(path), element=element)
+    return path
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "a special file"
+
+
 def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
     """Write ``path`` through ``write(file)`` into a temporary file beside it, then rename:
     readers and failures never see half a file. The file gets the permissions ``open()``
-    would give it (mkstemp's are 0600); an OSError names ``path``, not the temporary file."""
+    would give it (mkstemp's are 0600); an OSError names ``path``, not the temporary file.
+    A ``path`` that exists and is no regular file is refused (:func:`check_target`)."""
     def named(tmp: str) -> None:
         with open(tmp, "wb") as f:
             write(f)
@@ -23,7 +53,7 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
 def atomic_file(path: str | Path, write: Callable[[str], object]) -> None:
     """:func:`atomic_write` for a writer that takes a file name (``write(tmp_name)``), as
     OpenEXR's does."""
-    path = Path(path)
+    path = check_target(path)  # a device or FIFO there is refused, never replaced
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")

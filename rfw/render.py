@@ -10,8 +10,8 @@ from .backend import Devices, get_backend
 from .camera_path import path_for, run_path
 from .config import MAX_FRAMES, Config, build, pass_class, resolve_auto
 from .errors import RfwError, check_number
-from .fileio import FAILED_MARK, atomic_write, inside, write_run
 from .fileio import to_png_array as to_png_array  # moved to fileio; imported from here
+from .fileio import write_run
 from .frame import (
     Frame,
     Result,
@@ -154,38 +154,6 @@ def backend_for(cfg: Config) -> str:
     to (in the config or by its class), else wgpu (pinned passes then mix in)."""
     pins = {e.backend or pass_class(cfg, e).backend for e in cfg.passes if e.enabled}
     return pins.pop() if len(pins) == 1 and None not in pins else "wgpu"
-
-
-def output_paths(out_dir: Path, names: Any) -> list[Path]:
-    """Where a run writes: ``<output>.png`` per name, then ``timings.json``, each refused
-    unless it lands inside ``out_dir`` (symlinks resolved)."""
-    return [inside(out_dir, f"{name}.png") for name in names] + [
-        inside(out_dir, "timings.json")]
-
-
-def clear_outputs(out_dir: Path, names: Any) -> None:
-    """Remove what a previous run left at this run's paths: a run that fails then leaves no
-    image or timings that could pass for its own."""
-    exrs = [inside(out_dir, f"{name}.exr") for name in names]
-    for path in output_paths(out_dir, names) + exrs:
-        if path.is_file() or path.is_symlink():
-            path.unlink()
-
-
-def mark_failed(out_dir: Path, reason: str = "") -> None:
-    """After a failed run into ``out_dir``: remove ``timings.json`` (it marks a complete run)
-    and, if anything else is left, say in ``RUN-FAILED.txt`` that it is from an earlier run.
-    A folder that does not exist is not created."""
-    if not out_dir.is_dir():
-        return
-    (out_dir / "timings.json").unlink(missing_ok=True)  # a link goes, not what it points at
-    mark = inside(out_dir, FAILED_MARK)
-    if any(p.name != FAILED_MARK for p in out_dir.iterdir()):
-        text = ("the last 'rfw run' into this folder failed: the other files here are from "
-                f"an earlier run\n{reason}\n")
-        atomic_write(mark, lambda f: f.write(text.encode("utf-8", "replace")))
-    else:
-        mark.unlink(missing_ok=True)
 
 
 def write_outputs(result: Result, out_dir: Path, plan_formats: dict[str, str], *,

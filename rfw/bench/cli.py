@@ -70,7 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", help="output folder (default out/bench); compare: where "
                    "compare.md and compare.html go (default: print only)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--threshold", type=float, default=0.05,
+    p.add_argument("--threshold", type=threshold, default=0.05,
                    help="compare: relative change that counts (default 0.05)")
     p.add_argument("--fail-on-regression", action="store_true",
                    help="compare: exit 1 when a regression is flagged")
@@ -78,6 +78,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-mismatch", action="store_true",
                    help="compare: compare runs whose size, frames, warm-up, scene or settings "
                         "differ (the report says what differs at its top)")
+
+
+def threshold(text: str) -> float:
+    """An argparse type: ``--threshold``, a finite relative change at least 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
+    if not 0.0 <= value < float("inf"):  # nan fails both comparisons
+        raise argparse.ArgumentTypeError(f"must be a finite number at least 0 (0.05: 5%), "
+                                         f"not {text}")
+    return value
 
 
 def ray_address(text: str) -> str:
@@ -107,9 +119,9 @@ def run(args: argparse.Namespace) -> int:
         from .compare import compare
 
         if len(rest) != 2:
-            raise GraphError("usage: rfw bench compare OLD NEW (folders or results.jsonl)")
-        threshold = check_number(args.threshold, "--threshold", lo=0.0)
-        return compare(Path(rest[0]), Path(rest[1]), threshold=threshold,
+            raise GraphError("usage: rfw bench compare OLD NEW (folders or results.jsonl)",
+                             element="bench compare")
+        return compare(Path(rest[0]), Path(rest[1]), threshold=args.threshold,
                        fail_on_regression=args.fail_on_regression, show_all=args.all,
                        out=_out_dir(args.out) if args.out else None,
                        allow_mismatch=args.allow_mismatch, diff_scale=args.diff_scale)
@@ -117,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         from .report import main_report
 
         if len(rest) != 1:
-            raise GraphError("usage: rfw bench report DIR")
+            raise GraphError("usage: rfw bench report DIR", element="bench report")
         try:
             return main_report(rest[0], reference=args.reference, diff_scale=args.diff_scale)
         except ValueError as e:
@@ -153,8 +165,61 @@ def run(args: argparse.Namespace) -> int:
         from .ray_executor import ray_runs
 
         executor = partial(ray_runs, address=args.ray_address)
-    results = run_plan(plan, out, progress=not args.no_progress, executor=executor)
-    return _finish(out, results, args.reference, args.diff_scale)
+    from ..outdir import OutputFolder
+
+    # the runs and the report are staged: the folder's earlier bench is replaced only by a
+    # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
+    with OutputFolder(out) as folder:
+        try:
+            results = run_plan(plan, folder.staging, progress=not args.no_progress,
+                               executor=executor)
+            code, written = _finish(folder.staging, results, args.reference, args.diff_scale)
+        except BaseException as e:
+            _keep_partial(folder, len(plan.schedule()), e)
+            raise
+        folder.commit(last=[REPORT_MD, REPORT_HTML])
+    print("wrote " + ", ".join(str(out / p.relative_to(folder.staging)) for p in written))
+    return code
+
+
+REPORT_MD, REPORT_HTML = "report.md", "report.html"  # written last: they mark a whole bench
+PARTIAL_NOTE = "PARTIAL.txt"
+
+
+def _keep_partial(folder, total: int, error: BaseException) -> None:
+    """Move what an unfinished bench ran to ``OUT/partial-<time>/`` with ``PARTIAL.txt``
+    saying how far it got (``rfw bench report`` reads it); the folder's earlier results stay
+    as they were. An :class:`rfw.signals.Interrupted` gets a note saying so."""
+    import contextlib
+    import os
+
+    from ..outdir import partial_name, signals_held
+    from ..signals import Interrupted
+
+    results = folder.staging / "results.jsonl"
+    try:
+        done = sum(1 for line in results.read_bytes().splitlines() if line.strip())
+    except OSError:
+        done = 0
+    if done == 0:  # nothing worth keeping: the staging folder goes
+        if isinstance(error, Interrupted):
+            error.note = f"after 0 of {total} runs; earlier results untouched"
+        return
+    why = "interrupted" if isinstance(error, Interrupted) else \
+        f"stopped by {type(error).__name__}: {error}"
+    with signals_held(), contextlib.suppress(OSError):
+        # an unfinished report would pass for a whole one: only the runs are kept
+        for name in (REPORT_MD, REPORT_HTML, "results.csv"):
+            (folder.staging / name).unlink(missing_ok=True)
+        (folder.staging / PARTIAL_NOTE).write_text(
+            f"rfw bench {why} after {done} of {total} runs: these are its results so far "
+            f"('rfw bench report' on this folder reports them); the results beside this "
+            "folder are the previous complete bench's\n", encoding="utf-8")
+        target = partial_name(folder.out)
+        os.replace(folder.staging, target)
+        if isinstance(error, Interrupted):
+            error.note = (f"after {done} of {total} runs (kept in {target}; earlier results "
+                          "untouched)")
 
 
 def _out_dir(text: str) -> Path:
@@ -194,30 +259,32 @@ def _check_reference(reference: str | None, labels: list[str]) -> None:
     if reference is None or reference in labels:
         return
     if reference.isdigit():
-        check_number(int(reference), "--reference", kind=int, lo=0, hi=len(labels) - 1)
+        check_number(int(reference), "--reference", kind=int, lo=0, hi=len(labels) - 1,
+                     element="--reference")
         return
-    raise RfwError(f"--reference '{reference}': no such variant ({', '.join(labels)})",
-                   suggest=(reference, labels))
+    raise RfwError(f"no such variant: '{reference}' ({', '.join(labels)})",
+                   element="--reference", suggest=(reference, labels))
 
 
-def _finish(out: Path, results: Path, reference: str | None, diff_scale: str = "own") -> int:
-    """Write the report of the runs that worked; list the failed runs, one line each."""
+def _finish(out: Path, results: Path, reference: str | None,
+            diff_scale: str = "own") -> tuple[int, list[Path]]:
+    """Write the report of the runs that worked; list the failed runs, one line each.
+    Returns the exit code and the files to name."""
     from .report import write_report
     from .runner import load_results
 
     records = load_results(results)
     failed = [r for r in records if r.get("error")]
     md, page = write_report(out, reference=reference, diff_scale=diff_scale)
-    print(f"wrote {results}, {md}, {page}")
     if not failed:
-        return 0
+        return 0, [results, md, page]
     all_failed = len(failed) == len(records)
     print(f"rfw bench: {'all ' if all_failed else ''}{len(failed)} of {len(records)} runs "
           "failed:", file=sys.stderr)
     for r in failed:
         why = " ".join(str(r["error"]).split())
         print(f"  {r.get('variant')} #{int(r.get('repeat', 0)) + 1}: {why}", file=sys.stderr)
-    return 1
+    return 1, [results, md, page]
 
 
 def _peers(text: str) -> list[str]:
@@ -231,5 +298,6 @@ def _peers(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
     for n in names:
         if n not in PEER_NAMES:
-            raise GraphError(f"--peers: unknown peer '{n}'" + did_you_mean(n, PEER_NAMES))
+            raise GraphError(f"unknown peer '{n}'" + did_you_mean(n, PEER_NAMES),
+                             element="--peers")
     return names

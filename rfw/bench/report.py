@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import check_identifier
-from ..fileio import inside
+from ..fileio import atomic_write, inside
 from .images import compare, diff_legend, load_png, psnr, save_png, scale_text, scaled_diff
 from .path_chart import path_charts
 from .runner import load_results
@@ -232,8 +232,9 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     _failures(doc, variants)
     _method(doc, records, _report_devices(pooled))
     md, page = out_dir / "report.md", out_dir / "report.html"
-    md.write_text(doc.markdown(), encoding="utf-8")
-    page.write_text(doc.html("rfw benchmark", out_dir), encoding="utf-8")
+    # whole or not at all: 'rfw bench report' rewrites them in place
+    atomic_write(md, lambda f: f.write(doc.markdown().encode("utf-8")))
+    atomic_write(page, lambda f: f.write(doc.html("rfw benchmark", out_dir).encode("utf-8")))
     write_csv(out_dir / "results.csv", [*rfw, *peers])
     return md, page
 

@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
 MAX_FRAMES = 100_000  # per run: more is a typo, not a benchmark
 MAX_REPEAT = 1_000
+MAX_TIMEOUT = 1e6  # seconds per run: 11 days
 PEERS_RUN = ROOT / "benchmarks" / "peers" / "run.py"
 
 
@@ -88,10 +89,10 @@ def resolve_config(name: str) -> Path:
     if not p.suffix and candidate.is_file():
         return candidate
     if p.exists():
-        raise GraphError("not a config file", file=name)
+        raise GraphError("not a config file", file=name, element="config")
     known = sorted(c.stem for c in CONFIGS.glob("*.toml"))
     raise GraphError(f"config not found (neither a file nor configs/{p.stem}.toml)",
-                   file=name, suggest=(p.stem, known))
+                     file=name, element="config", suggest=(p.stem, known))
 
 
 def resolve_scene(scene: str | None, *, fetch: bool = False) -> str | None:
@@ -131,7 +132,7 @@ def _parse_vary(items: list[str]) -> list[tuple[str, list[str]]]:
         key, eq, values = item.partition("=")
         options = [v.strip() for v in values.split(",") if v.strip()]
         if not eq or not key.strip() or not options:
-            raise GraphError(f"--vary '{item}': expected KEY=V1,V2,...")
+            raise GraphError(f"expected KEY=V1,V2,..., not '{item}'", element="--vary")
         axes.append((key.strip(), options))
     return axes
 
@@ -169,15 +170,18 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     A ``--vary`` axis applies to the configs that know its key (``ao=on,off`` to configs with
     an ``ao`` variant); an axis no config knows is an error."""
     if not configs:
-        raise GraphError("rfw bench: name at least one config")
-    frames = check_number(frames, "--frames", kind=int, lo=1, hi=MAX_FRAMES)
-    warmup = check_number(warmup, "--warmup", kind=int, lo=0, hi=MAX_FRAMES)
-    repeat = check_number(repeat, "--repeat", kind=int, lo=1, hi=MAX_REPEAT)
-    timeout = check_number(timeout, "--timeout", kind=float, lo=1e-3)
+        raise GraphError("name at least one config", element="rfw bench")
+    frames = check_number(frames, "--frames", kind=int, lo=1, hi=MAX_FRAMES, element="--frames")
+    warmup = check_number(warmup, "--warmup", kind=int, lo=0, hi=MAX_FRAMES, element="--warmup")
+    repeat = check_number(repeat, "--repeat", kind=int, lo=1, hi=MAX_REPEAT, element="--repeat")
+    # a timeout past MAX_TIMEOUT overflows the wait of subprocess.run
+    timeout = check_number(timeout, "--timeout", kind=float, lo=1e-3, hi=MAX_TIMEOUT,
+                           element="--timeout")
     from ..frame import frames_in_flight
     frames_in_flight()  # a bad RFW_FRAMES_IN_FLIGHT: refused once here, not by every run
     if peer_frames is not None:
-        peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES)
+        peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES,
+                                   element="--peer-frames")
     scenes = list(dict.fromkeys(resolve_scene(s, fetch=fetch) for s in scenes)) \
         if scenes else [None]
     backends = backends or ["wgpu"]
@@ -188,7 +192,7 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     for c in configs:
         name, at, backend = c.rpartition("@") if "@" in c else (c, "", "")
         if at and backend not in ("wgpu", "vk"):
-            raise GraphError(f"'{c}': expected CONFIG@wgpu or CONFIG@vk")
+            raise GraphError(f"expected CONFIG@wgpu or CONFIG@vk, not '{c}'", element="config")
         mine = on.setdefault(resolve_config(name), [])
         mine.extend(b for b in ([backend] if at else backends) if b not in mine)
     paths = list(on)
@@ -201,7 +205,7 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
         if not used[key]:
             # fail the way --set would, naming the first config's file
             _check(paths[0], [*sets, f"{key}={opts[0]}"])
-            raise GraphError(f"--vary {key}: no config knows '{key}'")
+            raise GraphError(f"no config knows '{key}'", element=f"--vary {key}")
         skipped = [p.stem for p in paths if p not in used[key]]
         if skipped:
             notes.append(f"--vary {key} applies to {', '.join(p.stem for p in used[key])} "
@@ -225,7 +229,8 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
                         scene=scenes[0]))
     ids = [j.id for j in jobs]
     if len(set(ids)) != len(ids):
-        raise GraphError("rfw bench: two jobs of the matrix are the same (repeated config?)")
+        raise GraphError("two jobs of the matrix are the same (repeated config?)",
+                         element="rfw bench")
     return Plan(jobs, size, frames, warmup, repeat, order, seed, timeout,  # type: ignore[arg-type]
                 notes, peer_frames)
 
@@ -429,7 +434,7 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
                        dynamic_ncols=True)
         except ImportError:
             bar = None
-    with results.open("w", encoding="utf-8") as f:
+    with open(results, "wb") as f:
         for seq, run_dir, record in runs:
             r, pos, job = schedule[seq]
             if bar is not None:
@@ -450,8 +455,7 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
                 "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
             if job.kind == "peer":
                 record["peer"] = job.peer
-            f.write(json.dumps(record) + "\n")
-            f.flush()
+            _write_line(f, json.dumps(record) + "\n")
             if bar is not None:
                 bar.update(1)
             elif progress:
@@ -462,25 +466,26 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
     return results
 
 
+def _write_line(f: Any, line: str) -> None:
+    # a record is one write of its whole line, past Python's buffer: a reader (or an
+    # interrupted bench) never sees half of it
+    data = memoryview(line.encode("utf-8"))
+    f.flush()
+    while data:
+        data = data[os.write(f.fileno(), data):]
+
+
 def load_results(path: Path) -> list[dict[str, Any]]:
-    """The records of a ``results.jsonl`` (or of the one in a folder)."""
+    """The records of a ``results.jsonl`` (or of the one in a folder), each checked by
+    :func:`rfw.bench.records.read_results`: a line cut short, not JSON, or holding a time
+    that is not a finite number of ms fails naming the file, the line and the field."""
+    from .records import read_results
+
     path = Path(path)
     if path.is_dir():
         path = path / "results.jsonl"
     if not path.exists():
         raise GraphError("no results.jsonl here (run rfw bench first)", file=str(path))
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise GraphError(f"not UTF-8 (byte {e.start})", file=str(path)) from None
-    records = []
-    for n, line in enumerate(text.splitlines(), 1):
-        if line.strip():
-            try:
-                record = json.loads(line)
-            except json.JSONDecodeError as e:
-                raise GraphError(f"line {n}: not JSON ({e.msg})", file=str(path)) from None
-            if not isinstance(record, dict) or not isinstance(record.get("variant"), str):
-                raise GraphError(f"line {n}: not a run record (no 'variant')", file=str(path))
-            records.append(record)
-    return records
+    if not path.is_file():  # a FIFO would block the read, a device never end
+        raise RfwError("not a regular file", file=str(path))
+    return read_results(path)

@@ -3,10 +3,9 @@
 Each bad input must give exit code 2 and exactly one non-empty stderr line, starting
 ``rfw: error:`` and naming the file and the element (pass, slot, key, line); no traceback;
 nothing written outside ``--out`` (the whole scratch folder is compared before and after,
-the caches, ~/.config and the NVIDIA driver's ~/.nv aside); and no stale outputs: ``--out`` is seeded with an old
-``tonemap.ldr.png`` and ``timings.json``, and after the failed run ``timings.json`` is gone
-and the old image is gone or marked (a file named ``*stale*``, ``*failed*`` or
-``*incomplete*`` beside it).
+the caches, ~/.config and the NVIDIA driver's ~/.nv aside); and the earlier results kept
+(issue 21): ``--out`` is seeded with an old ``tonemap.ldr.png`` and ``timings.json``, and
+after the failed run ``--out`` holds exactly those files, byte for byte, and nothing else.
 Inputs valid by design (mirrored and zero-scale nodes, damaged caches) must render, exit 0.
 
 The cases live in tests/cli/corpus_cases.py. (The glTF mutation property test of item 9 is
@@ -35,7 +34,6 @@ from .corpus_cases import ACCEPTED, Accepted, Case, all_cases
 CASES = all_cases()
 OLD_PNG = b"\x89PNG\r\n\x1a\n an image from an earlier run"
 OLD_TIMINGS = b'{"from": "an earlier run"}\n'
-MARKS = ("stale", "failed", "incomplete")
 TIMEOUT = 120
 
 
@@ -110,15 +108,10 @@ def error_problems(case: Case, done: subprocess.CompletedProcess) -> list[str]:
     return problems
 
 
-def stale_problems(out: Path) -> list[str]:
-    problems = []
-    if (out / "timings.json").exists():
-        problems.append("a timings.json is left in --out")
-    png = out / "tonemap.ldr.png"
-    marked = out.is_dir() and any(m in p.name.lower() for p in out.iterdir() for m in MARKS)
-    if png.exists() and png.read_bytes() == OLD_PNG and not marked:
-        problems.append("the old tonemap.ldr.png is left unmarked in --out")
-    return problems
+def kept_problems(before: dict[str, str], after: dict[str, str]) -> list[str]:
+    """What a failed run changed in ``--out`` (snapshots of it before and after)."""
+    changed = _changes(before, after)
+    return [f"--out changed: {changed[:5]}"] if changed else []
 
 
 def _report(case_id: str, area: str, rc: int, problems: list[str], stderr: str) -> None:
@@ -147,6 +140,7 @@ def check_case(case: Case, root: Path) -> list[str]:
     if out:  # an empty --out is the working folder itself: nothing is skipped then
         skip.append(cwd / out)
     before = snapshot(root, skip)
+    kept = snapshot(cwd / out, []) if seeded else {}
     try:
         done = _run(case.command(), cwd, _env(root, cwd, case.env))
     except subprocess.TimeoutExpired:
@@ -157,7 +151,7 @@ def check_case(case: Case, root: Path) -> list[str]:
     if outside:
         problems.append(f"wrote outside --out: {outside[:5]}")
     if seeded:
-        problems += stale_problems(cwd / out)
+        problems += kept_problems(kept, snapshot(cwd / out, []))
     _report(case.id, case.area, done.returncode, problems, done.stderr)
     if problems:
         problems.append(f"stderr: {done.stderr.strip()[-1500:]!r}")
@@ -236,13 +230,19 @@ def test_the_snapshot_sees_a_write_outside(tmp_path: Path) -> None:
     assert _changes(before, snapshot(tmp_path, [tmp_path / "out"])) == ["link", "x.png"]
 
 
-def test_the_stale_check_sees_old_outputs(tmp_path: Path) -> None:
+def test_the_kept_check_sees_any_change_in_out(tmp_path: Path) -> None:
     (tmp_path / "tonemap.ldr.png").write_bytes(OLD_PNG)
     (tmp_path / "timings.json").write_bytes(OLD_TIMINGS)
-    assert len(stale_problems(tmp_path)) == 2
+    before = snapshot(tmp_path, [])
+    assert kept_problems(before, snapshot(tmp_path, [])) == []
     (tmp_path / "timings.json").unlink()
-    (tmp_path / "FAILED-stale-outputs.txt").write_bytes(b"")
-    assert stale_problems(tmp_path) == []
+    assert kept_problems(before, snapshot(tmp_path, []))
+    (tmp_path / "timings.json").write_bytes(OLD_TIMINGS)
+    (tmp_path / "RUN-FAILED.txt").write_bytes(b"")  # an added mark is a change too
+    assert kept_problems(before, snapshot(tmp_path, []))
+    (tmp_path / "RUN-FAILED.txt").unlink()
+    (tmp_path / "tonemap.ldr.png").write_bytes(OLD_PNG + b"x")
+    assert kept_problems(before, snapshot(tmp_path, []))
 
 
 def test_the_corpus_is_large_and_ids_are_unique() -> None:

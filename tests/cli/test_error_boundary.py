@@ -70,10 +70,11 @@ def seed_out(out: Path) -> None:
     (out / "timings.json").write_text('{"old": true}\n')
 
 
-def assert_no_stale_outputs(out: Path) -> None:
-    assert not (out / "timings.json").exists()
-    old = out / "tonemap.ldr.png"
-    assert not old.exists() or (out / "RUN-FAILED.txt").is_file(), sorted(out.iterdir())
+def assert_earlier_results_kept(out: Path) -> None:
+    # issue 21: a failed run leaves --out as it was, byte for byte, with nothing added
+    assert sorted(p.name for p in out.iterdir()) == ["timings.json", "tonemap.ldr.png"]
+    assert (out / "tonemap.ldr.png").read_bytes() == b"an old image"
+    assert (out / "timings.json").read_text() == '{"old": true}\n'
 
 
 def config(text: str = BASE, **replace: str) -> str:
@@ -132,7 +133,7 @@ BAD_RUNS = [
 
 @pytest.mark.parametrize("text,extra,needles", [c[1:] for c in BAD_RUNS],
                          ids=[c[0] for c in BAD_RUNS])
-def test_bad_run_input_is_one_line_and_leaves_no_stale_outputs(tmp_path, text, extra,
+def test_bad_run_input_is_one_line_and_keeps_earlier_results(tmp_path, text, extra,
                                                                 needles):
     if text is not None:
         (tmp_path / "c.toml").write_bytes(text if isinstance(text, bytes) else text.encode())
@@ -143,16 +144,18 @@ def test_bad_run_input_is_one_line_and_leaves_no_stale_outputs(tmp_path, text, e
             *extra, "--out", "out"]
     error_line(rfw("run", *args, cwd=tmp_path), *needles)
     assert files_under(tmp_path) == before  # nothing written outside --out
-    assert_no_stale_outputs(tmp_path / "out")
+    assert_earlier_results_kept(tmp_path / "out")
 
 
-def test_a_good_run_replaces_the_failure_mark(tmp_path):
-    # control: the same folder, the same checks, a valid run: outputs and no mark
+def test_a_good_run_replaces_the_earlier_results(tmp_path):
+    # control: the same folder, the same checks, a valid run: its outputs replace the old
+    # ones, and an older version's failure mark goes
     (tmp_path / "c.toml").write_text(config(**{'name = "tonemap"': 'name = "tonemap"\n'
                                                                    'settings = { curve = 0 }'}))
     seed_out(tmp_path / "out")
     error_line(rfw("run", "c.toml", "--frames", "0", "--out", "out", cwd=tmp_path))
-    assert (tmp_path / "out" / "RUN-FAILED.txt").is_file()
+    assert_earlier_results_kept(tmp_path / "out")
+    (tmp_path / "out" / "RUN-FAILED.txt").write_text("from an older rfw")
     done = rfw("run", "c.toml", "--set", "tonemap.exposure=0.5", *SMALL, "--out", "out",
                cwd=tmp_path)
     assert done.returncode == 0, done.stderr

@@ -1,0 +1,62 @@
+"""SIGINT and SIGTERM end every command the same way: cleanup runs, one line, 128 + signal.
+
+:func:`installed` makes both signals raise :class:`Interrupted` in the main thread, so
+``finally`` blocks and context managers (output folders: :mod:`rfw.outdir`, devices,
+worker processes) clean up as they do for an error; ``rfw.cli.main`` then prints
+``rfw: interrupted`` and exits 130 (SIGINT) or 143 (SIGTERM). A second signal while that
+cleanup runs ends the process at once, with the same line and code.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+from collections.abc import Iterator
+from types import FrameType
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupted(BaseException):
+    """A signal asked the command to stop (a BaseException: ``except Exception`` in the
+    code it interrupts does not swallow it). ``note`` is added to the one line told."""
+
+    def __init__(self, signum: int, note: str = "") -> None:
+        super().__init__(signum, note)
+        self.signum = signum
+        self.note = note
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+    def line(self) -> str:
+        return "rfw: interrupted" + (f" {self.note}" if self.note else "")
+
+
+def _first(signum: int, frame: FrameType | None) -> None:
+    for s in SIGNALS:  # from now on a signal ends the process as soon as it comes
+        signal.signal(s, _again)
+    raise Interrupted(signum)
+
+
+def _again(signum: int, frame: FrameType | None) -> None:
+    os.write(2, b"rfw: interrupted\n")
+    os._exit(128 + signum)
+
+
+@contextlib.contextmanager
+def installed() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` within the block (in the main thread;
+    elsewhere nothing changes), the handlers before it are put back after it."""
+    try:
+        old = {s: signal.signal(s, _first) for s in SIGNALS}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
