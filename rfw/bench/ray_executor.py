@@ -15,6 +15,7 @@ running.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -109,6 +110,8 @@ def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,
 
 def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
           out_dir: Path) -> Iterator[tuple[int, Path, dict[str, Any]]]:
+    refs: list[Any] = []
+    finished = 0
     try:
         gpus = ray.cluster_resources().get("GPU", 0)
         # one GPU per task where there are GPUs; on a CPU-only cluster one CPU per task
@@ -136,5 +139,10 @@ def _runs(ray: Any, schedule: list[tuple[int, int, Job]], plan: Plan,
                 atomic_write(run_dir / "image.png", lambda f, data=data: f.write(data))
             done["record"]["ray_cluster"] = cluster
             yield seq, run_dir, done["record"]
+            finished = seq + 1
     finally:
+        # an interrupted bench: its tasks still queued or running on a cluster are ended too
+        for ref in refs[finished:]:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
         ray.shutdown()  # stops the instance rfw started; only disconnects from a cluster

@@ -7,6 +7,7 @@ job always runs first after a cold start.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -434,7 +435,7 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
                        dynamic_ncols=True)
         except ImportError:
             bar = None
-    with open(results, "wb") as f:
+    with open(results, "wb") as f, contextlib.closing(runs):  # an executor's finally runs
         for seq, run_dir, record in runs:
             r, pos, job = schedule[seq]
             if bar is not None:
