@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from rfw.errors import RfwError
+from rfw.errors import RfwError, RfwTypeError, RfwValueError, type_name
 from rfw.graph import Buffer as BufferSlot
 from rfw.graph import CompiledGraph, Graph, GraphBuilder
 from rfw.graph.sync import State
@@ -607,6 +607,14 @@ class Raycaster:
         submitting; ``wait_ms``: waiting for the GPU; ``readback_ms``: hits out of it). With
         timestamps also the GPU's parts: ``gpu_upload_ms`` and ``gpu_readback_ms`` (the
         copies), ``gpu_ms`` (the traces alone) and its ``mrays_per_s``."""
+        with device_lock(self.device):  # one cast at a time on the device's queue
+            return self._cast(accel, buffers, origins, directions, tmin, tmax, batch=batch,
+                              hits=hits, out=out)
+
+    def _cast(self, accel: SceneAccel, buffers: RayBuffers, origins: np.ndarray,
+              directions: np.ndarray, tmin: Any, tmax: Any, *, batch: int,
+              hits: tuple[str, ...], out: dict[str, np.ndarray] | None,
+              ) -> dict[str, np.ndarray]:
         if batch < 1:
             raise ValueError(f"batch must be positive, got {batch}")
         n = len(origins)
@@ -838,15 +846,34 @@ class Raycaster:
         self.device.unregister(self)
 
 
+def device_lock(device: VkDevice) -> threading.RLock:
+    """The lock of ray casting on ``device``: a cast records into the raycaster's command
+    buffers, reuses its fences and submits to the device's one queue, none of which may be
+    used by two threads at once (Vulkan's external synchronization). Casts from several
+    threads take turns; each gets the hits a cast alone would."""
+    return device.__dict__.setdefault("_rfw_raycast_lock", threading.RLock())
+
+
 def raycaster(device: VkDevice, method: str = "auto") -> Raycaster:
     """The device's :class:`Raycaster` for ``method``, created on first use and kept (its
     pipeline takes longest to make); the device destroys it with everything else."""
     method = pick_method(device, method)
-    cache = device.__dict__.setdefault("_rfw_raycasters", {})
-    rc = cache.get(method)
-    if rc is None or rc.pipeline is None:
-        rc = cache[method] = Raycaster(device, method)
-    return rc
+    with device_lock(device):  # two threads' first scenes make one raycaster
+        cache = device.__dict__.setdefault("_rfw_raycasters", {})
+        rc = cache.get(method)
+        if rc is None or rc.pipeline is None:
+            rc = cache[method] = Raycaster(device, method)
+        return rc
+
+
+def check_device(device: Any) -> VkDevice:
+    """``device`` if it is a live :class:`VkDevice`, else an RfwError naming it."""
+    if not isinstance(device, VkDevice):
+        raise RfwTypeError(f"'device' must be a vkext.VkDevice (or None: the default), not "
+                           f"{type_name(device)}")
+    if not device.alive:
+        raise RfwValueError("'device' was destroyed: make a new vkext.VkDevice")
+    return device
 
 
 class RayScene:
@@ -860,8 +887,10 @@ class RayScene:
                  batch: int = DEFAULT_BATCH, label: str = "raycast"):
         if batch < 1:
             raise ValueError(f"batch must be positive, got {batch}")
-        self.device, self.batch, self.label = device, int(batch), label
+        self.device, self.batch, self.label = check_device(device), int(batch), label
         self.caster = raycaster(device, method)  # a method the device lacks fails here
+        self.lock = device_lock(device)
+        self._last: dict[str, Any] = {}
         self.method = self.caster.method
         self.accel: SceneAccel | None = None
         self.buffers: RayBuffers | None = None
@@ -892,21 +921,28 @@ class RayScene:
                                 ("barycentrics", 0.0)):
                 if name in arrays:
                     arrays[name][...] = value
+            self._last = {"method": self.method, "rays": len(origins), "batches": 0}
             return {k: arrays[k] for k in hits}
-        return self.caster.cast(self.accel, self.buffers, origins, directions, tmin, tmax,
-                                batch=self.batch, hits=hits, out=out)
+        with self.lock:  # the caster is the device's: its last is this cast's only here
+            if self.closed:  # closed by another thread while this one waited
+                raise RfwError("the ray scene is closed: make a new rfw.RayScene")
+            got = self.caster.cast(self.accel, self.buffers, origins, directions, tmin,
+                                   tmax, batch=self.batch, hits=hits, out=out)
+            self._last = dict(self.caster.last)
+            return got
 
     @property
     def last(self) -> dict[str, Any]:
-        """The last cast's counts and times (:attr:`Raycaster.last`)."""
-        return self.caster.last
+        """This scene's last cast's counts and times (see :attr:`Raycaster.last`)."""
+        return dict(self._last)
 
     def destroy(self) -> None:
-        self.closed = True
-        if self.buffers is not None:
-            self.buffers.destroy()
-            self.buffers = None
-        if self.accel is not None:
-            self.accel.destroy()
-            self.accel = None
-        self.device.unregister(self)
+        with self.lock:  # never while another thread's cast uses the buffers
+            self.closed = True
+            if self.buffers is not None:
+                self.buffers.destroy()
+                self.buffers = None
+            if self.accel is not None:
+                self.accel.destroy()
+                self.accel = None
+            self.device.unregister(self)
