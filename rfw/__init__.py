@@ -3,9 +3,11 @@
 The Python API (:mod:`rfw.api`, docs/python-api.md): ``rfw.load``/``rfw.make_config`` make a
 config, ``rfw.override`` applies ``--set`` strings, ``rfw.run`` renders once and
 ``rfw.Session`` keeps devices and scenes across renders; results are ``rfw.Result``.
+Every public function and class checks its arguments: a bad one is an ``rfw.RfwError``
+naming it (``rfw.RfwTypeError``, also a TypeError, for a wrong type).
 """
 
-from .errors import RfwError
+from .errors import RfwError, RfwTypeError, RfwValueError
 from .passes import ComputePass, Pass, RenderPass, Settings, SettingsError, Tex2D
 from .registry import available, get_pass, register_pass
 
@@ -15,8 +17,9 @@ __version__ = "0.1.0"
 _API = ("Config", "PassEntry", "Result", "Session", "load", "make_config", "override", "run")
 
 __all__ = ["ComputePass", "Config", "Pass", "PassEntry", "RayScene", "RenderPass", "Result",
-           "RfwError", "Session", "Settings", "SettingsError", "Tex2D", "available",
-           "get_pass", "load", "make_config", "override", "raycast", "register_pass", "run"]
+           "RfwError", "RfwTypeError", "RfwValueError", "Session", "Settings", "SettingsError",
+           "Tex2D", "available", "get_pass", "load", "make_config", "override", "raycast",
+           "register_pass", "run"]
 
 
 def __getattr__(name: str):

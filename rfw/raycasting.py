@@ -19,15 +19,17 @@ argument and the first bad row, as it does for shapes and dtypes before any GPU 
 from __future__ import annotations
 
 import atexit
+import threading
 from typing import Any
 
 import numpy as np
 
 from .backend import Backend, get_backend, installed
-from .errors import RfwError
+from .errors import RfwError, RfwTypeError, RfwValueError, check_type, type_name
 from .scene.model import Instance, Mesh, Scene
 
 _default_device: Any = None
+_default_lock = threading.Lock()  # two threads' first scenes make one default device
 METHODS = ("auto", "ray_query", "ray_pipeline")
 
 
@@ -35,11 +37,12 @@ def _floats(name: str, a: Any, width: int, *, finite: bool = False,
             convert: bool = True) -> np.ndarray:
     """``a`` checked as a real (N, width) array; float32 C-contiguous with ``convert``, else
     as it is (rays are converted as they are copied to the GPU: one pass, not two)."""
-    arr = np.asarray(a)
+    arr = _array(name, a)
     if arr.dtype.kind not in "fiu":  # floats, or integers that convert exactly enough
-        raise RfwError(f"{name} must be a real-valued (float) array, got dtype {arr.dtype}")
+        raise RfwTypeError(f"{name} must be a real-valued (float) array, got dtype "
+                           f"{arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] != width:
-        raise RfwError(f"{name} must have shape (N, {width}), got {arr.shape}")
+        raise RfwValueError(f"{name} must have shape (N, {width}), got {arr.shape}")
     if not convert:
         return arr
     out = np.ascontiguousarray(arr, np.float32)
@@ -50,16 +53,27 @@ def _floats(name: str, a: Any, width: int, *, finite: bool = False,
     return out
 
 
+def _array(name: str, a: Any) -> np.ndarray:
+    # numpy's own errors (ragged lists, objects) become one line naming the argument
+    if isinstance(a, str | bytes) or a is None:
+        raise RfwTypeError(f"{name} must be an array, not {type_name(a)}")
+    try:
+        return np.asarray(a)
+    except (TypeError, ValueError) as e:
+        raise RfwTypeError(f"{name} must be an array ({e})") from None
+
+
 def _interval(name: str, value: Any, n: int) -> np.ndarray | float:
     """A number stays a number (the GPU gets it once); anything else is (n,) float32."""
-    arr = np.asarray(value)
-    if arr.dtype.kind not in "fiu":
-        raise RfwError(f"{name} must be a number or a float array, got dtype {arr.dtype}")
+    arr = _array(name, value)
+    if arr.dtype.kind not in "fiu" or arr.dtype == bool:
+        raise RfwTypeError(f"{name} must be a number or a float array, got dtype "
+                           f"{arr.dtype}")
     arr = arr.astype(np.float64)
     if arr.ndim > 1 or (arr.ndim == 1 and arr.shape != (n,)):
-        raise RfwError(f"{name} must be a number or have shape ({n},), got {arr.shape}")
+        raise RfwValueError(f"{name} must be a number or have shape ({n},), got {arr.shape}")
     if np.isnan(arr).any() or (arr < 0).any():
-        raise RfwError(f"{name} must be non-negative and not NaN")
+        raise RfwValueError(f"{name} must be non-negative and not NaN")
     if arr.ndim == 0:
         return float(np.float32(arr))
     return arr.astype(np.float32)
@@ -88,11 +102,11 @@ def _mesh_scene(vertices: Any, indices: Any) -> Scene:
     v = _floats("vertices", vertices, 3, finite=True)
     if len(v) == 0:
         raise RfwError("vertices is empty")
-    idx = np.asarray(indices)
+    idx = _array("indices", indices)
     if idx.dtype.kind not in "iu":
-        raise RfwError(f"indices must be an integer array, got dtype {idx.dtype}")
+        raise RfwTypeError(f"indices must be an integer array, got dtype {idx.dtype}")
     if idx.ndim != 2 or idx.shape[1] != 3:
-        raise RfwError(f"indices must have shape (T, 3), got {idx.shape}")
+        raise RfwValueError(f"indices must have shape (T, 3), got {idx.shape}")
     if idx.size and (int(idx.min()) < 0 or int(idx.max()) >= len(v)):
         raise RfwError(f"indices must lie in [0, {len(v)}) (the vertex count), found "
                        f"{int(idx.min())}..{int(idx.max())}")
@@ -114,10 +128,11 @@ def _caster() -> Backend:
 
 def _device(backend: Backend) -> Any:
     global _default_device
-    if _default_device is None or not getattr(_default_device, "alive", True):
-        _default_device = backend.make_device(label="rfw.raycast")
-        atexit.register(backend.destroy_device, _default_device)
-    return _default_device
+    with _default_lock:
+        if _default_device is None or not getattr(_default_device, "alive", True):
+            _default_device = backend.make_device(label="rfw.raycast")
+            atexit.register(backend.destroy_device, _default_device)
+        return _default_device
 
 
 class RayScene:
@@ -174,17 +189,25 @@ class RayScene:
     def _open(self, scene: Scene, device: Any, method: str, batch: int | None, *,
               instances: bool) -> None:
         self._scene = None
+        where = "rfw.RayScene"
+        check_type(method, "method", str, "'auto', 'ray_query' or 'ray_pipeline'",
+                   element=where)
         if method not in METHODS:
-            raise RfwError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not {method!r}",
-                           element="rfw.RayScene")
-        if batch is not None and (isinstance(batch, bool) or not isinstance(batch, int)
-                                  or batch < 1):
-            raise RfwError(f"batch must be a positive integer, got {batch!r}",
-                           element="rfw.RayScene")
+            raise RfwValueError(f"method is 'auto', 'ray_query' or 'ray_pipeline', not "
+                                f"{method!r}", element=where)
+        if batch is not None and (isinstance(batch, bool) or not isinstance(batch, int)):
+            raise RfwTypeError(f"batch must be a positive integer, got {batch!r}",
+                               element=where)
+        if batch is not None and batch < 1:
+            raise RfwValueError(f"batch must be a positive integer, got {batch!r}",
+                                element=where)
         backend = _caster()
         self.device = device if device is not None else _device(backend)
         self.instances = instances
-        self._scene = backend.ray_scene(self.device, scene, method=method, batch=batch)
+        try:  # the backend checks the device (rfw knows no backend's device type)
+            self._scene = backend.ray_scene(self.device, scene, method=method, batch=batch)
+        except RfwError as e:
+            raise e.about(where) from None
 
     @property
     def closed(self) -> bool:
@@ -230,11 +253,12 @@ class RayScene:
             ``t_min``/``t_max`` or unfit ``out`` arrays; the message names the argument.
         """
         element = "RayScene.cast"
+        scene = self._scene  # another thread may close it meanwhile: its cast then refuses
         if self.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
         try:
             rays = _rays(origins, directions, t_min, t_max, ("t_min", "t_max"))
-            return self._cast(*rays, out=self._out(out))
+            return scene.cast(*rays, hits=self._keys(), out=self._out(out))
         except RfwError as e:
             raise e.about(element) from None
 
@@ -246,7 +270,8 @@ class RayScene:
         if out is None:
             return None
         if not isinstance(out, dict):
-            raise RfwError(f"out must be a dict of arrays by name, got {type(out).__name__}")
+            raise RfwTypeError(f"out must be a dict of arrays by name, got "
+                               f"{type(out).__name__}")
         unknown = sorted(set(out) - set(self._keys()), key=str)
         if unknown:
             raise RfwError(f"out has {unknown[0]!r}, which this scene does not return "
@@ -262,9 +287,9 @@ class RayScene:
     def close(self) -> None:
         """Free the acceleration structures and buffers now (safe to call twice); the
         device stays."""
-        if self._scene is not None:
-            self._scene.destroy()
-            self._scene = None
+        scene, self._scene = self._scene, None
+        if scene is not None:
+            scene.destroy()
 
     def __enter__(self) -> RayScene:
         return self
@@ -323,7 +348,7 @@ def raycast(vertices: Any = None, indices: Any = None, origins: Any = None,
         else:
             rs = RayScene.from_scene(scene, device=device, method=method, batch=batch)
     except RfwError as e:
-        raise RfwError(e.message, element=element) from None
+        raise type(e)(e.message, element=element) from None  # RfwTypeError stays one
     with rs:
         try:
             return rs._cast(*rays)

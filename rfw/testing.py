@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import RfwTypeError, RfwValueError, check_number, check_type, type_name
 from .graph import GraphBuilder, Texture, compile
 from .graph.resources import SizeRule
 from .passes import Pass
@@ -22,6 +23,7 @@ def run_pass(cls: type[Pass], inputs: dict[str, tuple[str, np.ndarray]], *,
     from .backends.gpu_scene import GpuScene
     from .backends.wgpu_backend import Device, Executor
 
+    _check_args(cls, inputs, settings, frames, size)
     inst = cls(cls.id or cls.__name__, **(settings or {}))
     ins, outs = inst.declare()
     first = next(iter(inputs.values()), None)
@@ -61,3 +63,28 @@ def run_pass(cls: type[Pass], inputs: dict[str, tuple[str, np.ndarray]], *,
         ex.destroy()
         if gpu_scene is not None:
             gpu_scene.destroy()
+
+
+def _check_args(cls: Any, inputs: Any, settings: Any, frames: Any, size: Any) -> None:
+    where = "rfw.testing.run_pass"
+    if not (isinstance(cls, type) and issubclass(cls, Pass)):
+        raise RfwTypeError(f"'cls' must be a Pass subclass, not {type_name(cls)}",
+                           element=where)
+    check_type(inputs, "inputs", dict, "{slot: (format, array)}", element=where)
+    for slot, value in inputs.items():
+        if not (isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], str)
+                and isinstance(value[1], np.ndarray)):
+            raise RfwTypeError(f"'inputs' must map each slot to (format, array), not "
+                               f"{type_name(value)} for {slot!r}", element=where)
+        if value[1].ndim != 3 or 0 in value[1].shape:
+            raise RfwValueError(f"'inputs' {slot!r} must be an (H, W, C) array, not shape "
+                                f"{value[1].shape}", element=where)
+    if settings is not None:
+        check_type(settings, "settings", dict, "a dict of settings", element=where)
+    check_number(frames, "frames", kind=int, lo=1, hi=1000, element=where)
+    if size is not None:
+        if not isinstance(size, tuple | list) or len(size) != 2:
+            raise RfwTypeError(f"'size' must be (width, height), not {type_name(size)}",
+                               element=where)
+        for v in size:
+            check_number(v, "size", kind=int, lo=1, hi=16384, element=where)
