@@ -32,17 +32,23 @@ _ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
 
 
 def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
-    # a box-filtered chain on the CPU: textures are small and loaded once
+    """A box-filtered chain on the CPU, each level the rounded mean of 2x2 (or 2x1) texels.
+    Sums are taken in uint16 (half a float32 level's bytes): the same bytes as averaging in
+    float32 and rounding half up, since every partial mean is exact there."""
     levels = [pixels]
     while max(levels[-1].shape[:2]) > 1:
-        p = levels[-1].astype(np.float32)
-        h, w = p.shape[:2]
-        p = p[: h - h % 2 or 1, : w - w % 2 or 1]
+        h, w = levels[-1].shape[:2]
+        p = levels[-1][: h - h % 2 or 1, : w - w % 2 or 1].astype(np.uint16)
+        n = 1
         if p.shape[0] >= 2:
-            p = (p[0::2] + p[1::2]) / 2
+            p = p[0::2] + p[1::2]
+            n *= 2
         if p.shape[1] >= 2:
-            p = (p[:, 0::2] + p[:, 1::2]) / 2
-        levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
+            p = p[:, 0::2] + p[:, 1::2]
+            n *= 2
+        p += n // 2
+        p //= n
+        levels.append(p.astype(np.uint8))
     return levels
 
 

@@ -138,9 +138,19 @@ def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
 
 
 def load_png(path: Path) -> np.ndarray:
+    """RGB of a PNG rfw wrote: at any size ``--size`` allows (16384x16384 is over Pillow's
+    decompression-bomb limit, which guards against files rfw did not write)."""
     from PIL import Image
 
-    with Image.open(path) as im:
+    from ..errors import RfwError
+    from ..scene.limits import MAX_IMAGE_SIDE, pillow_unbounded
+
+    with pillow_unbounded():
+        im = Image.open(path)
+    with im:
+        if max(im.size) > MAX_IMAGE_SIDE:  # not an image rfw wrote: refused before decoding
+            raise RfwError(f"{im.size[0]}x{im.size[1]} pixels is over the {MAX_IMAGE_SIDE} "
+                           f"per side of any image rfw writes", file=str(path))
         return np.asarray(im.convert("RGB"))
 
 
