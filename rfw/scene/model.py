@@ -293,11 +293,10 @@ class Scene:
         """This scene without instances that cannot be drawn (singular, NaN or infinite
         transforms), each named in a one-line warning; ``self`` when none is dropped.
 
-        Raises
-        ------
-        SceneError
-            when the scene had instances and none is left.
-        """
+        A scene with nothing left to draw is rendered as it is (the background only), as
+        an empty glTF scene is valid: one warning line says so, whether the file had no
+        instances or every one was skipped (for a scene built in code without instances,
+        nothing is said)."""
         keep = []
         for k, (inst, why) in enumerate(zip(self.instances, self._instance_checks()[0],
                                             strict=True)):
@@ -305,11 +304,12 @@ class Scene:
                 keep.append(inst)
             else:
                 warn(f"{self.source or self.name}: instance {inst.name or k!r} skipped: {why}")
+        if not keep and (self.instances or self.source):
+            # one line for both (and for the backends' second look at the loader's scene)
+            warn(f"{self.source or self.name}: nothing is drawable (no instances, or every "
+                 "one skipped): the images show the background only")
         if len(keep) == len(self.instances):
             return self
-        if not keep:
-            raise SceneError("no instance can be drawn (every transform is singular or not "
-                             "finite)", file=self.source or self.name)
         return replace(self, instances=keep)
 
 

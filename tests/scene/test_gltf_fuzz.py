@@ -232,10 +232,12 @@ def test_mirrored_node_is_kept_with_a_negative_determinant(tmp_path):
     assert sum(d < 0 for d in dets) == 1
 
 
-def test_all_nodes_degenerate_is_a_scene_error(tmp_path):
+def test_all_nodes_degenerate_is_an_empty_scene_with_a_warning(tmp_path, capsys):
+    # as an empty scene is (rfw.scene.model.Scene.drawable): drawn as the background only
     g = fuzz_doc(tmp_path)
     for node in g.doc["nodes"]:
         node.pop("matrix", None)
         node["scale"] = [0, 0, 0]
-    with pytest.raises(SceneError, match=r"scene\.gltf: no instance can be drawn"):
-        load_gltf(g.write(tmp_path))
+    scene = load_gltf(g.write(tmp_path))
+    assert scene.instances == []
+    assert "scene.gltf: nothing is drawable" in capsys.readouterr().err
