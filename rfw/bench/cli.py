@@ -262,8 +262,8 @@ def _check_reference(reference: str | None, labels: list[str]) -> None:
         check_number(int(reference), "--reference", kind=int, lo=0, hi=len(labels) - 1,
                      element="--reference")
         return
-    raise RfwError(f"no such variant: '{reference}' ({', '.join(labels)})",
-                   element="--reference", suggest=(reference, labels))
+    raise RfwError(f"no such variant ({', '.join(labels)})",
+                   element=f"--reference '{reference}'", suggest=(reference, labels))
 
 
 def _finish(out: Path, results: Path, reference: str | None,

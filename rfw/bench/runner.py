@@ -90,9 +90,9 @@ def resolve_config(name: str) -> Path:
     if not p.suffix and candidate.is_file():
         return candidate
     if p.exists():
-        raise GraphError("not a config file", file=name, element="config")
+        raise GraphError("not a file", file=name, element="config")
     known = sorted(c.stem for c in CONFIGS.glob("*.toml"))
-    raise GraphError(f"config not found (neither a file nor configs/{p.stem}.toml)",
+    raise GraphError(f"not found (neither a file nor configs/{p.stem}.toml)",
                      file=name, element="config", suggest=(p.stem, known))
 
 

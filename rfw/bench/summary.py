@@ -83,7 +83,7 @@ def _fold_rfw(v: VariantSummary) -> None:
         entry: dict[str, Any] = {"name": name}
         for metric in ("gpu_ms", "cpu_ms"):
             runs = [p[metric] for r in v.records for p in r.get("passes", [])
-                    if p["name"] == name and p[metric]]
+                    if p["name"] == name and p.get(metric)]
             entry[metric] = summarize(runs) if runs else None
             v.samples[f"{name}.{metric}"] = runs
         v.passes.append(entry)
