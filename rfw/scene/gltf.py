@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import hashlib
 import io
 import json
 import math
@@ -38,6 +39,7 @@ import numpy as np
 import pygltflib
 
 from ..errors import warn as warn_once
+from . import limits
 from .gltf_json import ShapeError, decode_json, reject_constant
 from .model import (
     WORLD_LIMIT,
@@ -182,6 +184,11 @@ def read_uri(path: str | Path, uri: str, where: str) -> bytes:
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
+def _index(value: Any, items: list) -> bool:
+    """Whether ``value`` is a valid index into ``items`` (booleans are not)."""
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(items)
+
+
 def _finite32(a: Any) -> bool:
     """True when every value lies within the world renderers can hold in float32 (no NaN,
     no infinity, nothing beyond ``WORLD_LIMIT``)."""
@@ -201,6 +208,9 @@ class _Loader:
         self.glb_bin: memoryview | None = None
         self.buffers: dict[int, memoryview] = {}
         self.images: dict[int, np.ndarray] = {}
+        # one decode per distinct image, however many images, textures or materials name it
+        self.decoded: dict[bytes, np.ndarray] = {}
+        self.texels = 0  # of the distinct images decoded so far (limits.MAX_TEXELS)
         self.textures: dict[tuple[int, bool], int | None] = {}
         self.materials: dict[int, int] = {}
         self.primitives: dict[tuple[int, int], int | None] = {}
@@ -309,6 +319,7 @@ class _Loader:
         except RecursionError:
             self.fail("JSON", "nested too deeply")
         self.check_extensions()
+        self.check_geometry()  # before any accessor is read
         self.build()
         self.say_unread()
         # zero-scale nodes are valid glTF: skipped with a warning that names them
@@ -553,6 +564,66 @@ class _Loader:
             self.fail(swhere, f"values need {offset + nbytes} bytes, {vname} has {len(data)}")
         values = np.frombuffer(data, raw.dtype, count * raw.shape[1], offset)
         raw[idx] = values.reshape(count, raw.shape[1])
+
+    def check_geometry(self) -> None:
+        """Refuse, before any accessor is read, a scene whose primitives would hold more
+        than ``limits.MAX_GEOMETRY_BYTES``. Counts are the accessors' ``count``, with or
+        without a bufferView (one without is ``count`` zeros: as large as one with), over
+        the distinct primitives of the nodes the scene reaches. Malformed elements are left
+        to ``build()``, which names them."""
+        doc = self.doc
+        nodes, meshes, scenes = doc.nodes or [], doc.meshes or [], doc.scenes or []
+        if doc.scene is not None or scenes:
+            k = 0 if doc.scene is None else doc.scene
+            roots = list(scenes[k].nodes or []) if _index(k, scenes) else []
+        else:
+            roots = list(range(len(nodes)))  # build() shows every root: at worst more
+        seen: set[int] = set()
+        used: set[int] = set()
+        while roots:
+            n = roots.pop()
+            if not _index(n, nodes) or n in seen:
+                continue
+            seen.add(n)
+            if _index(nodes[n].mesh, meshes):
+                used.add(nodes[n].mesh)
+            roots.extend(nodes[n].children or [])
+        vertices = indices = 0
+        largest, name = -1, ""
+        for m in sorted(used):
+            for p, prim in enumerate(meshes[m].primitives or []):
+                (v, vname), (i, iname) = self.primitive_counts(prim)
+                vertices, indices = vertices + v, indices + i
+                for cost, what in ((v * limits.VERTEX_BYTES, vname),
+                                   (i * limits.INDEX_BYTES, iname)):
+                    if cost > largest:
+                        largest, name = cost, f"meshes[{m}].primitives[{p}]{what}"
+        limits.check_geometry(vertices, indices, file=self.source, largest=name)
+
+    def primitive_counts(self, prim: Any) -> tuple[tuple[int, str], tuple[int, str]]:
+        """(vertices, what holds them), (triangle corners, what holds them) of a primitive,
+        from its accessors' counts (0 where one is malformed: build() says so)."""
+        accessors = self.doc.accessors or []
+
+        def count(index: Any, what: str) -> tuple[int, str]:
+            if not _index(index, accessors):
+                return 0, ""
+            acc = accessors[index]
+            n = acc.count
+            if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+                return 0, ""
+            backed = "" if acc.bufferView is not None else " and no bufferView"
+            return n, f", {what} accessors[{index}] with count {n:,}{backed}"
+
+        mode = 4 if prim.mode is None else prim.mode
+        if mode not in (4, 5, 6):
+            return (0, ""), (0, "")  # points and lines are not drawn
+        position = getattr(prim.attributes, "POSITION", None) if prim.attributes else None
+        v = count(position, "POSITION")
+        i = count(prim.indices, "indices") if prim.indices is not None else v
+        if mode != 4:  # a strip or fan of n indices makes n - 2 triangles
+            i = (3 * max(i[0] - 2, 0), i[1])
+        return v, i
 
     # -- scene graph ----------------------------------------------------------------------
 
@@ -939,28 +1010,37 @@ class _Loader:
             data = bytes(self.view(img.bufferView, iwhere)[0])
         else:
             self.fail(iwhere, "has neither uri nor bufferView")
-        self.images[index] = self.decode(data, iwhere)
+        key = hashlib.sha256(data).digest()  # the same bytes under another name or index
+        if key not in self.decoded:
+            self.decoded[key] = self.decode(data, iwhere)
+        self.images[index] = self.decoded[key]
         return self.images[index]
 
     def decode(self, data: bytes, where: str) -> np.ndarray:
+        """RGBA8 pixels of an encoded image; its size is checked against the limits
+        (``limits.check_image``) from the header, before the pixels are decoded."""
         from PIL import Image, UnidentifiedImageError  # only needed for textured scenes
 
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error", Image.DecompressionBombWarning)
-                with Image.open(io.BytesIO(data)) as im:
-                    im.load()
-                    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
-                        # 16-bit greyscale: keep the high byte rather than clipping
-                        grey = (np.asarray(im, np.uint32) >> 8).astype(np.uint8)
-                        im = Image.fromarray(grey, "L")
-                    rgba = np.array(im.convert("RGBA"), np.uint8)
+            with limits.pillow_unbounded():  # sizes are checked here, with the file named
+                im = Image.open(io.BytesIO(data))
         except UnidentifiedImageError:
             self.fail(where, "cannot decode the image: not a format Pillow reads "
                              f"({len(data)} bytes starting {bytes(data[:8])!r})")
-        except (OSError, ValueError, SyntaxError, Image.DecompressionBombWarning,
-                Image.DecompressionBombError) as e:
+        except (OSError, ValueError, SyntaxError) as e:
             self.fail(where, f"cannot decode the image ({type(e).__name__}: {e})")
+        with im:
+            self.texels = limits.check_image(*im.size, self.texels, file=self.source,
+                                             where=where)
+            try:
+                im.load()
+                if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                    # 16-bit greyscale: keep the high byte rather than clipping
+                    grey = (np.asarray(im, np.uint32) >> 8).astype(np.uint8)
+                    im = Image.fromarray(grey, "L")
+                rgba = np.array(im.convert("RGBA"), np.uint8)
+            except (OSError, ValueError, SyntaxError, MemoryError) as e:
+                self.fail(where, f"cannot decode the image ({type(e).__name__}: {e})")
         return np.ascontiguousarray(rgba)
 
     # -- cameras and lights ---------------------------------------------------------------
