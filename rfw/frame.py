@@ -163,6 +163,11 @@ class Result:
 
         out = check_path(out, "out", element="Result.save")
         exr = check_bool(exr, "exr", element="Result.save")
+        if out.exists() and not out.is_dir():  # a file or device is never replaced
+            from .errors import RfwValueError
+
+            raise RfwValueError(f"'out' must be a folder, and {str(out)!r} is not one",
+                                element="Result.save")
         return write_run(out, self.images, self.formats, self.timings, exr=exr,
                          source=self.config.source)
 
