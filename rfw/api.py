@@ -85,7 +85,14 @@ def override(cfg: Config, *sets: str | Mapping[str, Any], scene: str | None = No
     if size is not None:
         w, h = _pair(size, cfg.source)
         items.append(f"size={w}x{h}")
-    return apply_overrides(cfg, items)
+    out = apply_overrides(cfg, items)
+    for entry in out.passes:  # a bad setting fails here, as rfw run refuses it
+        if entry.enabled:
+            try:
+                pass_class(out, entry).Params(f"pass '{entry.name}'", **entry.settings)
+            except RfwError as e:
+                raise e.in_file(out.source) from None
+    return out
 
 
 def make_config(name: str, passes: Iterable[PassEntry | Mapping[str, Any]], outputs: Iterable[str],

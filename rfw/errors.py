@@ -103,7 +103,7 @@ def check_type(value: Any, name: str, types: type | tuple[type, ...], expected: 
 
 def check_bool(value: Any, name: str, *, element: str | None = None) -> bool:
     """``value`` if it is True or False (numpy's too); ``'yes'`` or 1 are refused."""
-    if type(value).__name__ == "bool_" and type(value).__module__ == "numpy":
+    if type(value).__module__ == "numpy" and type(value).__name__ in ("bool", "bool_"):
         return bool(value)
     return check_type(value, name, bool, "True or False", element=element)
 

@@ -180,8 +180,8 @@ class RayScene:
         """Every instance of ``scene`` (one BLAS per mesh, the TLAS places them); the hits
         then also name the ``instance`` (index into ``scene.instances``)."""
         if not isinstance(scene, Scene):
-            raise RfwError(f"scene must be an rfw.scene.Scene, got {type(scene).__name__}",
-                           element="RayScene.from_scene")
+            raise RfwTypeError(f"scene must be an rfw.scene.Scene, got "
+                               f"{type(scene).__name__}", element="RayScene.from_scene")
         self = cls.__new__(cls)
         self._open(scene, device, method, batch, instances=True)
         return self
