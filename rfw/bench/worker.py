@@ -5,7 +5,8 @@
 
 Writes ``DIR/record.json`` (per pass and per frame: GPU ms from timestamps, CPU record ms;
 whole-frame wall ms; memory, culling and ray counters where the run has them; along a
-camera path, each frame's camera and, where there are culling counters, each frame's) and
+camera path, each frame's camera and, where there are culling counters, each frame's; the
+hashes of its config, graph, scene and shaders, :mod:`rfw.bench.inputs`) and
 ``DIR/image.png`` (the config's first output). A failure writes ``{"error": ...}`` and
 exits 1, so the runner can report it instead of dropping the variant.
 """
@@ -21,7 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from ..config import parse_size
+from ..errors import RfwError
 from ..fileio import atomic_write
+from .inputs import run_inputs, watching_shaders
 from .runner import gpu_clocks
 
 # timings.json keys copied into the record as they are, where a run has them
@@ -91,9 +94,10 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     clock.patch(FrameExecutor)  # one backend: the executor's own frames
     clock.patch(Frame)  # mixed: the frame that walks every side (their own frame() idle)
     try:
-        t0 = time.perf_counter()
-        result = render(cfg, frames=frames, warmup=warmup, backend=backend)
-        total_s = time.perf_counter() - t0
+        with watching_shaders() as shader_sources:
+            t0 = time.perf_counter()
+            result = render(cfg, frames=frames, warmup=warmup, backend=backend)
+            total_s = time.perf_counter() - t0
     finally:
         clock.restore()
     clocks = gpu_clocks()  # right after the frames: the clocks they ran at, or close
@@ -125,9 +129,11 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
                   "wall_ms": _with_camera_writes(clock.last(frames), timings)},
         "process_s": total_s, "gpu_clocks": clocks,
     }
+    record.update(run_inputs(config, cfg, shader_sources))  # what compare says changed
     for key in EXTRA_KEYS:
         if key in timings:
             record[key] = timings[key]
+    check_times(record)
     if "memory" not in record and hasattr(plan, "transient_bytes"):
         # wgpu allocates per texture: the plan's numbers are what there is
         record["memory"] = {"plan_transient_bytes": plan.transient_bytes,
@@ -139,6 +145,17 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     first = next(iter(result.images))
     record["output"] = first
     return record, to_png_array(result.images[first], formats[first])
+
+
+def check_times(record: dict[str, Any]) -> None:
+    """Refuse a time that is not a finite number of ms at least 0 (a timestamp query read
+    wrong): as a failed run, so results.jsonl never holds what compare must refuse."""
+    from .records import check_record
+
+    try:
+        check_record({"variant": "run", **record})
+    except RfwError as e:
+        raise RuntimeError(f"timings: {e}") from None
 
 
 def _with_camera_writes(wall_ms: list[float], timings: dict[str, Any]) -> list[float]:

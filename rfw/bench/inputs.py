@@ -1,0 +1,208 @@
+"""What a benchmark run measured, as hashes: its config file, graph, scene and shaders.
+
+The worker writes ``inputs: {config, graph, scene, shaders}`` (sha256 hex) into each run's
+record, and ``shader_files: {path: sha256}`` for every shader source the run compiled, its
+includes with it. ``rfw bench compare`` names each input that differs between OLD and NEW
+(``config changed: configs/deferred.toml (sha 1a2b3c4d5e6f -> 7a8b9c0d1e2f)``), so a time
+difference is read beside what changed; records written before this existed say "inputs
+not recorded".
+
+- ``config``: the config file's bytes.
+- ``graph``: the frame graph the config built with the run's ``--set`` values and variants,
+  as rfw TOML (passes, settings, slots, formats, size).
+- ``scene``: a scene file's bytes (a ``.gltf`` with the buffers and images it names beside
+  it); a built-in scene's name and parameters (``stress:1000``).
+- ``shaders``: every shader file the run's passes compiled (GLSL through ``rfw.spirv``, WGSL
+  through ``rfw.shaders``), includes too, seen while it compiled them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+KEYS = ("config", "graph", "scene", "shaders")
+SHORT = 12  # hex digits shown of a hash
+
+
+def sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def shown(path: str | Path) -> str:
+    """A path as reports show it: from the working folder or the rfw checkout if inside."""
+    p = Path(path)
+    for base in (Path.cwd(), ROOT):
+        try:
+            return str(p.resolve().relative_to(base.resolve()))
+        except (ValueError, OSError):
+            continue
+    return str(p)
+
+
+def _stable(path: Path) -> str:
+    # a shader's name in the hash: from the rfw checkout, so the working folder changes nothing
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+@contextmanager
+def watching_shaders() -> Iterator[dict[Path, bytes]]:
+    """Inside: every shader file read for a compile, with its bytes. Both compilers read a
+    shader and its includes through one function (``rfw.spirv._sources`` for GLSL, the
+    SPIR-V cache key; ``rfw.shaders._expand`` for WGSL), watched here while active."""
+    from .. import shaders, spirv
+
+    seen: dict[Path, bytes] = {}
+    sources, expand = spirv._sources, shaders._expand
+
+    def glsl(path: Path, search: list[Path], got: dict[Path, bytes]) -> None:
+        sources(path, search, got)
+        for p, data in got.items():
+            seen.setdefault(Path(p).resolve(), data)
+
+    def wgsl(path: Path, *args: Any) -> None:
+        try:
+            seen.setdefault(Path(path).resolve(), Path(path).read_bytes())
+        except OSError:
+            pass  # the compile itself says why
+        expand(path, *args)
+
+    spirv._sources, shaders._expand = glsl, wgsl  # type: ignore[assignment]
+    try:
+        yield seen
+    finally:
+        spirv._sources, shaders._expand = sources, expand  # type: ignore[assignment]
+
+
+def scene_hash(scene: str) -> str:
+    """A scene file's bytes (a ``.gltf`` with the files it names), or a built-in's name."""
+    from ..scene import is_builtin
+
+    p = Path(scene)
+    if not p.is_file():
+        if scene in ("default", "") or is_builtin(scene):
+            return sha256(f"builtin:{scene or 'default'}".encode())
+        return sha256(f"missing:{scene}".encode())
+    h = hashlib.sha256(p.read_bytes())
+    if p.suffix.lower() == ".gltf":
+        for name in _gltf_files(p):
+            extra = p.parent / name
+            if extra.is_file():
+                h.update(b"\0" + name.encode() + b"\0" + extra.read_bytes())
+    return h.hexdigest()
+
+
+def _gltf_files(path: Path) -> list[str]:
+    """The relative buffer and image URIs a glTF names (data: URIs are in the JSON)."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, OSError, RecursionError):
+        return []
+    names = []
+    for key in ("buffers", "images"):
+        items = doc.get(key) if isinstance(doc, dict) else None
+        for item in items if isinstance(items, list) else []:
+            uri = item.get("uri") if isinstance(item, dict) else None
+            if isinstance(uri, str) and uri and not uri.startswith("data:") \
+                    and ":" not in uri and not os.path.isabs(uri):
+                names.append(uri)
+    return sorted(set(names))
+
+
+def run_inputs(config: str | Path, cfg: Any, shader_sources: dict[Path, bytes]
+               ) -> dict[str, Any]:
+    """``{inputs: {config, graph, scene, shaders}, shader_files: {path: sha}}`` of one run:
+    ``config`` its file, ``cfg`` the config with the run's settings applied, the shader
+    sources :func:`watching_shaders` saw it compile."""
+    from ..config import build
+    from ..graph import to_toml
+
+    files = {_stable(p): sha256(data) for p, data in shader_sources.items()}
+    together = "".join(f"{name}\0{digest}\n" for name, digest in sorted(files.items()))
+    return {"inputs": {"config": sha256(Path(config).read_bytes()),
+                       "graph": sha256(to_toml(build(cfg).graph).encode()),
+                       "scene": scene_hash(str(cfg.scene)),
+                       "shaders": sha256(together.encode())},
+            "shader_files": dict(sorted(files.items()))}
+
+
+# ---------------------------------------------------------------------------------------------
+# compare: what changed between OLD and NEW
+
+
+def _of(records: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    out: dict[str, list[dict[str, Any]]] = {}
+    for r in records:
+        if not r.get("error") and r.get("kind", "rfw") == "rfw":
+            out.setdefault(r["variant"], []).append(r)
+    return out
+
+
+def input_changes(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[str]:
+    """One line per input (config, graph, scene, shaders) that differs between the runs of
+    a variant in OLD and in NEW, each said once; ``inputs not recorded`` for a side whose
+    records have none (written before inputs were hashed); ``... differ between the runs``
+    where the runs of one side measured different inputs (a file edited during the bench)."""
+    olds, news = _of(old), _of(new)
+    out: list[str] = []
+
+    def say(line: str) -> None:
+        if line not in out:
+            out.append(line)
+
+    for label in [k for k in olds if k in news]:
+        sides = []
+        for side, runs in (("OLD", olds[label]), ("NEW", news[label])):
+            if any(not isinstance(r.get("inputs"), dict) for r in runs):
+                say(f"inputs not recorded in {side} (results written before rfw hashed a "
+                    "run's config, graph, scene and shaders): their changes are not reported")
+                continue
+            for key in KEYS:
+                if len({r["inputs"].get(key) for r in runs}) > 1:
+                    say(f"{label}: {key} differs between the runs of {side} (changed during "
+                        "the bench?)")
+            sides.append(runs[-1])
+        if len(sides) != 2:
+            continue
+        a, b = sides
+        for key in KEYS:
+            was, now = a["inputs"].get(key), b["inputs"].get(key)
+            if was != now:
+                say(f"{key} changed: {_what(key, label, a, b)} (sha {_short(was)} -> "
+                    f"{_short(now)})")
+    return out
+
+
+def _short(digest: Any) -> str:
+    return str(digest)[:SHORT] if digest else "none"
+
+
+def _what(key: str, label: str, a: dict[str, Any], b: dict[str, Any]) -> str:
+    """The changed input in words: its file(s), or the variant whose graph it is."""
+    if key == "config":
+        return _pair(a.get("config_path"), b.get("config_path"))
+    if key == "scene":
+        return _pair(a.get("scene"), b.get("scene"), files=False)
+    if key == "shaders":
+        fa, fb = a.get("shader_files") or {}, b.get("shader_files") or {}
+        parts = [f"{n}" for n in sorted(fa.keys() & fb.keys()) if fa[n] != fb[n]]
+        parts += [f"{n} (new)" for n in sorted(fb.keys() - fa.keys())]
+        parts += [f"{n} (gone)" for n in sorted(fa.keys() - fb.keys())]
+        return ", ".join(parts) if parts else "shader files not recorded"
+    return label
+
+
+def _pair(was: Any, now: Any, *, files: bool = True) -> str:
+    def name(x: Any) -> str:
+        return shown(x) if files and x else str(x)
+
+    return name(now) if was == now or not was else f"{name(was)} -> {name(now)}"
