@@ -307,7 +307,10 @@ class _Upload:
             return
         staging = staging_buffer(device, self.size, label="scene:upload")
         try:
-            staging.write(np.concatenate(self.parts))
+            offset = 0
+            for part in self.parts:  # in place: no joined copy of every byte uploaded
+                staging.write(part, offset)
+                offset += part.size
             with one_time(device, label="scene upload") as cmd:
                 record_upload(cmd, staging, buffers=self.buffers, images=self.images,
                               buffers_to=_SCENE_READ, images_to=_SAMPLED)

@@ -1,0 +1,343 @@
+"""rfw.scene.limits: what a glTF file may ask for, counted before anything is allocated.
+
+Accessors with and without a bufferView count alike against the geometry limit; each
+distinct image is decoded once and counted once; sizes come from the image header; an empty
+scene and a scene whose only instance is skipped render alike. Each refusal is checked with
+a control that stays under the limit."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from rfw.backends.scene_data import mip_chain
+from rfw.scene import SceneError, load_gltf, limits
+from rfw.scene.model import Instance, Material, Mesh, Scene, Texture
+
+ROOT = Path(__file__).resolve().parents[2]
+QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+UV = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+IDX = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+
+
+def data_uri(blob: bytes, kind: str = "application/octet-stream") -> str:
+    return f"data:{kind};base64," + base64.b64encode(blob).decode()
+
+
+def quad_doc(meshes: int = 1) -> dict:
+    """``meshes`` meshes, each one node, all reading one quad's accessors (a backed
+    bufferView shared by every mesh)."""
+    blob = QUAD.tobytes() + UV.tobytes() + IDX.tobytes()
+    return {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(blob), "uri": data_uri(blob)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+                        {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1},
+                                    "indices": 2}]} for _ in range(meshes)],
+        "nodes": [{"mesh": k, "translation": [1.5 * k, 0, 0]} for k in range(meshes)],
+        "scenes": [{"nodes": list(range(meshes))}], "scene": 0,
+    }
+
+
+def unbacked(count: int, *, mode: int | None = None, extra: dict | None = None) -> dict:
+    prim: dict = {"attributes": {"POSITION": 0}}
+    if mode is not None:
+        prim["mode"] = mode
+    doc = {"asset": {"version": "2.0"},
+           "accessors": [{"componentType": 5126, "count": count, "type": "VEC3"}],
+           "meshes": [{"primitives": [prim]}], "nodes": [{"mesh": 0}],
+           "scenes": [{"nodes": [0]}], "scene": 0}
+    doc.update(extra or {})
+    return doc
+
+
+def write(tmp_path: Path, doc: dict, name: str = "scene.gltf") -> Path:
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def png(pixels: np.ndarray, **save: object) -> bytes:
+    f = io.BytesIO()
+    Image.fromarray(pixels).save(f, "PNG", **save)
+    return f.getvalue()
+
+
+def textured(doc: dict, uris: list[str], sources: list[int]) -> dict:
+    """Each mesh k gets a material whose base colour is textures[k] = images[sources[k]]."""
+    doc["images"] = [{"uri": u} for u in uris]
+    doc["textures"] = [{"source": s} for s in sources]
+    doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": k}}}
+                        for k in range(len(sources))]
+    for k, mesh in enumerate(doc["meshes"]):
+        mesh["primitives"][0]["material"] = k
+    return doc
+
+
+# -- geometry ---------------------------------------------------------------------------------
+
+
+def test_unbacked_accessor_over_the_limit_is_refused_before_it_is_allocated(tmp_path):
+    path = write(tmp_path, unbacked(67_108_863))
+    with pytest.raises(SceneError) as e:
+        load_gltf(path)
+    line = str(e.value)
+    assert line.startswith(f"{path}: meshes: 67,108,863 vertices and 67,108,863 indices")
+    assert "13.25 GiB" in line and "limit of 1.00 GiB per scene" in line
+    assert "meshes[0].primitives[0], POSITION accessors[0] with count 67,108,863 and no " \
+           "bufferView" in line
+    assert "\n" not in line
+
+
+def test_small_unbacked_accessor_loads_as_zeros(tmp_path):
+    # the control: zero-filled accessors are valid glTF, and small ones load
+    scene = load_gltf(write(tmp_path, unbacked(6)))
+    assert len(scene.meshes) == 1 and scene.meshes[0].positions.shape == (6, 3)
+    assert not scene.meshes[0].positions.any()
+
+
+def test_backed_accessors_count_alike_through_a_shared_buffer_view(tmp_path):
+    # one 4-vertex bufferView read by many meshes: each mesh holds its own copy
+    per = limits.geometry_bytes(4, 6)
+    n = limits.MAX_GEOMETRY_BYTES // per
+    assert load_gltf(write(tmp_path, quad_doc(3))).meshes  # the control: few meshes load
+    old = limits.MAX_GEOMETRY_BYTES
+    try:
+        limits.MAX_GEOMETRY_BYTES = 3 * per  # three meshes fit exactly, four do not
+        assert len(load_gltf(write(tmp_path, quad_doc(3))).meshes) == 3
+        with pytest.raises(SceneError, match=r"meshes: 16 vertices and 24 indices would "
+                                             r"need about .* \(the largest: meshes\[0\]"):
+            load_gltf(write(tmp_path, quad_doc(4)))
+    finally:
+        limits.MAX_GEOMETRY_BYTES = old
+    assert n > 1_000_000  # the real limit leaves room for real scenes
+
+
+def test_strips_count_their_triangles_and_unreached_meshes_do_not_count(tmp_path):
+    # a strip of n indices makes n - 2 triangles: 3 (n - 2) corners
+    n = 4_000_000
+    need = limits.geometry_bytes(n, 3 * (n - 2))
+    assert need > limits.MAX_GEOMETRY_BYTES > limits.geometry_bytes(n, n)
+    with pytest.raises(SceneError, match=f"{n:,} vertices and {3 * (n - 2):,} indices"):
+        load_gltf(write(tmp_path, unbacked(n, mode=5)))
+    # a mesh no node of the scene reaches is never read, so it is not counted
+    doc = unbacked(6)
+    doc["accessors"].append({"componentType": 5126, "count": 67_108_863, "type": "VEC3"})
+    doc["meshes"].append({"primitives": [{"attributes": {"POSITION": 1}}]})
+    doc["nodes"].append({"mesh": 1})
+    assert len(load_gltf(write(tmp_path, doc)).meshes) == 1
+    doc["scenes"][0]["nodes"].append(1)  # the control: reached, it counts
+    with pytest.raises(SceneError, match="67,108,869 vertices"):
+        load_gltf(write(tmp_path, doc))
+
+
+def test_geometry_limit_boundary():
+    at = limits.MAX_GEOMETRY_BYTES // limits.VERTEX_BYTES
+    limits.check_geometry(at, 0, file="f", largest="x")
+    with pytest.raises(SceneError, match=r"f: meshes: .*\(the largest: x\)"):
+        limits.check_geometry(at + 1, 0, file="f", largest="x")
+
+
+# -- images -----------------------------------------------------------------------------------
+
+
+def test_one_image_used_by_many_textures_is_decoded_once(tmp_path):
+    (tmp_path / "a.png").write_bytes(png(np.full((8, 8, 3), 200, np.uint8)))
+    (tmp_path / "b.png").write_bytes(png(np.full((8, 8, 3), 50, np.uint8)))
+    # one image named by 3 textures, and 3 images naming one file: one decode each way
+    for uris, sources in ((["a.png"], [0, 0, 0]), (["a.png"] * 3, [0, 1, 2])):
+        scene = load_gltf(write(tmp_path, textured(quad_doc(3), uris, sources)))
+        assert len(scene.textures) == 3
+        assert len({id(t.pixels) for t in scene.textures}) == 1
+    # the control: two different files are two images
+    scene = load_gltf(write(tmp_path, textured(quad_doc(2), ["a.png", "b.png"], [0, 1])))
+    assert len({id(t.pixels) for t in scene.textures}) == 2
+
+
+def test_declared_size_over_the_side_limit_is_refused_from_the_header(tmp_path):
+    # a 100000x100000 PNG of a few hundred bytes: Pillow's DecompressionBombError before
+    (tmp_path / "bomb.png").write_bytes(_declared_png(100_000, 100_000))
+    (tmp_path / "wide.png").write_bytes(png(np.zeros((1, 20_000, 3), np.uint8)))
+    for name, size in (("bomb.png", "100000x100000"), ("wide.png", "20000x1")):
+        path = write(tmp_path, textured(quad_doc(1), [name], [0]))
+        with pytest.raises(SceneError) as e:
+            load_gltf(path)
+        assert str(e.value) == (f"{path}: images[0]: {size} pixels is over the limit of 16384 "
+                                "pixels per side")
+    assert Image.MAX_IMAGE_PIXELS == 89_478_485  # Pillow's own check is left as it was
+    # the control: at the limit, an image loads
+    (tmp_path / "edge.png").write_bytes(png(np.zeros((1, 16384, 3), np.uint8)))
+    scene = load_gltf(write(tmp_path, textured(quad_doc(1), ["edge.png"], [0])))
+    assert scene.textures[0].pixels.shape == (1, 16384, 4)
+
+
+def test_distinct_texels_count_against_the_limit_once_per_image(tmp_path, monkeypatch):
+    (tmp_path / "a.png").write_bytes(png(np.full((8, 8, 3), 200, np.uint8)))
+    (tmp_path / "b.png").write_bytes(png(np.full((8, 8, 3), 50, np.uint8)))
+    monkeypatch.setattr(limits, "MAX_TEXELS", 100)  # one 8x8 image fits, two do not
+    scene = load_gltf(write(tmp_path, textured(quad_doc(4), ["a.png"] * 2, [0, 1, 0, 1])))
+    assert len(scene.textures) == 4
+    path = write(tmp_path, textured(quad_doc(2), ["a.png", "b.png"], [0, 1]))
+    with pytest.raises(SceneError) as e:
+        load_gltf(path)
+    assert str(e.value).startswith(f"{path}: images[1]: 8x8 pixels brings the scene's "
+                                   "distinct images to 128 texels")
+    assert "over the limit of 100" in str(e.value)
+
+
+def test_texture_over_the_device_limit_is_refused_before_upload():
+    from rfw import load
+    from rfw.render import render
+
+    mesh = Mesh("quad", QUAD, np.tile(np.float32([0, 0, 1]), (4, 1)), UV,
+                np.tile(np.float32([1, 0, 0, 1]), (4, 1)), IDX.astype(np.uint32))
+    for side, ok in ((16385, False), (16384, True)):
+        scene = Scene("wide", [mesh], [Material(base_color_texture=0)],
+                      [Texture("wide.png", np.zeros((1, side, 4), np.uint8))],
+                      [Instance(0, np.identity(4, np.float32))], source="wide.gltf")
+        for backend in ("wgpu", "vk"):
+            key = "max-texture-dimension-2d" if backend == "wgpu" else "maxImageDimension2D"
+            cfg = load(ROOT / "configs" / "flat.toml", size=(16, 16))
+            if ok:  # the control: at the device's limit it renders
+                render(cfg, scene=scene, frames=1, backend=backend)
+                continue
+            with pytest.raises(SceneError) as e:
+                render(cfg, scene=scene, frames=1, backend=backend)
+            assert str(e.value) == (f"wide.gltf: textures: texture 'wide.png' is 16385x1, "
+                                    f"over this device's {key} (16384 pixels per side)")
+
+
+def test_textures_sharing_an_image_render_as_two_copies(tmp_path):
+    # one image named by two textures against the same pixels in two files (encoded apart,
+    # so both are decoded): the same picture; the control, a different image, is not
+    pixels = np.random.default_rng(3).integers(0, 256, (16, 16, 3), np.uint8)
+    (tmp_path / "a.png").write_bytes(png(pixels))
+    (tmp_path / "a2.png").write_bytes(png(pixels, compress_level=1))
+    (tmp_path / "c.png").write_bytes(png(255 - pixels))
+    assert (tmp_path / "a.png").read_bytes() != (tmp_path / "a2.png").read_bytes()
+    shared = write(tmp_path, textured(quad_doc(2), ["a.png"], [0, 0]), "shared.gltf")
+    copies = write(tmp_path, textured(quad_doc(2), ["a.png", "a2.png"], [0, 1]), "copies.gltf")
+    other = write(tmp_path, textured(quad_doc(2), ["a.png", "c.png"], [0, 1]), "other.gltf")
+    assert len({id(t.pixels) for t in load_gltf(copies).textures}) == 2
+    for backend in ("wgpu", "vk"):
+        a, b, c = (_render(tmp_path, p, backend) for p in (shared, copies, other))
+        assert np.array_equal(a, b), backend
+        assert np.abs(a.astype(int) - c).max() > 20, backend
+
+
+def test_mip_chain_is_the_float_chain():
+    # sums in uint16, the same bytes as the float32 means rounded half up it replaced
+    def float_chain(pixels):
+        levels = [pixels]
+        while max(levels[-1].shape[:2]) > 1:
+            p = levels[-1].astype(np.float32)
+            h, w = p.shape[:2]
+            p = p[: h - h % 2 or 1, : w - w % 2 or 1]
+            if p.shape[0] >= 2:
+                p = (p[0::2] + p[1::2]) / 2
+            if p.shape[1] >= 2:
+                p = (p[:, 0::2] + p[:, 1::2]) / 2
+            levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
+        return levels
+
+    rng = np.random.default_rng(1)
+    for shape in ((1, 1), (1, 7), (7, 1), (5, 3), (33, 17), (2, 300)):
+        for a in (rng.integers(0, 256, (*shape, 4), np.uint8), np.full((*shape, 4), 255,
+                                                                          np.uint8)):
+            want, got = float_chain(a), mip_chain(a)
+            assert len(want) == len(got)
+            assert all(np.array_equal(x, y) and y.dtype == np.uint8 for x, y in zip(want, got,
+                                                                                    strict=True))
+    # the control: rounding down instead differs on random texels
+    a = rng.integers(0, 256, (8, 8, 4), np.uint8)
+    down = (a.reshape(4, 2, 4, 2, 4).astype(int).sum((1, 3)) // 4).astype(np.uint8)
+    assert not np.array_equal(mip_chain(a)[1], down)
+
+
+def test_bench_reads_back_images_over_pillows_bomb_limit(tmp_path):
+    # rfw writes up to 16384x16384, over Pillow's 178-megapixel error: run with the limit
+    # lowered so a 64x64 image stands for one that large
+    code = """
+import sys
+import numpy as np
+from PIL import Image
+from rfw.bench.images import load_png
+Image.fromarray(np.full((64, 64, 3), 7, np.uint8)).save(sys.argv[1])
+Image.MAX_IMAGE_PIXELS = 1000
+try:
+    Image.open(sys.argv[1])
+    print("no bomb check")
+except Image.DecompressionBombError:
+    print("bomb check")
+print(load_png(sys.argv[1]).shape, Image.MAX_IMAGE_PIXELS)
+"""
+    run = subprocess.run([sys.executable, "-c", code, str(tmp_path / "x.png")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.stdout.split("\n")[:2] == ["bomb check", "(64, 64, 3) 1000"], run.stderr
+
+
+# -- empty scenes -----------------------------------------------------------------------------
+
+
+def test_empty_scene_and_skipped_only_instance_render_alike(tmp_path):
+    empty = write(tmp_path, {"asset": {"version": "2.0"}, "scenes": [{"nodes": []}],
+                             "scene": 0}, "empty.gltf")
+    doc = quad_doc(1)
+    doc["nodes"][0]["scale"] = [0, 0, 0]
+    skipped = write(tmp_path, doc, "skipped.gltf")
+    drawn = write(tmp_path, quad_doc(1), "drawn.gltf")
+    images = {}
+    for path in (empty, skipped, drawn):
+        out = tmp_path / f"out-{path.stem}"
+        run = subprocess.run([sys.executable, "-m", "rfw.cli", "run", "configs/flat.toml",
+                              "--backend", "vk", "--scene", str(path), "--size", "32x32",
+                              "--frames", "1", "--out", str(out)],
+                             cwd=ROOT, capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        said = [line for line in run.stderr.splitlines() if "nothing is drawable" in line]
+        if path is drawn:  # the control: a drawable scene says nothing and shows the quad
+            assert said == [] and "rfw: warning" not in run.stderr
+        else:
+            assert said == [f"rfw: warning: {path}: nothing is drawable (no instances, or "
+                            "every one skipped): the images show the background only"]
+        with Image.open(out / "flat.color.png") as im:
+            images[path.stem] = np.asarray(im)
+    assert np.array_equal(images["empty"], images["skipped"])
+    assert not np.array_equal(images["empty"], images["drawn"])
+
+
+def _render(tmp_path: Path, scene: Path, backend: str) -> np.ndarray:
+    from rfw import load
+    from rfw.render import render
+    from rfw.scene import load_scene
+
+    cfg = load(ROOT / "configs" / "forward.toml", size=(48, 32))  # flat draws no textures
+    result = render(cfg, scene=load_scene(scene), frames=1, backend=backend)
+    return result.images[cfg.outputs[0]]
+
+
+def _declared_png(width: int, height: int) -> bytes:
+    """A PNG whose header declares ``width`` x ``height`` (its data is one short row)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + \
+            struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + \
+        chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
