@@ -26,7 +26,8 @@ def example(name: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_every_example_is_tested():
-    tested = {"ab_setting.py", "sweep_plot.py", "plugin_pass.py", "api_tour.ipynb"}
+    tested = {"ab_setting.py", "sweep_plot.py", "plugin_pass.py", "api_tour.ipynb",
+              "notebook_pass.ipynb"}  # the last by tests/api/test_notebook_pass.py
     # _common.py is what the scripts share, not an example
     assert {p.name for p in EXAMPLES.iterdir() if p.suffix in (".py", ".ipynb")
             and not p.name.startswith("_")} == tested
