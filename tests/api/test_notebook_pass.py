@@ -71,7 +71,7 @@ def test_a_pass_from_stdin_renders(how, backend):
     done = _run(["-", backend, how], SCRIPT)
     assert done.returncode == 0, done.stderr
     rows = [line.split() for line in done.stdout.splitlines()]
-    (a1, inv1, same1, colours), (a0, inv0, same0, _) = rows
+    (a1, inv1, _, colours), (a0, inv0, same0, _) = rows
     assert (a1, inv1) == ("1.0", "0")  # every pixel 255 - colour, exactly
     assert int(colours) >= 4  # the scene has colours to invert (not one flat sky)
     # control: amount 0 leaves the colour, which the same check refuses
