@@ -129,14 +129,9 @@ def gpu_choice() -> int | None:
     none, its CPU devices), in the driver's order; None when unset. A Ray task of
     ``rfw bench --executor ray`` sets it to the GPU Ray gave it, so each task opens its own.
     Anything but a whole number from 0 is a one-line error naming it."""
-    import os
+    from . import env
 
-    raw = os.environ.get(GPU_ENV, "").strip()
-    if not raw:
-        return None
-    if not raw.isdigit():
-        raise RfwError(f"must be a device index (0, 1, ...), not {raw!r}", element=GPU_ENV)
-    return int(raw)
+    return env.get(GPU_ENV)
 
 
 def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:
@@ -163,11 +158,14 @@ def order(names: Iterable[str]) -> list[str]:
 
 def get_backend(name: str, *, file: str | None = None,
                 element: str | None = "--backend") -> Backend:
-    """The backend registered as ``name``, loaded on first use; an unknown name is one line
-    naming the installed ones."""
+    """The backend registered as ``name``, loaded on first use; an unknown or empty name is
+    one line naming the installed ones."""
     if name in _loaded:
         return _loaded[name]
     eps = {ep.name: ep for ep in entry_points(ENTRY_POINT_GROUP)}
+    if isinstance(name, str) and not name.strip():  # --backend '': not "the default"
+        raise RfwError(f"names no backend; installed: {', '.join(order(eps)) or 'none'}",
+                       file=file, element=element)
     ep = eps.get(name) if isinstance(name, str) else None
     if ep is None:
         raise RfwError(f"unknown backend {name!r}" + did_you_mean(str(name), eps)

@@ -27,7 +27,6 @@ import importlib.machinery
 import importlib.metadata
 import importlib.util
 import io
-import os
 import zipfile
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -286,8 +285,9 @@ def pack_for_gpu(meshlets: Meshlets) -> dict[str, np.ndarray]:
 
 def default_cache_dir() -> Path:
     """``$RFW_CACHE_MESHLETS`` if set, else ``~/.cache/rfw/meshlets``."""
-    env = os.environ.get("RFW_CACHE_MESHLETS")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "rfw" / "meshlets"
+    from . import env
+
+    return env.get("RFW_CACHE_MESHLETS") or Path.home() / ".cache" / "rfw" / "meshlets"
 
 
 def meshlet_cache_key(

@@ -46,9 +46,10 @@ def target_of(stage: str) -> str:
 
 
 def cache_dir() -> Path:
-    root = os.environ.get("RFW_CACHE_SPIRV") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "rfw", "spirv")
-    return Path(root)
+    from . import env
+
+    return env.get("RFW_CACHE_SPIRV") or Path(os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "rfw", "spirv"))
 
 
 def stage_of(path: Path) -> str:

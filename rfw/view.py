@@ -522,7 +522,9 @@ def present_format(preferred: str) -> str:
     """The swapchain format: the preferred one without ``-srgb`` (the graph output is
     display-encoded already). ``RFW_VIEW_FORMAT`` names another (the tests' negative
     control shows an ``*-srgb`` one double-encodes)."""
-    chosen = os.environ.get("RFW_VIEW_FORMAT") or preferred.removesuffix("-srgb")
+    from . import env
+
+    chosen = env.get("RFW_VIEW_FORMAT") or preferred.removesuffix("-srgb")
     if chosen not in ("bgra8unorm", "rgba8unorm", "bgra8unorm-srgb", "rgba8unorm-srgb"):
         raise RfwError(f"'{chosen}' is no window format (bgra8unorm, rgba8unorm, or either "
                        "with -srgb)", element="RFW_VIEW_FORMAT")

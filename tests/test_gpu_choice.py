@@ -42,7 +42,7 @@ def test_the_chosen_device_renders_and_a_missing_one_is_one_line(tmp_path, backe
     assert np.array_equal(a, b)
     for bad, says in (("99", r"asks for device 99, and this machine has \d+ (GPU|CPU) "
                              r"device\(s\): \S"),
-                      ("gpu0", r"must be a device index \(0, 1, \.\.\.\), not 'gpu0'")):
+                      ("gpu0", r"expected a device index \(from 0\), not 'gpu0'")):
         done = _run(tmp_path, backend, bad, f"bad{bad}")
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2, done.stderr

@@ -8,12 +8,12 @@ validation layer's leak report at ``vkDestroyDevice``/``vkDestroyInstance`` stay
 from __future__ import annotations
 
 import itertools
-import os
 import warnings
 from collections import Counter
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
+from rfw import env
 from rfw.backend import gpu_choice, pick_gpu
 from rfw.errors import RfwError
 
@@ -256,10 +256,7 @@ def async_queue_preference() -> str:
     with async compute on, over off, was 0.988x on the compute-only family and 1.203x on a
     second queue of the graphics family (which shares the graphics engine: no overlap,
     only the semaphores' cost)."""
-    raw = os.environ.get(ASYNC_QUEUE_ENV, "family").strip()
-    if raw not in ("graphics", "family"):
-        raise RfwError(f"must be family or graphics, not {raw!r}", element=ASYNC_QUEUE_ENV)
-    return raw
+    return env.get(ASYNC_QUEUE_ENV)
 
 
 def compute_queue_choice(families: list[tuple[int, int, int]], graphics: int,

@@ -25,7 +25,6 @@ every frame (the benchmarks' baseline).
 
 from __future__ import annotations
 
-import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
@@ -34,9 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from rfw import env
 from rfw.backends.base import FrameExecutor
 from rfw.context import check_sampler
-from rfw.errors import RfwError, naming
+from rfw.errors import naming
 from rfw.frame import InFlight, frames_in_flight, run_frames
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
@@ -170,14 +170,6 @@ def _chained(b: Any) -> Any:
     return replace(b, src=State(b.src.layout, b.dst.stages, frozenset()))
 
 
-def _switch(name: str) -> bool:
-    # an on/off environment switch, on unless "0"; anything but 0 or 1 is a one-line error
-    raw = os.environ.get(name, "1").strip()
-    if raw not in ("0", "1"):
-        raise RfwError(f"must be 0 or 1, not {raw!r}", element=name)
-    return raw == "1"
-
-
 def _runs(slots: list[int]) -> list[tuple[int, int]]:
     """Sorted slot numbers as (first, count) runs of consecutive ones."""
     out: list[tuple[int, int]] = []
@@ -250,7 +242,7 @@ class VkExecutor(FrameExecutor):
         # whole-frame replay: a frame that would record what its slot's command buffer holds
         # submits it again (so it is not one-time-submit); RFW_VK_FRAME_REPLAY=0 records
         # every frame, the baseline a benchmark measures against in the same run
-        self.frame_replay = _switch("RFW_VK_FRAME_REPLAY")
+        self.frame_replay = env.get("RFW_VK_FRAME_REPLAY")
         self.primaries = 0  # primary command buffers begun (what tests count)
         self._begin_info = ffi.new("VkCommandBufferBeginInfo*", {
             "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
@@ -272,7 +264,7 @@ class VkExecutor(FrameExecutor):
             # descriptor sets written once and scene draws recorded once, then replayed
             # (vkext.bundles); RFW_VK_BUNDLES=0 writes and records them every frame: the
             # baseline a benchmark measures against in the same run
-            if os.environ.get("RFW_VK_BUNDLES", "1") != "0":
+            if env.get("RFW_VK_BUNDLES"):
                 self.sets = SetCache(device, self.allocator)
                 self.bundles = BundleCache(device)
             for p in passes.values():

@@ -24,7 +24,6 @@ and ``RFW_POISON=1`` (``rfw run --order-seed N --poison`` sets these). The vk ex
 
 from __future__ import annotations
 
-import os
 from collections import Counter
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -33,7 +32,8 @@ from dataclasses import dataclass, replace
 from functools import reduce
 from typing import Any
 
-from rfw.errors import RfwError, check_number
+from rfw import env
+from rfw.errors import check_number
 from rfw.graph import CompiledGraph
 from rfw.graph.formats import format_info
 from rfw.graph.plan import Barrier
@@ -44,7 +44,7 @@ from .consts import const, ffi, lib
 from .memory import Buffer, Image
 
 SEED_ENV, POISON_ENV = "RFW_ORDER_SEED", "RFW_POISON"
-MAX_SEED = 2**32 - 1
+MAX_SEED = env.MAX_SEED
 
 # the patterns: loud, and never what a pass that writes its output leaves behind
 NAN = float("nan")
@@ -90,29 +90,11 @@ def mode() -> Fuzz:
     m = _MODE.get()
     if m is not None:
         return m
-    seed = os.environ.get(SEED_ENV, "").strip()
-    return Fuzz(_seed_from_env(seed) if seed else None, _flag_from_env())
+    return Fuzz(env.get(SEED_ENV), env.get(POISON_ENV))
 
 
 def _check_seed(value: Any, key: str) -> int:
     return check_number(value, key, kind=int, lo=0, hi=MAX_SEED)
-
-
-def _seed_from_env(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise RfwError(f"{SEED_ENV} must be an integer, not {text!r}") from None
-    return _check_seed(value, SEED_ENV)
-
-
-def _flag_from_env() -> bool:
-    text = os.environ.get(POISON_ENV, "").strip().lower()
-    if text in ("", "0", "false", "no", "off"):
-        return False
-    if text in ("1", "true", "yes", "on"):
-        return True
-    raise RfwError(f"{POISON_ENV} must be 1 or 0, not {text!r}")
 
 
 def prepare(plan: CompiledGraph) -> tuple[CompiledGraph, Poisoner | None]:

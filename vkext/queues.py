@@ -25,11 +25,11 @@ they are (a pass's begin and end are on its own queue).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from rfw import env
 from rfw.errors import RfwError
 from rfw.graph import CompiledGraph
 from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, QueuePlan, Submission, Transfer
@@ -98,7 +98,7 @@ def async_queues(device: VkDevice, plan: CompiledGraph,
     its barriers, the executor's), and those of a pass on another family than the graphics
     one are put as its queue can record them (:meth:`AsyncQueues.barriers_for`)."""
     q = plan.queues
-    if q is None or (COMPUTE not in q.queues and os.environ.get(SPAN_ENV, "0") != "1"):
+    if q is None or (COMPUTE not in q.queues and not env.get(SPAN_ENV)):
         return None
     runner = AsyncQueues(device, q)
     for table in barriers:

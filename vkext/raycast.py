@@ -308,10 +308,9 @@ def mapped_streams(device: VkDevice) -> tuple[bool, bool]:
     ``rays``, ``hits`` or ``host`` (both, see :func:`rays_in_host_memory`); unset (or
     ``auto``) both where memory is device-local, host-visible and host-cached at once
     (unified memory: no copy is worth making), else neither: a discrete GPU stages."""
-    value = os.environ.get("RFW_RAYCAST_MAPPED", "auto")
-    if value != "auto" and value not in PLACEMENTS:
-        raise RfwError(f"RFW_RAYCAST_MAPPED is {', '.join(PLACEMENTS)} or auto, not "
-                       f"{value!r}", element="vkext.raycast")
+    from rfw import env
+
+    value = env.get("RFW_RAYCAST_MAPPED")  # PLACEMENTS or auto, checked there
     if value != "auto":
         return PLACEMENTS[value]
     unified = bool(_type_bits(device, [DEVICE_LOCAL, HOST_VISIBLE, HOST_COHERENT,
@@ -326,7 +325,9 @@ def rays_in_host_memory() -> bool:
     trace reads them across the bus instead of a copy doing so first (the H200 at 921,600
     rays: the staged copy in took 0.62 ms of GPU time, writing device-local host-visible
     memory 2.64 ms of host time against 1.63 for host-cached staging)."""
-    return os.environ.get("RFW_RAYCAST_MAPPED") == "host"
+    from rfw import env
+
+    return env.get("RFW_RAYCAST_MAPPED") == "host"
 
 
 def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,

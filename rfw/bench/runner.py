@@ -13,7 +13,6 @@ import json
 import os
 import platform
 import random
-import re
 import shutil
 import subprocess
 import sys
@@ -252,22 +251,17 @@ def environment() -> dict[str, Any]:
             **({} if clocks else {"gpu_clocks_note": NO_CLOCKS})}
 
 
-# one line of printable characters, as a hash or a describe string is (set by scripts)
-_COMMIT_RE = re.compile(r"[0-9A-Za-z][0-9A-Za-z._+/-]{0,99}")
 NO_CLOCKS = "not reported: no nvidia-smi on this machine (a CPU driver such as lavapipe " \
             "has no GPU clocks)"
 
 
 def _commit() -> tuple[str, str]:
     """``(commit, where it came from)``: ``RFW_COMMIT``, ``git`` or ``none``."""
-    given = os.environ.get("RFW_COMMIT")
-    if given is not None and given.strip():
-        text = given.strip()
-        if not _COMMIT_RE.fullmatch(text):
-            raise RfwError("expected a commit (one word of letters, digits and ._+/-, at "
-                           f"most 100), got {given[:40]!r}", file="RFW_COMMIT",
-                           element="environment")
-        return text, "RFW_COMMIT"
+    from ..env import get
+
+    given = get("RFW_COMMIT")  # one word, as a hash or a describe string is (rfw.env)
+    if given is not None:
+        return given, "RFW_COMMIT"
 
     def git(*args: str) -> str:
         try:

@@ -10,7 +10,6 @@ and for names nobody knows, one line says what to do.
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -32,8 +31,11 @@ def config_scene(cfg: Any, *, fetch: bool = False, flag: bool = False) -> Any:
 
 
 def fetch_allowed(flag: bool = False) -> bool:
-    """``flag`` (``--fetch``), else ``RFW_FETCH`` set to 1/true/yes/on."""
-    return flag or os.environ.get(FETCH_ENV, "").strip().lower() in ("1", "true", "yes", "on")
+    """``flag`` (``--fetch``), else ``RFW_FETCH`` (1/true/yes/on; 0/false/no/off or unset:
+    no; anything else is refused, :func:`rfw.env.flag`)."""
+    from .. import env
+
+    return flag or env.get(FETCH_ENV)
 
 
 def known_names() -> list[str]:

@@ -102,5 +102,5 @@ def test_a_bad_switch_is_one_line_and_exit_2(tmp_path, value, code):
                          env={**os.environ, "RFW_VK_FRAME_REPLAY": value})
     assert run.returncode == code, run.stderr
     if code:
-        assert run.stderr.count("\n") == 1 and "RFW_VK_FRAME_REPLAY: must be 0 or 1" in \
+        assert run.stderr.count("\n") == 1 and "RFW_VK_FRAME_REPLAY: expected 0 or 1" in \
             run.stderr and "Traceback" not in run.stderr

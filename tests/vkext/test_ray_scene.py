@@ -533,7 +533,7 @@ def test_bad_out_is_one_line(vk_device, case):
 
 def test_a_bad_placement_setting_is_one_line(vk_device, monkeypatch):
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "yes")
-    with pytest.raises(RfwError, match=r"^vkext\.raycast: RFW_RAYCAST_MAPPED is 0, 1, rays, "
+    with pytest.raises(RfwError, match=r"^RFW_RAYCAST_MAPPED: expected 0, 1, rays, "
                                         r"hits, host or auto, not 'yes'$"):
         rfw.RayScene(_TRI, _FACES, device=vk_device)
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "auto")  # control: the documented values pass

@@ -27,8 +27,9 @@ FORMAT = 1  # bump when a converter changes its output: cached scenes are then r
 
 def default_cache() -> Path:
     """``$RFW_CACHE`` if set, else ``~/.cache/rfw/scenes``."""
-    env = os.environ.get("RFW_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "rfw" / "scenes"
+    from ... import env
+
+    return env.get("RFW_CACHE") or Path.home() / ".cache" / "rfw" / "scenes"
 
 
 # ---------------------------------------------------------------------------------------------
