@@ -22,7 +22,7 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -70,10 +70,8 @@ def watching_shaders() -> Iterator[dict[Path, bytes]]:
             seen.setdefault(Path(p).resolve(), data)
 
     def wgsl(path: Path, *args: Any) -> None:
-        try:
+        with suppress(OSError):  # unreadable: the compile itself says why
             seen.setdefault(Path(path).resolve(), Path(path).read_bytes())
-        except OSError:
-            pass  # the compile itself says why
         expand(path, *args)
 
     spirv._sources, shaders._expand = glsl, wgsl  # type: ignore[assignment]
