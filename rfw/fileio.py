@@ -19,10 +19,8 @@ def check_target(path: str | Path, *, element: str | None = None) -> Path:
     path = Path(path)
     try:
         st = os.stat(path)
-    except FileNotFoundError:
+    except OSError:  # nothing there (or unreachable): the write itself says why it fails
         return path
-    except OSError as e:
-        raise RfwError(e.strerror or str(e), file=str(path), element=element) from None
     if not stat.S_ISREG(st.st_mode):
         raise RfwError(f"exists and is {_kind(st.st_mode)}, not a regular file: refused as "
                        "an output", file=str(path), element=element)
