@@ -12,6 +12,11 @@ from typing import Any
 import numpy as np
 
 DIFF_CMAP = "inferno"  # perceptually ordered, black at zero: unchanged pixels stay dark
+# rows per step of psnr and abs_diff: a 16384x16384 image (what --size allows) in float64
+# would be 6 GiB per operand
+_ROWS = 512
+# FLIP and SSIM hold several float copies of both images: larger images get PSNR only
+PERCEPTUAL_MAX_PIXELS = 4096 * 4096
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
@@ -25,19 +30,27 @@ def _rgb(image: np.ndarray) -> np.ndarray:
 
 def psnr(reference: np.ndarray, test: np.ndarray, *, peak: float = 255.0) -> float:
     """Peak signal-to-noise ratio in dB over RGB (alpha ignored); ``inf`` for identical."""
-    a, b = _rgb(reference).astype(np.float64), _rgb(test).astype(np.float64)
+    a, b = _rgb(reference), _rgb(test)
     if a.shape != b.shape:
         raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
-    mse = float(np.mean((a - b) ** 2))
+    total = 0.0
+    for y in range(0, a.shape[0], _ROWS):  # a band at a time: bounded memory at any size
+        d = a[y:y + _ROWS].astype(np.float64) - b[y:y + _ROWS]
+        total += float(np.sum(d * d))
+    mse = total / max(a.size, 1)
     return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
 
 
 def abs_diff(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
     """``|reference - test|`` in 8-bit steps, max over RGB."""
-    a, b = _rgb(reference).astype(np.int16), _rgb(test).astype(np.int16)
+    a, b = _rgb(reference), _rgb(test)
     if a.shape != b.shape:
         raise ValueError(f"images differ in shape: {a.shape} vs {b.shape}")
-    return np.abs(a - b).max(axis=2).astype(np.uint8)
+    out = np.empty(a.shape[:2], np.uint8)
+    for y in range(0, a.shape[0], _ROWS):
+        d = a[y:y + _ROWS].astype(np.int16) - b[y:y + _ROWS]
+        out[y:y + _ROWS] = np.abs(d).max(axis=2)
+    return out
 
 
 def diff_image(reference: np.ndarray, test: np.ndarray, *,
@@ -53,8 +66,10 @@ def diff_image(reference: np.ndarray, test: np.ndarray, *,
 
 
 def scaled_diff(d: np.ndarray, top: int) -> np.ndarray:
-    """An :func:`abs_diff` colour-mapped from black (0) to ``top`` 8-bit steps."""
-    return colorize(d / max(int(top), 1))
+    """An :func:`abs_diff` colour-mapped from black (0) to ``top`` 8-bit steps (through a
+    table of its 256 values: the map's float RGBA of every pixel would be 32 bytes each)."""
+    table = colorize(np.arange(256) / max(int(top), 1))
+    return table[np.asarray(d, np.uint8)]
 
 
 def scale_text(top: int, *, own_max: int | None = None) -> str:
@@ -129,6 +144,9 @@ def compare(reference: np.ndarray, test: np.ndarray) -> dict[str, Any]:
     d = abs_diff(reference, test)
     out: dict[str, Any] = {"psnr": psnr(reference, test), "diff_max": int(d.max()),
                            "abs_diff": d}
+    if reference.shape[0] * reference.shape[1] > PERCEPTUAL_MAX_PIXELS:
+        out["ssim"] = None  # too large for either: PSNR and the difference only
+        return out
     f = flip(reference, test)
     if f is not None:
         out["flip"], out["flip_map"] = f
