@@ -61,6 +61,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "KHR_mesh_quantization",  # integer positions / normals: any component type is read
     "EXT_texture_webp",  # Pillow decodes WebP
     "KHR_texture_transform",  # applied to the primitive's texture coordinates
+    "KHR_draco_mesh_compression",  # decoded by DracoPy
 })
 
 
@@ -738,13 +739,19 @@ class _Loader:
                 self.unread["morphs"].append(where)
             if "POSITION" not in attrs:
                 self.fail(where, "has no POSITION attribute")
-            pos = self.accessor(attrs["POSITION"], f"POSITION of {where}", ("VEC3",))
+            draco = (prim.extensions or {}).get("KHR_draco_mesh_compression")
+            decoded = {} if draco is None else self.draco(draco, mode,
+                                                          f"{where}.extensions."
+                                                          "KHR_draco_mesh_compression")
+            pos = decoded["POSITION"] if "POSITION" in decoded else \
+                self.accessor(attrs["POSITION"], f"POSITION of {where}", ("VEC3",))
             n = len(pos)
 
             def attribute(name: str, types: tuple[str, ...]) -> np.ndarray | None:
                 if name not in attrs:
                     return None
-                a = self.accessor(attrs[name], f"{name} of {where}", types)
+                a = decoded[name] if name in decoded else \
+                    self.accessor(attrs[name], f"{name} of {where}", types)
                 if len(a) != n:
                     self.fail(f"accessors[{attrs[name]}] ({name} of {where})",
                               f"count {len(a)} differs from POSITION's {n}")
@@ -767,7 +774,9 @@ class _Loader:
             if colors is not None:
                 material = self.tint(material, colors, where)
 
-            if prim.indices is not None:
+            if "indices" in decoded:
+                iwhere, idx = f"{where} (Draco)", decoded["indices"]
+            elif prim.indices is not None:
                 iwhere = f"accessors[{prim.indices}] (indices of {where})"
                 idx = self.accessor(prim.indices, f"indices of {where}", ("SCALAR",),
                                     indices=True)
@@ -802,6 +811,37 @@ class _Loader:
                 indices=np.ascontiguousarray(idx, np.uint32),
                 material=material,
             )
+
+    def draco(self, ext: Any, mode: int, where: str) -> dict[str, np.ndarray]:
+        """A KHR_draco_mesh_compression primitive's attributes (float64, by glTF name) and
+        its triangle indices ("indices"), decoded from its buffer view."""
+        if not isinstance(ext, dict) or not isinstance(ext.get("attributes"), dict):
+            self.fail(where, "must be an object with bufferView and attributes")
+        if mode != 4:
+            self.fail(where, f"mode {mode}: Draco primitives must be TRIANGLES (4)")
+        import DracoPy  # only needed for Draco-compressed scenes
+
+        data, _, _ = self.view(ext.get("bufferView"), where)
+        try:
+            mesh = DracoPy.decode(bytes(data))
+        except Exception as e:  # the decoder's errors have no common base
+            self.fail(where, f"cannot decode the Draco data ({type(e).__name__}: {e})")
+        faces = np.asarray(getattr(mesh, "faces", None) if mesh is not None else None)
+        if faces is None or faces.ndim != 2 or faces.shape[1] != 3:
+            self.fail(where, "the Draco data is not a triangle mesh")
+        out = {"indices": faces.astype(np.int64).ravel()}
+        for name, uid in ext["attributes"].items():
+            found = mesh.get_attribute_by_unique_id(uid) \
+                if isinstance(uid, int) and not isinstance(uid, bool) else None
+            if found is None:
+                self.fail(where, f"attributes.{name}: no Draco attribute has id "
+                                 f"{json.dumps(uid)}")
+            values = np.asarray(found["data"], np.float64)
+            values = values.reshape(len(values), -1)
+            if not np.all(np.isfinite(values)):
+                self.fail(where, f"attributes.{name}: contains NaN or infinity")
+            out[name] = values
+        return out
 
     def triangles(self, idx: np.ndarray, mode: int, where: str) -> np.ndarray:
         """Triangle-list indices for TRIANGLES, TRIANGLE_STRIP or TRIANGLE_FAN."""

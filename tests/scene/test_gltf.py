@@ -715,8 +715,10 @@ MALFORMED = {
                                   g.doc.__setitem__("samplers", [{"wrapS": 1}]),
                                   g.doc["textures"][0].__setitem__("sampler", 0)),
                     ["samplers[0]", "wrapS 1"]),
-    "draco required": (_set("extensionsRequired", ["KHR_draco_mesh_compression"]),
-                       ["extensionsRequired", "KHR_draco_mesh_compression", "not supported"]),
+    # KHR_draco_mesh_compression is read (tests/scene/test_real_files.py)
+    "webgl technique required": (_set("extensionsRequired", ["KHR_technique_webgl"]),
+                                 ["extensionsRequired", "KHR_technique_webgl",
+                                  "not supported"]),
     "meshopt and basisu": (_set("extensionsRequired", ["EXT_meshopt_compression",
                                                        "KHR_texture_basisu"]),
                            ["EXT_meshopt_compression, KHR_texture_basisu"]),

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rfw.scene import load_gltf, load_meshfile
+from rfw.scene import SceneError, load_gltf, load_meshfile
 from rfw.scene.model import Material, Mesh, Scene
 from rfw.scene.sides import back_faced, closed_outward, with_back_faces
 
@@ -297,3 +297,28 @@ def test_runner_summary_is_json_lines(tmp_path):
     assert rows["old.gltf"]["skipped"].startswith("glTF 1.0")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"] == {"renders (valid)": 2, "skipped (not glTF 2.0)": 1}
+
+
+def test_draco_primitive_is_decoded(tmp_path):
+    import DracoPy
+
+    pos = QUAD_POS.astype(np.float32)
+    blob = DracoPy.encode(pos, QUAD_IDX.reshape(-1, 3), quantization_bits=14)
+    g = Gltf()
+    view = g.view(bytes(blob))
+    acc = len(g.doc["accessors"])
+    g.doc["accessors"] += [{"componentType": 5126, "count": 4, "type": "VEC3"},
+                           {"componentType": 5123, "count": 6, "type": "SCALAR"}]
+    g.doc["extensionsUsed"] = g.doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    g.node(mesh=g.mesh({"attributes": {"POSITION": acc}, "indices": acc + 1, "extensions": {
+        "KHR_draco_mesh_compression": {"bufferView": view, "attributes": {"POSITION": 0}}}}))
+    mesh = load_gltf(g.write(tmp_path)).meshes[0]
+    assert mesh.triangle_count == 2
+    # the decoder may reorder vertices: the same corners, within the quantization
+    np.testing.assert_allclose(np.sort(mesh.positions[mesh.indices], axis=0),
+                               np.sort(pos[QUAD_IDX], axis=0), atol=1e-3)
+    # control: broken Draco bytes are one SceneError naming the element
+    start = g.doc["bufferViews"][view]["byteOffset"]
+    g.bin[start:start + 8] = b"\0" * 8
+    with pytest.raises(SceneError, match="KHR_draco_mesh_compression: cannot decode"):
+        load_gltf(g.write(tmp_path, "broken.gltf"))
