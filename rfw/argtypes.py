@@ -16,6 +16,17 @@ def size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def backend(text: str) -> str:
+    """``--backend NAME``: an empty name is refused here (``args.backend or default`` would
+    take it for no --backend); an unknown one by :func:`rfw.backend.get_backend`."""
+    if not text.strip():
+        from .backend import installed
+
+        raise argparse.ArgumentTypeError(f"names no backend; installed: "
+                                         f"{', '.join(installed()) or 'none'}")
+    return text
+
+
 def count(lo: int, hi: int) -> typing.Callable[[str], int]:
     """An argparse type: an integer in [lo, hi] (``--frames 0`` is an error, not 1)."""
 

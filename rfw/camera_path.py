@@ -338,8 +338,12 @@ def check_cameras(path: CameraPath, cfg: Any) -> None:
                          up_element=where)
         return
     for k in range(8):
-        check_camera(path.at(k / 8), file=cfg.source, element="camera.path", aspect=aspect,
-                     up_given=up_given)
+        try:
+            check_camera(path.at(k / 8), file=cfg.source, element="camera.path",
+                         aspect=aspect, up_given=up_given)
+        except RfwError as e:
+            raise RfwError(f"the orbit's camera at t = {k / 8:g}: {e.message}",
+                           file=cfg.source, element="camera.path") from None
 
 
 def describe(camera: Any, t: float) -> dict[str, Any]:

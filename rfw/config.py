@@ -32,7 +32,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .errors import check_identifier, check_number
+from . import env
+from .errors import RfwError, check_identifier, check_number
 from .graph import Graph, GraphBuilder, GraphError
 from .graph.errors import did_you_mean
 from .graph.resources import SizeRule
@@ -45,7 +46,9 @@ _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar", "gltf", "path")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
 MAX_SIZE = 16384  # pixels per side: beyond any device's 2D image limit we know of
-MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for (rfw.frame.frames_in_flight)
+# frames submitted and not waited for (rfw.frame.frames_in_flight): one bound for the
+# config key, --set and RFW_FRAMES_IN_FLIGHT
+MAX_FRAMES_IN_FLIGHT = env.MAX_FRAMES_IN_FLIGHT
 
 
 @dataclass
@@ -151,7 +154,7 @@ def _camera(value: Any, source: str, prefix: str = "") -> dict[str, Any]:
     """The ``camera`` table checked: vectors, yfov in degrees, near and far, ``gltf`` (a
     scene camera's name or index) and ``path`` (:mod:`rfw.camera_path`). ``prefix``
     (``"--set "``) goes before the key an error names."""
-    from .camera_path import check_path
+    from .camera_path import check_path, check_vector
 
     camera = _table(value, "camera", source)
     _check_keys(camera, _CAMERA_KEYS, "camera", source)
@@ -159,9 +162,10 @@ def _camera(value: Any, source: str, prefix: str = "") -> dict[str, Any]:
     for key, v in camera.items():
         where = f"{prefix}camera.{key}"
         if key in ("position", "target", "up"):
-            if not (isinstance(v, list) and len(v) == 3):
-                raise _fail(source, f"must be three numbers [x, y, z], not {v!r}", where)
-            out[key] = [check_number(x, where, file=source, element=where) for x in v]
+            try:
+                out[key] = check_vector(v, where, source)
+            except RfwError as e:
+                raise _fail(source, e.message, where) from None
         elif key == "yfov":
             out[key] = check_number(v, where, lo=0.01, hi=179.0, file=source, element=where)
         elif key == "gltf":
@@ -177,7 +181,26 @@ def _camera(value: Any, source: str, prefix: str = "") -> dict[str, Any]:
         raise _fail(source, "'znear' must be smaller than 'zfar'", f"{prefix}camera")
     if "up" in out:
         _check_up(out, source, f"{prefix}camera.up")
+    if "position" in out and "target" in out:  # the view is the config's: checked now
+        _check_matrices(out, source, prefix)
     return out
+
+
+def _check_matrices(camera: dict[str, Any], source: str, prefix: str) -> None:
+    """The camera's float32 matrices keep a picture (:func:`rfw.camera_path.check_camera`),
+    with the scene camera's defaults for keys the table leaves out (rfw.frame.camera_for
+    checks again with the scene's own)."""
+    from .camera_path import check_camera
+    from .scene.model import Camera
+
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in camera.items()
+              if k in ("position", "target", "up", "znear", "zfar")}
+    if "yfov" in camera:
+        values["yfov"] = math.radians(camera["yfov"])
+    try:
+        check_camera(Camera(**values), file=source, element=f"{prefix}camera.position")
+    except RfwError as e:
+        raise _fail(source, e.message, e.element) from None
 
 
 def _check_up(camera: dict[str, Any], source: str, where: str) -> None:

@@ -17,7 +17,6 @@ counts that drain), so images and timing samples are what waiting for every fram
 
 from __future__ import annotations
 
-import os
 import statistics
 import time
 from collections import deque
@@ -45,16 +44,10 @@ def frames_in_flight(value: Any = None) -> int:
     if value is not None:
         return check_number(value, "frames_in_flight", kind=int, lo=1,
                             hi=MAX_FRAMES_IN_FLIGHT, element="frames_in_flight")
-    raw = os.environ.get(FRAMES_IN_FLIGHT_ENV, "").strip()
-    if not raw:
-        return DEFAULT_FRAMES_IN_FLIGHT
-    try:
-        number = int(raw, 10)
-    except ValueError:
-        raise RfwError(f"must be a whole number from 1 to {MAX_FRAMES_IN_FLIGHT}, not "
-                       f"{raw!r}", element=FRAMES_IN_FLIGHT_ENV) from None
-    return check_number(number, FRAMES_IN_FLIGHT_ENV, kind=int, lo=1, hi=MAX_FRAMES_IN_FLIGHT,
-                        element=FRAMES_IN_FLIGHT_ENV)
+    from . import env
+
+    chosen = env.get(FRAMES_IN_FLIGHT_ENV)
+    return DEFAULT_FRAMES_IN_FLIGHT if chosen is None else chosen
 
 
 class InFlight:
@@ -262,6 +255,13 @@ def camera_for(cfg: Config, scene: Any) -> Any:
     if not cam.znear < cam.zfar:  # one of them from the scene's camera
         raise RfwError(f"znear {cam.znear:g} must be smaller than zfar {cam.zfar:g} (the "
                        f"other from the scene's camera)", file=cfg.source, element="camera")
+    from .camera_path import check_camera
+
+    # float32 keeps a picture: the config's keys over the scene's camera, checked together
+    check_camera(cam, file=cfg.source if values else getattr(scene, "source", None),
+                 element="camera.position" if "position" in values else "camera",
+                 aspect=cfg.size[0] / cfg.size[1], up_given="up" in values,
+                 up_element="camera.up")
     return cam
 
 

@@ -61,7 +61,7 @@ def test_commit_from_git_when_unset(monkeypatch):
 @pytest.mark.parametrize("bad", ["abc def", "a\nb", "-rf", "x" * 101])
 def test_a_bad_rfw_commit_is_refused(monkeypatch, bad):
     monkeypatch.setenv("RFW_COMMIT", bad)
-    with pytest.raises(RfwError, match="^RFW_COMMIT: expected a commit"):
+    with pytest.raises(RfwError, match=r"^RFW_COMMIT: expected a commit"):
         environment()
 
 

@@ -126,7 +126,9 @@ def test_a_bad_value_is_one_line_naming_the_variable(monkeypatch, name, raw, say
 
 def test_a_long_value_is_shortened_and_control_characters_are_escaped(monkeypatch):
     monkeypatch.setenv("RFW_FETCH", "x" * 500 + "\n\x1b[2J")
-    line = str(pytest.raises(RfwError, env.get, "RFW_FETCH").value)
+    with pytest.raises(RfwError) as err:
+        env.get("RFW_FETCH")
+    line = str(err.value)
     assert len(line) < 160 and "\n" not in line and "\x1b" not in line
 
 
