@@ -19,7 +19,7 @@ import pytest
 from PIL import Image
 
 from rfw.backends.scene_data import mip_chain
-from rfw.scene import SceneError, load_gltf, limits
+from rfw.scene import SceneError, limits, load_gltf
 from rfw.scene.model import Instance, Material, Mesh, Scene, Texture
 
 ROOT = Path(__file__).resolve().parents[2]
