@@ -151,9 +151,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--backends", default="wgpu,vk")
     ap.add_argument("--config", default="configs/flat.toml")
     ap.add_argument("--size", default="64x64")
-    ap.add_argument("--only", default="", help="substring a file's path must contain")
+    ap.add_argument("--only", default="",
+                    help="comma-separated substrings: a file's path must contain one")
     args = ap.parse_args(argv)
-    files = [p for p in find_files(args.root) if args.only in str(p)]
+    only = args.only.split(",")
+    files = [p for p in find_files(args.root) if any(o in str(p) for o in only)]
     backends = [b for b in args.backends.split(",") if b]
     gltf = [p for p in files if p.suffix.lower() in (".gltf", ".glb")]
     versions = {p: gltf_version(p) for p in gltf}
@@ -161,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     reports = validate(v2, args.validator)
     args.out.mkdir(parents=True, exist_ok=True)
     counts: Counter = Counter()
+    same: list[bool] = []
     refused: Counter = Counter()
     needs: Counter = Counter()
     with tempfile.TemporaryDirectory() as tmp, \
@@ -182,9 +185,12 @@ def main(argv: list[str] | None = None) -> int:
             images = [r.pop("image") for r in results.values() if "image" in r]
             if len(images) == len(backends) > 1:
                 row["same_image"] = all(np.array_equal(images[0], i) for i in images[1:])
+                same.append(row["same_image"])
             row["backends"] = results
             first = results[backends[0]]
-            valid = row.get("valid", True)  # mesh files: no validator
+            # mesh files have no validator: "mesh file" stands for the verdict
+            judged = "mesh file" if "valid" not in row else \
+                "valid" if row["valid"] else "invalid"
             if any(r.get("traceback") for r in results.values()):
                 verdict = "TRACEBACK"
             elif first["exit"] == 0 and first.get("covered", 0) > 0:
@@ -198,16 +204,17 @@ def main(argv: list[str] | None = None) -> int:
                 if missing:
                     needs[missing.group(1)] += 1
                 else:
-                    refused[f"{'valid' if valid else 'invalid'}: {reason(first)}"] += 1
+                    refused[f"{judged}: {reason(first)}"] += 1
             row["verdict"] = verdict
-            counts[f"{verdict} ({'valid' if valid else 'invalid'})"] += 1
+            counts[f"{verdict} ({judged})"] += 1
             log.write(json.dumps(row) + "\n")
             log.flush()
-            print(f"{verdict:16} {'' if valid else '(invalid) '}{rel}", flush=True)
+            print(f"{verdict:16} ({judged}) {rel}", flush=True)
     summary = {"root": str(args.root), "files": len(files), "backends": backends,
                "config": args.config, "size": args.size, "counts": dict(counts),
                "refused": dict(refused.most_common()), "needs_extension": dict(needs),
-               "validated": bool(reports)}
+               "validated": bool(reports),
+               "same_image": dict(Counter(str(r) for r in same))}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(json.dumps(summary, indent=2))
     return 0
