@@ -360,7 +360,7 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--size", type=argtypes.size, help="output size WxH")
     run.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES),
                      help="frames to time (after one warm-up)")
-    run.add_argument("--backend", metavar="NAME",
+    run.add_argument("--backend", metavar="NAME", type=argtypes.backend,
                      help="backend of unpinned passes: wgpu, vk or another installed one "
                      "(default: vk when every pass is pinned to vk, else wgpu)")
     run.add_argument("--validate", action="store_true",
@@ -397,7 +397,7 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES), help="close after this many frames")
     v.add_argument("--keys", help="comma-separated key presses, one per frame (scripting)")
     v.add_argument("--no-overlay", action="store_true", help="start without the overlay (H)")
-    v.add_argument("--backend", metavar="NAME",
+    v.add_argument("--backend", metavar="NAME", type=argtypes.backend,
                    help="backend of unpinned passes: wgpu, vk or another installed one "
                    "(default: the one every pass is pinned to, else wgpu)")
     v.add_argument("--validate", action="store_true",
@@ -493,6 +493,9 @@ def _main(argv: list[str]) -> int:
 
     try:
         args = parser().parse_args(argv)  # a refused command line touches no output folder
+        from .env import check_all
+
+        check_all()  # every RFW_* variable set, read or not by this command
         return args.func(args)
     except Interrupted as e:
         print(e.line(), file=sys.stderr)
