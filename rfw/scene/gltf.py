@@ -394,12 +394,10 @@ class _Loader:
                       f"{', '.join(sorted(SUPPORTED_EXTENSIONS))})")
 
     def say_unread(self) -> None:
-        """One warning line per kind of thing read past; a file whose primitives were all
-        points or lines is refused, as a mesh file without triangles is."""
-        skipped = self.unread["points"] + self.unread["lines"]
-        if skipped and not self.scene.meshes:
-            self.fail("meshes", f"no triangles to draw: all {len(skipped)} primitives the "
-                                "scene uses are points or lines")
+        """One warning line per kind of thing read past. A file whose primitives are all
+        points or lines is a scene with nothing drawable, rendered as an empty one is (the
+        background, with the scene's own 'nothing is drawable' line): issue 21 treats the
+        two alike."""
         if self.doc.animations:
             self.unread["animations"].append("animations")
         for kind, message in _UNREAD.items():

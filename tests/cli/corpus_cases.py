@@ -154,7 +154,7 @@ GLTF_CASES: list[tuple[str, object, str]] = [
     ("node-cycle", _edit("nodes.0.children", [0]), "nodes[0]"),
     ("mesh-no-primitives", _edit("meshes.0.primitives", []), "meshes[0]"),
     ("primitives-is-null", _edit("meshes.0.primitives", None), "meshes[0]"),
-    ("mode-points", _edit("meshes.0.primitives.0.mode", 0), "meshes[0].primitives[0]"),
+    ("mode-unknown", _edit("meshes.0.primitives.0.mode", 7), "meshes[0].primitives[0]"),
     ("mode-string", _edit("meshes.0.primitives.0.mode", "triangles"), "mode"),
     ("no-position", _edit("meshes.0.primitives.0.attributes", {}), "meshes[0].primitives[0]"),
     ("position-out-of-range", _edit("meshes.0.primitives.0.attributes", {"POSITION": 9}),

@@ -680,11 +680,7 @@ MALFORMED = {
                          ["accessors[1] (TEXCOORD_0", "normalized"]),
     "negative offset": (_set("accessors.0.byteOffset", -4), ["accessors[0]", "byteOffset"]),
     "zero count": (_accessor_count(0), ["accessors[0]", "count"]),
-    # points and lines among triangles are skipped (tests/scene/test_real_files.py); alone,
-    # nothing is left to draw
-    "lines": (_set("meshes.0.primitives.0.mode", 1), ["meshes: no triangles to draw"]),
-    "points": (_set("meshes.0.primitives.0.mode", 0), ["meshes: no triangles to draw",
-                                                        "1 primitives", "points or lines"]),
+    # points and lines are skipped, alone too (tests/scene/test_real_files.py)
     "unknown mode": (_set("meshes.0.primitives.0.mode", 7), [PRIM, "mode 7"]),
     "no position": (_set("meshes.0.primitives.0.attributes", {"TEXCOORD_0": 1}),
                     [PRIM, "no POSITION"]),

@@ -147,14 +147,20 @@ def test_point_primitive_among_triangles_is_skipped_with_one_warning(tmp_path):
     assert run(g.write(tmp_path, "plain.gltf"), tmp_path / "plain")[:2] == (0, [])
 
 
-def test_only_lines_is_one_error(tmp_path):
+def test_only_lines_renders_the_background_as_an_empty_scene_does(tmp_path):
+    # nothing drawable is treated as an empty scene (issue 21): the background, one line
+    # for what was skipped and one saying nothing is drawable
     g = Gltf()
     g.node(mesh=g.mesh(g.primitive(mode=1), g.primitive(idx=None, mode=3)))
-    code, err, _ = run(g.write(tmp_path), tmp_path / "out")
-    assert code == 2 and len(err) == 1, err
-    assert err[0].endswith("scene.gltf: meshes: no triangles to draw: all 2 primitives the "
-                           "scene uses are points or lines")
-    assert not (tmp_path / "out").exists()
+    code, err, covered = run(g.write(tmp_path), tmp_path / "out")
+    assert code == 0 and covered == 0, err
+    assert len(err) == 2 and all(e.startswith("rfw: warning: ") for e in err), err
+    assert "meshes[0].primitives[0] and 1 more: LINES" in err[0], err
+    assert "nothing is drawable" in err[1], err
+    # control: an empty glTF scene says the second line only
+    g = Gltf()
+    code, err, covered = run(g.write(tmp_path, "empty.gltf"), tmp_path / "empty")
+    assert code == 0 and covered == 0 and len(err) == 1 and "nothing is drawable" in err[0]
 
 
 # ---------------------------------------------------------------------------------------------
