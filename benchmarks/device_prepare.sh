@@ -46,6 +46,8 @@ wheels=(
     # (566 MiB installed) cannot travel in a device call
     moderngl==5.13.0 glcontext==3.1.0 pygfx==0.17.0 pylinalg==0.6.8 freetype-py==2.5.1
     uharfbuzz==0.57.0 hsluv==5.0.5 jinja2==3.1.6 markupsafe==3.0.4
+    # glTF KHR_draco_mesh_compression
+    DracoPy==2.2.0
 )
 platforms=()
 for n in 17 27 28 31 34 35; do platforms+=(--platform "manylinux_2_${n}_x86_64"); done
