@@ -187,6 +187,31 @@ def workers(marker: str) -> list[str]:
     return found
 
 
+MOMENTS = ["imports", "checks", "staging", "frames"]
+
+
+def signal_at(proc: subprocess.Popen, out: Path, moment: str, sig: int) -> None:
+    """Send ``sig`` to ``proc`` at ``moment`` (held still meanwhile): "imports" (rfw's imports
+    under way, main() not started), "checks" (main()'s handlers installed, no lock yet),
+    "staging" (a staging folder in ``out``), "frames" (two frames staged there)."""
+    pid = proc.pid
+    if moment == "imports":
+        wait_for(proc, lambda: mapped(pid, "_rtoml"), "rfw's imports", pause=0.002)
+    elif moment == "checks":
+        wait_for(proc, lambda: signal.SIGTERM in caught(pid), "rfw's signal handlers",
+                 pause=0.002)
+    elif moment == "staging":
+        wait_for(proc, lambda: bool(staging_dirs(out)), "a staging folder")
+    else:
+        wait_for(proc, lambda: staged_frames(out) >= 2, "two staged frames", pause=0.01)
+    with stopped(proc):
+        if moment == "imports":  # the moment is what the test says it is
+            assert signal.SIGTERM not in caught(pid), "main() had started already"
+        if moment == "checks":
+            assert not (out / LOCK).exists(), "the lock was taken already"
+        os.kill(pid, sig)
+
+
 # -- judges ---------------------------------------------------------------------------------
 
 

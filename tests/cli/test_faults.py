@@ -33,6 +33,7 @@ from .faults_util import (
     FLAT,
     LOCK,
     LONG,
+    MOMENTS,
     QUICK,
     assert_kept,
     assert_refused,
@@ -50,6 +51,7 @@ from .faults_util import (
     read_only,
     rfw,
     seed,
+    signal_at,
     snapshot,
     staged_frames,
     staging_dirs,
@@ -59,17 +61,11 @@ from .faults_util import (
     workers,
 )
 
-_cache: dict[str, Path] = {}
-
 
 @pytest.fixture(scope="session")
-def home(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("faults-home")
-
-
-@pytest.fixture(scope="session")
-def env(home) -> dict[str, str]:
-    return env_for(home)
+def env(tmp_path_factory) -> dict[str, str]:
+    # home and caches shared by the session's rfw processes: a warm shader cache
+    return env_for(tmp_path_factory.mktemp("faults-home"))
 
 
 @pytest.fixture(scope="session")
@@ -91,27 +87,7 @@ def _frames(timings: Path) -> int:
 
 # -- 1. signals at several moments of rfw run ----------------------------------------------
 
-MOMENTS = ["imports", "checks", "staging", "frames"]
 SIGNALS = [signal.SIGINT, signal.SIGTERM]
-
-
-def _signal_at(proc: subprocess.Popen, out: Path, moment: str, sig: int) -> None:
-    pid = proc.pid
-    if moment == "imports":
-        wait_for(proc, lambda: mapped(pid, "_rtoml"), "rfw's imports", pause=0.002)
-    elif moment == "checks":
-        wait_for(proc, lambda: signal.SIGTERM in caught(pid), "rfw's signal handlers",
-                 pause=0.002)
-    elif moment == "staging":
-        wait_for(proc, lambda: bool(staging_dirs(out)), "a staging folder")
-    else:
-        wait_for(proc, lambda: staged_frames(out) >= 2, "two staged frames", pause=0.01)
-    with stopped(proc):
-        if moment == "imports":  # the moment is what the test says it is
-            assert signal.SIGTERM not in caught(pid), "main() had started already"
-        if moment == "checks":
-            assert not (out / LOCK).exists(), "the lock was taken already"
-        os.kill(pid, sig)
 
 
 @pytest.mark.parametrize("prev", ["previous", "none"])
@@ -122,7 +98,7 @@ def test_run_signal(tmp_path, env, good, moment, sig, prev):
     before = seed(good, out) if prev == "previous" else {}
     proc = start(["run", *LONG, "--out", str(out)], tmp_path, env)
     try:
-        _signal_at(proc, out, moment, sig)
+        signal_at(proc, out, moment, sig)
         rc, _, err = finish(proc)
     finally:
         kill_tree(proc)
