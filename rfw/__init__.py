@@ -7,9 +7,12 @@ Every public function and class checks its arguments: a bad one is an ``rfw.RfwE
 naming it (``rfw.RfwTypeError``, also a TypeError, for a wrong type).
 """
 
-from .errors import RfwError, RfwTypeError, RfwValueError
-from .passes import ComputePass, Pass, RenderPass, Settings, SettingsError, Tex2D
-from .registry import available, get_pass, register_pass
+from . import signals as _signals
+
+_signals.early()  # the rfw command: a signal while it still imports ends it in one line too
+from .errors import RfwError, RfwTypeError, RfwValueError  # noqa: E402
+from .passes import ComputePass, Pass, RenderPass, Settings, SettingsError, Tex2D  # noqa: E402
+from .registry import available, get_pass, register_pass  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -206,6 +206,9 @@ def _check_run_targets(folder: typing.Any, cfg: typing.Any) -> None:
     if frames.exists() and not frames.is_dir():
         raise RfwError("exists and is not a folder: --save-every writes its images there",
                        file=str(frames), element="--out")
+    if frames.is_dir():  # the frame images there are replaced or removed on success
+        for entry in frames.iterdir():
+            folder.target(f"{FRAMES}/{entry.name}")
 
 
 def _superseded(out: Path, outputs: typing.Any, written: list[Path]) -> list[Path]:

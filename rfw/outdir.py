@@ -111,9 +111,11 @@ class OutputFolder:
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise RfwError(f"in use by another rfw ({self._holder()}): wait for it or "
-                           "choose another folder", file=self.given,
-                           element=self.element) from None
+            holder = self._holder()
+            os.close(self._fd)  # not ours: the holder's .rfw-lock must stay
+            self._fd = None
+            raise RfwError(f"in use by another rfw ({holder}): wait for it or choose another "
+                           "folder", file=self.given, element=self.element) from None
         except OSError as e:  # a file system without flock (some network mounts)
             if e.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
                 raise

@@ -46,6 +46,23 @@ def _again(signum: int, frame: FrameType | None) -> None:
     os._exit(128 + signum)
 
 
+def early() -> None:
+    """When this process is the ``rfw`` command (the console script or ``python -m
+    rfw.cli``), end it with the one line and 128 + signal should SIGINT or SIGTERM come
+    while it imports, before ``rfw.cli.main`` installs the handlers that clean up."""
+    import sys
+
+    argv = list(getattr(sys, "orig_argv", sys.argv))
+    command = os.path.basename(sys.argv[0]) == "rfw" if sys.argv else False
+    if not (command or argv[1:3] == ["-m", "rfw.cli"]):
+        return
+    try:
+        for s in SIGNALS:
+            signal.signal(s, _again)
+    except ValueError:  # not the main thread
+        pass
+
+
 @contextlib.contextmanager
 def installed() -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` within the block (in the main thread;

@@ -169,7 +169,10 @@ def run(args: argparse.Namespace) -> int:
 
     # the runs and the report are staged: the folder's earlier bench is replaced only by a
     # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
-    with OutputFolder(out) as folder:
+    folder = OutputFolder(out)
+    for name in ("results.jsonl", "results.csv", REPORT_MD, REPORT_HTML):
+        folder.target(name)  # a FIFO or device there is refused before any run
+    with folder:
         try:
             results = run_plan(plan, folder.staging, progress=not args.no_progress,
                                executor=executor)

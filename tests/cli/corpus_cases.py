@@ -183,8 +183,8 @@ GLTF_CASES: list[tuple[str, object, str]] = [
         "byteLength": 44, "uri": "data:application/octet-stream;base64,"
         + base64.b64encode(NAN_BIN).decode()}]), "POSITION"),
     ("material-out-of-range", _edit("meshes.0.primitives.0.material", 4), "material"),
-    ("required-extension", gltf_doc(extensionsRequired=["KHR_draco_mesh_compression"],
-                                    extensionsUsed=["KHR_draco_mesh_compression"]),
+    ("required-extension", gltf_doc(extensionsRequired=["KHR_texture_basisu"],
+                                    extensionsUsed=["KHR_texture_basisu"]),
      "extensionsRequired"),
     ("camera-out-of-range", _edit("nodes.0.camera", 2), "camera"),
     ("camera-yfov-zero", gltf_doc(nodes=[{"mesh": 0}, {"camera": 0}], scenes=[{"nodes": [0, 1]}],
