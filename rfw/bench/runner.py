@@ -14,6 +14,7 @@ import os
 import platform
 import random
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -354,8 +355,7 @@ def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
     env = {**os.environ, **(env or {}), "PYTHONPATH": os.pathsep.join(
         [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
     try:
-        done = subprocess.run(_command(job, plan, out), capture_output=True, text=True,
-                              timeout=plan.timeout, check=False, env=env, cwd=cwd)
+        done = _worker(_command(job, plan, out), timeout=plan.timeout, env=env, cwd=cwd)
     except subprocess.TimeoutExpired:
         (out / "image.png").unlink(missing_ok=True)
         return {"error": f"timed out after {plan.timeout:g} s",
@@ -370,6 +370,29 @@ def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
         record = {"error": f"exit {done.returncode} after writing its record"}
     record["elapsed_s"] = elapsed
     return record
+
+
+def _worker(cmd: list[str], *, timeout: float, env: dict[str, str],
+            cwd: str | None) -> subprocess.CompletedProcess:
+    """``subprocess.run`` for a bench worker that a signal cannot orphan: SIGINT and SIGTERM
+    wait while it is started (CPython does not end a child whose ``Popen`` a signal broke
+    off after the fork), and anything that stops the wait, a signal too, kills it."""
+    from ..outdir import signals_held
+
+    def unblock() -> None:  # the worker itself takes signals again
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+
+    with signals_held():
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env, cwd=cwd, preexec_fn=unblock)
+    with proc:
+        try:
+            stdout, stderr = proc.communicate(timeout=timeout)
+        except BaseException:
+            proc.kill()
+            proc.wait()
+            raise
+    return subprocess.CompletedProcess(cmd, proc.returncode, stdout, stderr)
 
 
 def _read_record(path: Path) -> dict[str, Any] | None:
