@@ -216,6 +216,9 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     peers = [v for v in variants if v.kind == "peer"]
     doc = Doc()
     doc.h(1, "rfw benchmark")
+    partial = out_dir / "PARTIAL.txt"  # an interrupted bench's runs (rfw.bench.cli)
+    if partial.is_file():
+        doc.p("Partial results: " + " ".join(partial.read_text(errors="replace").split()))
     _environment(doc, records, pooled)
     _frame_table(doc, rfw)
     charts = _charts(out_dir, rfw)
