@@ -162,7 +162,8 @@ def test_html_onto_a_folder_is_one_line(tmp_path):
     folder.mkdir()
     done = rfw("graph", "plan", CONFIG, "--size", "32x18", "--html", folder, cwd=tmp_path)
     assert done.returncode == 2
-    assert done.stderr == f"rfw: error: {folder}: --html: is a folder, not a file to write\n"
+    assert done.stderr == (f"rfw: error: {folder}: --html: exists and is a folder, not a regular "
+                           "file: refused as an output\n")
     assert done.stdout == ""  # checked before the plan is printed
     assert [p.name for p in tmp_path.rglob("*")] == ["taken"]
     # a missing folder is made, as for every other output
