@@ -411,32 +411,15 @@ def old_frames(out_dir: Path) -> list[Path]:
                   for p in folder.glob(pattern) if p.is_file() or p.is_symlink())
 
 
-def clear_frames(out_dir: Path) -> None:
-    """Remove the per-frame images an earlier run left in ``<out_dir>/frames`` (and the
-    folder, if that empties it): every run clears them, with ``--save-every`` or without,
-    so none of them can pass for this run's frames."""
-    from .fileio import inside
-
-    folder = inside(out_dir, FRAMES_DIR)
-    if not folder.is_dir():
-        return
-    for pattern in ("*.[0-9][0-9][0-9][0-9].png", "*.[0-9][0-9][0-9][0-9].exr"):
-        for old in folder.glob(pattern):
-            if old.is_file() or old.is_symlink():
-                old.unlink()
-    if not any(folder.iterdir()):
-        folder.rmdir()
-
-
 def frame_writer(out_dir: Path, every: int, frames: int, *,
                  exr: bool = False) -> Callable[[int, Any], None]:
     """An ``each_frame`` callback writing every output of timed frames ``0, every, 2 *
     every, ...`` and the last one as ``<out_dir>/frames/<output>.<k>.png`` (k 4 digits),
     with ``exr`` also ``<output>.<k>.exr`` for each float output (as ``rfw run --exr``).
-    Older images of these patterns are removed first: a run leaves only its own frames."""
+    ``rfw run`` gives it its staging folder and, on success, replaces the earlier frames
+    (:func:`old_frames`) with these (:mod:`rfw.outdir`)."""
     from .fileio import atomic_write, inside, is_float_image, png_bytes, write_exr
 
-    clear_frames(out_dir)
     folder = inside(out_dir, FRAMES_DIR)
 
     def write(k: int, frame: Any) -> None:

@@ -128,6 +128,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from .camera_path import FRAMES_DIR
     from .outdir import OutputFolder
     from .render import render, table, write_outputs
 
@@ -144,9 +145,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         formats = {r.name: r.format for r in result.executor.plan.resources}
         staged = write_outputs(result, folder.staging, formats, exr=args.exr)
         written = [folder.out / p.relative_to(folder.staging) for p in staged]
-        folder.commit(last=["timings.json"], merge=[FRAMES], remove=_superseded(
+        folder.commit(last=["timings.json"], merge=[FRAMES_DIR], remove=_superseded(
             folder.out, cfg.outputs, written))
-    _remove_if_empty(folder.out / FRAMES)
+    _remove_if_empty(folder.out / FRAMES_DIR)
     if args.exr:  # 8-bit and integer outputs keep their exact values in the PNG
         print("".join(f"  {n}: {formats[n]}, not float: PNG only (--exr)\n"
                       for n in result.images if folder.out / f"{n}.exr" not in written), end="")
@@ -165,9 +166,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"validation: {checked['messages']} message(s)")
         return 1 if checked["messages"] else 0
     return 0
-
-
-FRAMES = "frames"  # rfw.camera_path.FRAMES_DIR: --save-every's images
 
 
 def _run_config(args: argparse.Namespace) -> tuple[typing.Any, str]:
@@ -198,17 +196,19 @@ def _run_config(args: argparse.Namespace) -> tuple[typing.Any, str]:
 
 def _check_run_targets(folder: typing.Any, cfg: typing.Any) -> None:
     # every path the run may write, inside --out and a regular file (or nothing) there
+    from .camera_path import FRAMES_DIR
+
     for name in cfg.outputs:
         folder.target(f"{name}.png")
         folder.target(f"{name}.exr")
     folder.target("timings.json")
-    frames = folder.out / FRAMES
+    frames = folder.out / FRAMES_DIR
     if frames.exists() and not frames.is_dir():
         raise RfwError("exists and is not a folder: --save-every writes its images there",
                        file=str(frames), element="--out")
     if frames.is_dir():  # the frame images there are replaced or removed on success
         for entry in frames.iterdir():
-            folder.target(f"{FRAMES}/{entry.name}")
+            folder.target(f"{FRAMES_DIR}/{entry.name}")
 
 
 def _superseded(out: Path, outputs: typing.Any, written: list[Path]) -> list[Path]:

@@ -132,7 +132,7 @@ def read_exr(path: str | Path) -> Any:
     raise ValueError(f"{path}: unexpected EXR channels {sorted(ch)}")
 
 
-FAILED_MARK = "RUN-FAILED.txt"  # beside outputs a failed run could not replace
+FAILED_MARK = "RUN-FAILED.txt"  # older rfw's mark of a failed run: a good run removes it
 
 
 def to_png_array(image: Any, fmt: str) -> Any:
@@ -204,7 +204,6 @@ def write_run(out_dir: Path, images: dict[str, Any], formats: dict[str, str],
         atomic_write(path, lambda f, d=data: f.write(d))
     for path, name in zip(exrs, floats, strict=True):
         write_exr(path, images[name])
-    inside(out_dir, FAILED_MARK).unlink(missing_ok=True)
     atomic_write(timings_path, lambda f: f.write(json.dumps(timings, indent=2).encode()
                                                  + b"\n"))
     return [*pngs, *exrs, timings_path]

@@ -16,11 +16,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+import typing
 from functools import partial
 from pathlib import Path
 
 from .. import argtypes
 from ..errors import RfwError, check_number
+
+if typing.TYPE_CHECKING:
+    from ..outdir import OutputFolder
 
 PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rfw_raycast")
 
@@ -189,7 +193,7 @@ REPORT_MD, REPORT_HTML = "report.md", "report.html"  # written last: they mark a
 PARTIAL_NOTE = "PARTIAL.txt"
 
 
-def _keep_partial(folder, total: int, error: BaseException) -> None:
+def _keep_partial(folder: OutputFolder, total: int, error: BaseException) -> None:
     """Move what an unfinished bench ran to ``OUT/partial-<time>/`` with ``PARTIAL.txt``
     saying how far it got (``rfw bench report`` reads it); the folder's earlier results stay
     as they were. An :class:`rfw.signals.Interrupted` gets a note saying so."""
