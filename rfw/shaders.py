@@ -28,6 +28,18 @@ class ShaderError(GraphError):
 STAGES = ("comp", "vert", "frag", "task", "mesh", "rgen", "rchit", "rahit", "rmiss", "rint",
           "rcall")
 
+# the dicts of every rfw.bench.inputs.watching_shaders open now: each file a compile reads
+watchers: list[dict[Path, bytes]] = []
+
+
+def read_source(path: Path) -> bytes:
+    """A shader file's bytes, as both compilers read a shader and its includes (GLSL for the
+    SPIR-V cache key, WGSL to preprocess), seen by every dict in :data:`watchers`."""
+    data = path.read_bytes()
+    for seen in watchers:
+        seen.setdefault(path.resolve(), data)
+    return data
+
 
 def program_files(folder: Path, shader: str, *, owner: str = "") -> list[Path]:
     """The files that make a pass's program, the one rule both backends follow.
@@ -83,7 +95,7 @@ def preprocess(path: str | Path, defines: dict[str, object] | None = None,
 def _expand(path: Path, env: dict[str, str], host: dict[str, str], out: list[str],
             where: list[tuple[str, int]], search: list[Path], once: set[Path]) -> None:
     try:
-        data = path.read_bytes()
+        data = read_source(path)
     except OSError as e:
         raise ShaderError(f"{path}: cannot read shader: {e.strerror or e}") from None
     try:

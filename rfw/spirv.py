@@ -30,7 +30,7 @@ from pathlib import Path
 
 from .errors import warn
 from .fileio import atomic_write
-from .shaders import COMMON, STAGES, ShaderError
+from .shaders import COMMON, STAGES, ShaderError, read_source
 
 # stages both backends run: one Vulkan 1.1 binary feeds naga and vkCreateShaderModule alike
 PORTABLE_STAGES = ("comp", "vert", "frag")
@@ -66,7 +66,7 @@ _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 def _sources(path: Path, search: list[Path], seen: dict[Path, bytes]) -> None:
     """The shader and everything it includes (for the cache key)."""
     try:
-        data = path.read_bytes()
+        data = read_source(path)
     except OSError as e:
         raise ShaderCompileError(f"{path}: cannot read shader: {e.strerror or e}") from None
     seen[path] = data

@@ -22,7 +22,7 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -56,29 +56,16 @@ def _stable(path: Path) -> str:
 
 @contextmanager
 def watching_shaders() -> Iterator[dict[Path, bytes]]:
-    """Inside: every shader file read for a compile, with its bytes. Both compilers read a
-    shader and its includes through one function (``rfw.spirv._sources`` for GLSL, the
-    SPIR-V cache key; ``rfw.shaders._expand`` for WGSL), watched here while active."""
-    from .. import shaders, spirv
+    """Inside: every shader file read for a compile, with its bytes (both compilers read a
+    shader and its includes through :func:`rfw.shaders.read_source`)."""
+    from ..shaders import watchers
 
     seen: dict[Path, bytes] = {}
-    sources, expand = spirv._sources, shaders._expand
-
-    def glsl(path: Path, search: list[Path], got: dict[Path, bytes]) -> None:
-        sources(path, search, got)
-        for p, data in got.items():
-            seen.setdefault(Path(p).resolve(), data)
-
-    def wgsl(path: Path, *args: Any) -> None:
-        with suppress(OSError):  # unreadable: the compile itself says why
-            seen.setdefault(Path(path).resolve(), Path(path).read_bytes())
-        expand(path, *args)
-
-    spirv._sources, shaders._expand = glsl, wgsl  # type: ignore[assignment]
+    watchers.append(seen)
     try:
         yield seen
     finally:
-        spirv._sources, shaders._expand = sources, expand  # type: ignore[assignment]
+        watchers.remove(seen)
 
 
 def scene_hash(scene: str) -> str:

@@ -18,6 +18,7 @@ import pytest
 from tests.conftest import tree_env
 
 from .synthetic import record
+from .test_review_fixes import listing, one_error_line
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = {"deferred@wgpu": {"gbuffer": 10.0, "lighting": 2.0, "tonemap": 0.5}}
@@ -50,21 +51,6 @@ def write(folder: Path, records: list[dict] | None = None, *, text: str | None =
                 "".join(json.dumps(r) + "\n" for r in records or [])).encode()
     (folder / "results.jsonl").write_bytes(data)
     return folder
-
-
-def one_error(done: subprocess.CompletedProcess, *expected: str) -> str:
-    """The one ``rfw: error:`` line of an exit-2 run, holding each of ``expected``."""
-    lines = done.stderr.strip().splitlines()
-    assert done.returncode == 2, done.stdout + done.stderr
-    assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
-    assert "Traceback" not in done.stderr
-    for e in expected:
-        assert e in lines[0], lines[0]
-    return lines[0]
-
-
-def listing(folder: Path) -> list[str]:
-    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -102,7 +88,7 @@ def test_faulty_results_file_is_one_line_naming_file_and_line(tmp_path, case):
     new = write(tmp_path / "new", data=data)
     before = listing(tmp_path)
     done = compare(tmp_path, "old", "new", "--out", "cmp")
-    one_error(done, f"rfw: error: {Path('new') / 'results.jsonl'}: ", expected)
+    one_error_line(done, f"rfw: error: {Path('new') / 'results.jsonl'}: ", expected)
     assert done.stdout == ""
     assert listing(tmp_path) == before  # refused before anything is written
     assert old.is_dir() and new.is_dir()
@@ -111,20 +97,20 @@ def test_faulty_results_file_is_one_line_naming_file_and_line(tmp_path, case):
 def test_the_old_side_is_named_too(tmp_path):
     write(tmp_path / "old", text="")
     write(tmp_path / "new", lines_of())
-    one_error(compare(tmp_path, "old", "new"), "old/results.jsonl: OLD: no run records")
+    one_error_line(compare(tmp_path, "old", "new"), "old/results.jsonl: OLD: no run records")
     # a results file given as a file, with a cut line
     (tmp_path / "cut.jsonl").write_text(_good_text()[:-1][:-30])
-    one_error(compare(tmp_path, "cut.jsonl", "new"), "cut.jsonl: line 3: cut short")
+    one_error_line(compare(tmp_path, "cut.jsonl", "new"), "cut.jsonl: line 3: cut short")
 
 
 def test_a_results_file_that_is_no_regular_file_is_refused(tmp_path):
     write(tmp_path / "old", lines_of())
     (tmp_path / "new").mkdir()
     os.mkfifo(tmp_path / "new" / "results.jsonl")  # a read would block forever
-    one_error(compare(tmp_path, "old", "new"), "new/results.jsonl: NEW: not a regular file")
+    one_error_line(compare(tmp_path, "old", "new"), "new/results.jsonl: NEW: not a regular file")
     (tmp_path / "new" / "results.jsonl").unlink()
     (tmp_path / "new" / "results.jsonl").mkdir()
-    one_error(compare(tmp_path, "old", "new"), "not a regular file")
+    one_error_line(compare(tmp_path, "old", "new"), "not a regular file")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -182,7 +168,7 @@ def test_bad_timings_are_refused_naming_file_line_and_field(tmp_path, case):
     (tmp_path / "new" / "results.jsonl").write_text(
         "".join(json.dumps(r) + "\n" for r in recs))  # json writes NaN, Infinity as such
     done = compare(tmp_path, "old", "new", "--fail-on-regression")
-    one_error(done, "new/results.jsonl: ", expected)
+    one_error_line(done, "new/results.jsonl: ", expected)
     assert "not judged" not in done.stdout and done.stdout == ""
 
 
@@ -195,8 +181,8 @@ def test_numbers_json_reads_as_infinite_are_refused(tmp_path, literal, expected)
     write(tmp_path / "old", lines_of(seed=1))
     text = _good_text().replace('"gpu_ms": [', f'"gpu_ms": [{literal}, ', 1)
     write(tmp_path / "new", text=text)
-    one_error(compare(tmp_path, "old", "new"), "new/results.jsonl: line 1: pass 'gbuffer': "
-              f"gpu_ms[0]: {expected}")
+    one_error_line(compare(tmp_path, "old", "new"),
+                   f"new/results.jsonl: line 1: pass 'gbuffer': gpu_ms[0]: {expected}")
 
 
 def test_failed_runs_are_not_read_for_times(tmp_path):
@@ -220,7 +206,7 @@ def test_threshold_must_be_finite_and_not_negative(tmp_path, value):
     write(tmp_path / "old", lines_of(seed=1))
     write(tmp_path / "new", lines_of(seed=2))
     done = compare(tmp_path, "old", "new", f"--threshold={value}")  # -inf is no option
-    one_error(done, "rfw bench: argument --threshold: ", value)
+    one_error_line(done, "rfw bench: argument --threshold: ", value)
     # negative control: a finite threshold, 0 included, compares
     assert compare(tmp_path, "old", "new", "--threshold", "0").returncode == 0
 
@@ -229,8 +215,8 @@ def test_fail_on_regression_fails_when_nothing_is_measured_on_both_sides(tmp_pat
     write(tmp_path / "old", lines_of({"forward@wgpu": {"forward": 4.0}}))
     write(tmp_path / "new", lines_of(BASE))
     done = compare(tmp_path, "old", "new", "--fail-on-regression")
-    one_error(done, "--fail-on-regression: nothing to compare: no pass or frame time was "
-              "measured on both OLD and NEW")
+    one_error_line(done, "--fail-on-regression: nothing to compare: no pass or frame time "
+                   "was measured on both OLD and NEW", quiet=False)
     # the report still says what each side measured, with its cost
     assert "forward@wgpu: only in OLD" in done.stdout
     assert re.search(r"forward@wgpu frame\.gpu_ms +[34]\.\d{3} +- +- +removed", done.stdout)
@@ -246,7 +232,7 @@ def test_fail_on_regression_fails_when_every_new_run_failed(tmp_path):
     write(tmp_path / "new", [{"variant": "deferred@wgpu", "kind": "rfw", "repeat": r,
                               "error": "SceneError: broken.glb: not glTF"} for r in range(3)])
     done = compare(tmp_path, "old", "new", "--fail-on-regression")
-    one_error(done, "--fail-on-regression: nothing to compare")
+    one_error_line(done, "--fail-on-regression: nothing to compare", quiet=False)
     assert "deferred@wgpu: every run failed in NEW (3 run(s); first: SceneError: broken.glb" \
         in done.stdout
 
@@ -382,7 +368,8 @@ def test_inputs_that_changed_during_a_bench_are_said(tmp_path):
 def test_an_input_hash_that_is_not_a_string_is_refused(tmp_path):
     write(tmp_path / "old", lines_of(seed=1))
     write(tmp_path / "new", lines_of(seed=2, inputs={**SHA, "graph": 5}))
-    one_error(compare(tmp_path, "old", "new"), "line 1: inputs.graph: expected a sha256, not 5")
+    one_error_line(compare(tmp_path, "old", "new"),
+                   "line 1: inputs.graph: expected a sha256, not 5")
 
 
 # ---------------------------------------------------------------------------------------------

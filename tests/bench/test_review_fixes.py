@@ -22,11 +22,13 @@ def bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=120, check=False)
 
 
-def one_error_line(done: subprocess.CompletedProcess, *expected: str) -> str:
-    """Exit 2, nothing on stdout, one ``rfw: error:`` line holding every ``expected``."""
+def one_error_line(done: subprocess.CompletedProcess, *expected: str,
+                   quiet: bool = True) -> str:
+    """Exit 2, nothing on stdout (unless not ``quiet``: a report printed before the error),
+    one ``rfw: error:`` line holding every ``expected``."""
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2, done.stdout + done.stderr
-    assert done.stdout == "", done.stdout
+    assert not quiet or done.stdout == "", done.stdout
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr
     assert "Traceback" not in done.stderr
     for e in expected:
