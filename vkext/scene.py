@@ -32,9 +32,9 @@ from rfw.backends.scene_data import (
     mirrored_arrays,
     mirrored_mask,
     sun_camera_bytes,
+    texture_views,
 )
 from rfw.graph.sync import State
-from rfw.scene.limits import check_texture_size
 from rfw.scene.model import Camera, Scene, SceneError
 from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
@@ -436,18 +436,9 @@ class VkScene:
                                                         "size": self.camera_span})
 
         # textures, their samplers and the defaults
-        limit = dev.limits.get("maxImageDimension2D")
-        for t in scene.textures:  # all checked before the first is made
-            check_texture_size(t.pixels.shape[1], t.pixels.shape[0], limit,
-                               "maxImageDimension2D", file=scene.source, name=t.name)
-        # textures sharing an image (a glTF image named by many textures) share its upload
-        views: dict[tuple[int, bool], ImageView] = {}
-        self.textures = []
-        for t in scene.textures:
-            key = (id(t.pixels), t.srgb)
-            if key not in views:
-                views[key] = self._texture(up, t.pixels, t.srgb, t.name)
-            self.textures.append(views[key])
+        key = "maxImageDimension2D"
+        self.textures = texture_views(scene, dev.limits.get(key), key,
+                                      lambda t: self._texture(up, t.pixels, t.srgb, t.name))
         self.samplers = [self._own(make_sampler(
             dev, mag=t.mag_filter, min=t.min_filter, mip=t.mipmap_filter, address_u=t.address_u,
             address_v=t.address_v, label=f"{t.name}:sampler")) for t in scene.textures]

@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.limits import check_texture_size
 from ..scene.model import Camera, Scene, SceneError
 from ..scene.sides import with_back_faces
 from ..units import align_up
@@ -28,6 +27,7 @@ from .scene_data import (
     mirrored_arrays,
     mirrored_mask,
     sun_camera_bytes,
+    texture_views,
 )
 
 # wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these four;
@@ -157,18 +157,9 @@ class GpuScene:
         return tex.create_view()
 
     def _upload_textures(self) -> None:
-        limit = self.device.limits.get("max-texture-dimension-2d")
-        for t in self.scene.textures:  # all checked before the first is made
-            check_texture_size(t.pixels.shape[1], t.pixels.shape[0], limit,
-                               "max-texture-dimension-2d", file=self.scene.source, name=t.name)
-        # textures sharing an image (a glTF image named by many textures) share its upload
-        views: dict[tuple[int, bool], Any] = {}
-        self.textures = []
-        for t in self.scene.textures:
-            key = (id(t.pixels), t.srgb)
-            if key not in views:
-                views[key] = self._texture(t.pixels, t.srgb, t.name)
-            self.textures.append(views[key])
+        key = "max-texture-dimension-2d"
+        self.textures = texture_views(self.scene, self.device.limits.get(key), key,
+                                      lambda t: self._texture(t.pixels, t.srgb, t.name))
         self.samplers = [self.device.create_sampler(
             mag_filter=t.mag_filter, min_filter=t.min_filter,
             mipmap_filter=t.mipmap_filter, address_mode_u=t.address_u,

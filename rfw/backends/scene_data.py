@@ -7,11 +7,13 @@ the GLSL twins declare the same offsets.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from ..scene.model import Camera, Light, Material, Mesh, Scene
+from ..scene.limits import check_texture_size
+from ..scene.model import Camera, Light, Material, Mesh, Scene, Texture
 
 # the scene's groups (Vulkan: sets) as scene.glsl and mesh.glsl declare them: (name, binding,
 # kind as rfw.spirv reflects it). Both backends build their scene layouts from this one table,
@@ -50,6 +52,21 @@ def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
         p //= n
         levels.append(p.astype(np.uint8))
     return levels
+
+
+def texture_views(scene: Scene, limit: int | None, key: str,
+                  make: Callable[[Texture], Any]) -> list[Any]:
+    """One view per ``scene.textures``, made by ``make``. All are checked against the
+    device's 2D ``limit`` (``key`` names it) before the first is made, and textures sharing
+    an image in one colour space (a glTF image named by many textures) share one upload."""
+    for t in scene.textures:
+        check_texture_size(t.pixels.shape[1], t.pixels.shape[0], limit, key,
+                           file=scene.source, name=t.name)
+    views: dict[tuple[int, bool], Any] = {}
+    for t in scene.textures:
+        if (id(t.pixels), t.srgb) not in views:
+            views[id(t.pixels), t.srgb] = make(t)
+    return [views[id(t.pixels), t.srgb] for t in scene.textures]
 
 
 def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:

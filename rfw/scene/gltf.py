@@ -219,9 +219,9 @@ class _Loader:
         # build(): kind -> the elements (first few named)
         self.unread: dict[str, list[str]] = {k: [] for k in _UNREAD}
         self.tinted: dict[tuple[int, tuple[float, ...]], int] = {}
-        # per scene material with textures: (TEXCOORD set, KHR_texture_transform 2x3 or None)
-        self.uv_sets: dict[int, tuple[int, np.ndarray | None]] = {}
-        self.material_names: dict[int, str] = {}
+        # per scene material with textures: (TEXCOORD set, KHR_texture_transform 2x3 or None,
+        # the file's material it comes from)
+        self.uv_sets: dict[int, tuple[int, np.ndarray | None, str]] = {}
         self.texture_uses: list[tuple[str, int, np.ndarray | None]] = []
         self.default_material: int | None = None
         self.warned: set[str] = set()
@@ -235,9 +235,10 @@ class _Loader:
     def warn(self, message: str) -> None:
         if message not in self.warned:
             self.warned.add(message)
-            warn_once(f"{self.source}: {message}")
+            line = f"{self.source}: {message}"
+            warn_once(line)
             # as well, for callers that collect them (the fetch cache's notes)
-            warnings.warn(f"{self.source}: {message}", SceneWarning, stacklevel=4)
+            warnings.warn(line, SceneWarning, stacklevel=4)
 
     def skipped(self, where: str, message: str) -> None:
         """A valid but unusable element (a zero-scale node's camera): one warning line."""
@@ -758,13 +759,13 @@ class _Loader:
             normals = attribute("NORMAL", ("VEC3",))
             tangents = attribute("TANGENT", ("VEC4",))
             material = self.material(prim.material, f"{where}.material")
-            texcoord, uv_matrix = self.uv_sets.get(material, (0, None))
+            texcoord, uv_matrix, textured = self.uv_sets.get(material, (0, None, ""))
             uvs = attribute(f"TEXCOORD_{texcoord}", ("VEC2",))
             if uvs is None and texcoord != 0:
                 uvs = attribute("TEXCOORD_0", ("VEC2",))
-            if uvs is None and material in self.uv_sets:
+            if uvs is None and textured:
                 self.warn(f"{where}: has no TEXCOORD_{texcoord}, which the textures of "
-                          f"{self.material_names[material]} use: they are sampled at (0, 0)")
+                          f"{textured} use: they are sampled at (0, 0)")
             elif uvs is not None and uv_matrix is not None:
                 # KHR_texture_transform is affine, so it may be applied per vertex
                 uvs = uvs @ uv_matrix[:, :2].T + uv_matrix[:, 2]
@@ -913,9 +914,8 @@ class _Loader:
             out.double_sided = bool(m.doubleSided)
         self.materials[index] = k = len(self.scene.materials)
         self.scene.materials.append(out)
-        self.material_names[k] = mwhere
         if self.texture_uses:
-            self.uv_sets[k] = self.uv_set(mwhere)
+            self.uv_sets[k] = (*self.uv_set(mwhere), mwhere)
         return k
 
     def uv_set(self, mwhere: str) -> tuple[int, np.ndarray | None]:
@@ -951,7 +951,6 @@ class _Loader:
                                                 base_color=color))
             if material in self.uv_sets:
                 self.uv_sets[self.tinted[key]] = self.uv_sets[material]
-                self.material_names[self.tinted[key]] = self.material_names[material]
         return self.tinted[key]
 
     def texture_info(self, info: Any, srgb: bool, where: str) -> int | None:

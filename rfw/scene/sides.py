@@ -38,15 +38,16 @@ def back_faced(mesh: Mesh) -> Mesh:
     tangents = mesh.tangents.astype(np.float32, copy=True)
     # the bitangent cross(n, t) * w must keep pointing along +v, so w flips with n
     tangents[:, 3] *= -1.0
-    back = mesh.indices.astype(np.uint32).reshape(-1, 3)[:, [0, 2, 1]] + np.uint32(n)
+    front = mesh.indices.astype(np.uint32, copy=False)
+    back = front.reshape(-1, 3)[:, [0, 2, 1]] + np.uint32(n)
+    # np.concatenate makes new, contiguous arrays
     return replace(
         mesh,
-        positions=np.ascontiguousarray(np.concatenate([mesh.positions, mesh.positions])),
-        normals=np.ascontiguousarray(np.concatenate([mesh.normals, -mesh.normals])),
-        uvs=np.ascontiguousarray(np.concatenate([mesh.uvs, mesh.uvs])),
-        tangents=np.ascontiguousarray(np.concatenate([mesh.tangents, tangents])),
-        indices=np.ascontiguousarray(np.concatenate([mesh.indices.astype(np.uint32),
-                                                     back.ravel()])))
+        positions=np.concatenate([mesh.positions, mesh.positions]),
+        normals=np.concatenate([mesh.normals, -mesh.normals]),
+        uvs=np.concatenate([mesh.uvs, mesh.uvs]),
+        tangents=np.concatenate([mesh.tangents, tangents]),
+        indices=np.concatenate([front, back.ravel()]))
 
 
 def closed_outward(positions: np.ndarray, faces: np.ndarray) -> bool:
