@@ -70,9 +70,6 @@ def check_vector(value: Any, where: str, source: str | None) -> list[float]:
     return out
 
 
-_vector = check_vector
-
-
 def check_camera(cam: Any, *, file: str | None, element: str, aspect: float = 16 / 9,
                  up_given: bool = False, up_element: str | None = None) -> None:
     """Refuse a camera (:class:`rfw.scene.Camera`) whose float32 matrices keep no picture,
@@ -154,7 +151,7 @@ def check_path(value: Any, source: str | None, where: str = "camera.path") -> di
         raise RfwError(f"an orbit has no {stray[0]} (kind = \"keyframes\" has)", file=source,
                        element=f"{where}.{stray[0]}")
     if "center" in value:
-        out["center"] = _vector(value["center"], f"{where}.center", source)
+        out["center"] = check_vector(value["center"], f"{where}.center", source)
     for key, lo in (("radius", 1e-6), ("height", -1e9), ("start", -1e6), ("turns", -1e6)):
         if key in value:
             out[key] = float(check_number(value[key], key, lo=lo, hi=1e9, file=source,
@@ -192,7 +189,7 @@ def _keys(keys: Any, source: str | None, where: str) -> list[dict[str, Any]]:
                                             element=f"{kw}.t"))
         for k in ("position", "target"):
             if k in key:
-                entry[k] = _vector(key[k], f"{kw}.{k}", source)
+                entry[k] = check_vector(key[k], f"{kw}.{k}", source)
         if "yfov" in key:
             entry["yfov"] = float(check_number(key["yfov"], "yfov", lo=0.01, hi=179.0,
                                                file=source, element=f"{kw}.yfov"))

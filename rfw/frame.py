@@ -29,7 +29,16 @@ import numpy as np
 
 from .backend import Backend, Devices, get_backend
 from .config import MAX_FRAMES_IN_FLIGHT, Built, Config, pass_class
-from .errors import RfwError, check_number
+from .errors import (
+    RfwError,
+    RfwTypeError,
+    RfwValueError,
+    check_bool,
+    check_number,
+    check_path,
+    did_you_mean,
+    type_name,
+)
 from .graph import CompiledGraph
 from .mixed import MixedPlan, split
 
@@ -151,14 +160,11 @@ class Result:
     def save(self, out: str | Path, *, exr: bool = False) -> list[Path]:
         """Write what ``rfw run --out OUT [--exr]`` writes into folder ``out``; returns the
         paths written."""
-        from .errors import check_bool, check_path
         from .fileio import write_run
 
         out = check_path(out, "out", element="Result.save")
         exr = check_bool(exr, "exr", element="Result.save")
         if out.exists() and not out.is_dir():  # a file or device is never replaced
-            from .errors import RfwValueError
-
             raise RfwValueError(f"'out' must be a folder, and {str(out)!r} is not one",
                                 element="Result.save")
         return write_run(out, self.images, self.formats, self.timings, exr=exr,
@@ -168,13 +174,9 @@ class Result:
         if name is None:
             return next(iter(self.images))
         if not isinstance(name, str):  # an output's name ('tonemap.ldr')
-            from .errors import RfwTypeError, type_name
-
             raise RfwTypeError(f"'name' must be an output name (str), not {type_name(name)}",
                                file=self.config.source, element="Result")
         if name not in self.images:
-            from .errors import did_you_mean
-
             raise RfwError(f"no output '{name}'" + did_you_mean(name, self.images)
                            + f"; outputs: {', '.join(self.images)}", file=self.config.source,
                            element="outputs")

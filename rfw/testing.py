@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .config import MAX_SIZE
 from .errors import RfwTypeError, RfwValueError, check_number, check_type, type_name
 from .graph import GraphBuilder, Texture, compile
 from .graph.resources import SizeRule
@@ -87,4 +88,4 @@ def _check_args(cls: Any, inputs: Any, settings: Any, frames: Any, size: Any) ->
             raise RfwTypeError(f"'size' must be (width, height), not {type_name(size)}",
                                element=where)
         for v in size:
-            check_number(v, "size", kind=int, lo=1, hi=16384, element=where)
+            check_number(v, "size", kind=int, lo=1, hi=MAX_SIZE, element=where)

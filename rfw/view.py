@@ -525,7 +525,7 @@ def present_format(preferred: str) -> str:
     from . import env
 
     chosen = env.get("RFW_VIEW_FORMAT") or preferred.removesuffix("-srgb")
-    if chosen not in ("bgra8unorm", "rgba8unorm", "bgra8unorm-srgb", "rgba8unorm-srgb"):
+    if chosen not in env.VIEW_FORMATS:  # the adapter's preferred one too
         raise RfwError(f"'{chosen}' is no window format (bgra8unorm, rgba8unorm, or either "
                        "with -srgb)", element="RFW_VIEW_FORMAT")
     return chosen
