@@ -96,7 +96,7 @@ def test_a_ray_task_hands_its_gpu_to_the_worker_and_leaves_its_environment(tmp_p
 
     seen = {}
 
-    def fake_run(cmd, **kw):
+    def fake_worker(cmd, **kw):  # runner._worker starts every bench worker
         seen["env"] = kw["env"]
         return subprocess.CompletedProcess(cmd, 1, "", "no worker here")
 
@@ -104,7 +104,7 @@ def test_a_ray_task_hands_its_gpu_to_the_worker_and_leaves_its_environment(tmp_p
     fake_ray = types.SimpleNamespace(get_gpu_ids=lambda: [2],
                                      get_runtime_context=lambda: ctx)
     monkeypatch.setitem(sys.modules, "ray", fake_ray)
-    monkeypatch.setattr(runner.subprocess, "run", fake_run)
+    monkeypatch.setattr(runner, "_worker", fake_worker)
     monkeypatch.setenv(GPU_ENV, "7")
     job = runner.Job("rfw", "flat", "flat", config="configs/flat.toml")
     plan = runner.Plan([job], (8, 8), 1, 0, 1)
