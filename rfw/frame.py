@@ -111,6 +111,9 @@ def run_frames(executor: Any, frames: int) -> None:
 
 def one_frame(executor: Any, *, last: bool) -> None:
     """One frame of ``executor``, draining the frames in flight inside it if ``last``."""
+    from .signals import check
+
+    check()  # a signal whose first raise was swallowed still ends the run here
     executor.drain_after_frame = last
     try:
         executor.frame()

@@ -157,7 +157,12 @@ class OutputFolder:
             with contextlib.suppress(OSError):
                 self.out.rmdir()  # only if empty
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, kind: object, error: object, tb: object) -> None:
+        from .signals import Interrupted
+
+        if isinstance(error, Interrupted) and self.committed and not error.note:
+            # held back during the commit, the signal came after it: the results are whole
+            error.note = f"(after its results were written to {self.given})"
         with signals_held():
             if self.staging.is_dir():
                 shutil.rmtree(self.staging, ignore_errors=True)

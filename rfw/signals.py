@@ -35,10 +35,24 @@ class Interrupted(BaseException):
         return "rfw: interrupted" + (f" {self.note}" if self.note else "")
 
 
+# the signal _first raised for: an Interrupted raised while Python runs a __del__ or a
+# weakref callback is printed and dropped, so loops call check() to raise it again
+_pending: int | None = None
+
+
 def _first(signum: int, frame: FrameType | None) -> None:
+    global _pending
+    _pending = signum
     for s in SIGNALS:  # from now on a signal ends the process as soon as it comes
         signal.signal(s, _again)
     raise Interrupted(signum)
+
+
+def check() -> None:
+    """Raise :class:`Interrupted` again if a signal came and its first raise was lost
+    (swallowed by a ``__del__``, a callback or a broad ``except``). Call it in long loops."""
+    if _pending is not None:
+        raise Interrupted(_pending)
 
 
 def _again(signum: int, frame: FrameType | None) -> None:
@@ -67,6 +81,7 @@ def early() -> None:
 def installed() -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` within the block (in the main thread;
     elsewhere nothing changes), the handlers before it are put back after it."""
+    global _pending
     try:
         old = {s: signal.signal(s, _first) for s in SIGNALS}
     except ValueError:  # not the main thread
@@ -75,5 +90,6 @@ def installed() -> Iterator[None]:
     try:
         yield
     finally:
+        _pending = None
         for s, handler in old.items():
             signal.signal(s, handler)
