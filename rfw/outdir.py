@@ -163,10 +163,22 @@ class OutputFolder:
         if isinstance(error, Interrupted) and self.committed and not error.note:
             # held back during the commit, the signal came after it: the results are whole
             error.note = f"(after its results were written to {self.given})"
+        if isinstance(error, OSError) and error.filename:
+            error.filename = self._shown(error.filename)  # ENOSPC names the output's path
         with signals_held():
             if self.staging.is_dir():
                 shutil.rmtree(self.staging, ignore_errors=True)
             self._release()
+
+    def _shown(self, filename: str | bytes | int) -> str | bytes | int:
+        """``filename`` as the user knows it: a staged path named by where it was going."""
+        if not isinstance(filename, str):
+            return filename
+        try:
+            rel = Path(filename).resolve().relative_to(self.staging)
+        except ValueError:
+            return filename
+        return str(Path(self.given) / rel)
 
     # -- commit -----------------------------------------------------------------------------
 
