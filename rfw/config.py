@@ -37,7 +37,7 @@ from .errors import RfwError, check_identifier, check_number
 from .graph import Graph, GraphBuilder, GraphError
 from .graph.errors import did_you_mean
 from .graph.resources import SizeRule
-from .passes import Pass
+from .passes import SCENE_NEEDS, Pass
 from .registry import get_pass
 
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames",
@@ -574,6 +574,16 @@ def _frames(text: str, source: str, *, key: str = "frames", hi: int = MAX_FRAMES
                         element=f"--set {key}")
 
 
+def _has_work(cfg: Config, entry: PassEntry, scene: Any) -> bool:
+    need = pass_class(cfg, entry).scene_needs
+    if need is None:
+        return True
+    if need not in SCENE_NEEDS:
+        raise _fail(cfg.source, f"pass '{entry.name}' ({entry.use}): scene_needs must be one "
+                                f"of {', '.join(SCENE_NEEDS)}, not {need!r}")
+    return SCENE_NEEDS[need](scene)
+
+
 @dataclass
 class Built:
     graph: Graph
@@ -581,8 +591,14 @@ class Built:
     slots: dict[str, dict[str, str]]  # pass -> slot -> resource
 
 
-def build(cfg: Config) -> Built:
-    """Instantiate the passes and wire their slots into a frame graph."""
+def build(cfg: Config, scene: Any = None) -> Built:
+    """Instantiate the passes and wire their slots into a frame graph. With ``scene``, an
+    enabled pass whose ``scene_needs`` that scene lacks (a points_lines pass on a scene
+    without points or lines) is left out as ``enabled = false`` leaves it."""
+    if scene is not None:
+        cfg = replace(cfg, passes=[replace(p, enabled=False) if p.enabled
+                                   and not _has_work(cfg, p, scene) else p
+                                   for p in cfg.passes])
     enabled = {p.name for p in cfg.passes if p.enabled}
     g = GraphBuilder(cfg.name, size=cfg.size, source=cfg.source)
     instances: dict[str, Pass] = {}

@@ -25,6 +25,8 @@ FILTERS = ("linear", "nearest")
 ADDRESSES = ("clamp-to-edge", "repeat", "mirror-repeat")
 COMPARES = ("never", "less", "equal", "less-equal", "greater", "not-equal", "greater-equal",
             "always")
+# what draw_scene draws: the scene's triangles, or its strokes (points, line segments)
+TOPOLOGIES = ("triangle-list", "line-list", "point-list")
 
 
 @runtime_checkable
@@ -98,9 +100,11 @@ class PassContext(Protocol):
                    defines: dict[str, object] | None = None, depth_compare: str = "less",
                    depth_write: bool = True, cull: str = "back", camera: str = "main",
                    blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
-                   **bindings: Any) -> int:
+                   topology: str = "triangle-list", **bindings: Any) -> int:
         """Draw the scene's instances into ``color`` [(slot, clear or None)] and ``depth``
-        (slot, clear or None); returns the draws."""
+        (slot, clear or None); returns the draws. ``topology`` line-list or point-list
+        draws the scene's strokes (``Scene.strokes``) with those primitives; where the
+        scene has none and nothing is cleared, nothing is recorded."""
 
     def render_pass(self, *, color: Sequence[tuple[str, Any]] = (),
                     depth: tuple[str, Any] | None = None,
@@ -128,6 +132,25 @@ class RayTracingContext(PassContext, Protocol):
                    any_hit: str | None = None, defines: dict[str, object] | None = None,
                    max_recursion: int = 1, **bindings: Any) -> None:
         """Launch ``size`` rays from the raygen ``shader`` (default: the pass's)."""
+
+
+def check_topology(pass_name: str, topology: Any) -> None:
+    """A ShaderError naming the pass for a ``draw_scene`` topology rfw has no draw of."""
+    if topology not in TOPOLOGIES:
+        raise ShaderError(f"pass '{pass_name}': draw_scene topology must be one of "
+                          f"{', '.join(TOPOLOGIES)}, not {topology!r}")
+
+
+def nothing_to_draw(scene: Any, topology: str, color: Sequence[tuple[str, Any]],
+                    depth: tuple[str, Any] | None) -> bool:
+    """Whether a stroke draw may be left out whole: the scene (GpuScene, VkScene) has
+    nothing of ``topology`` and no target is cleared, so a scene without points or lines
+    costs its points_lines pass no render pass at all."""
+    if topology == "triangle-list" or any(clear is not None for _, clear in color):
+        return False
+    if depth is not None and depth[1] is not None:
+        return False
+    return scene.draws(topology) == 0
 
 
 def check_sampler(filter: str, address: str, compare: str | None) -> None:

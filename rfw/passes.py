@@ -275,6 +275,12 @@ def storage_format(format: str) -> str:
                      "output needs a plain r/rg/rgba format, not sRGB or bgra)")
 
 
+# what ``Pass.scene_needs`` may name, and whether a scene (rfw.scene.Scene) holds it
+SCENE_NEEDS: dict[str, Any] = {
+    "strokes": lambda scene: bool(scene.stroke_instances),  # points or lines (glTF 0-3)
+}
+
+
 class Pass:
     """Base of every pass. Subclasses declare slots, settings and a shader, and record."""
 
@@ -286,6 +292,10 @@ class Pass:
     requires: ClassVar[tuple[str, ...]] = ()
     side_effect: ClassVar[bool] = False
     backend: ClassVar[str | None] = None  # "vk" for passes that need raw Vulkan (vkext)
+    # what a scene must hold for the pass to have work (one of SCENE_NEEDS, e.g. "strokes"):
+    # a run on a scene without it leaves the pass out, as ``enabled = false`` would, so it
+    # records nothing and has no timing row. Only for passes whose outputs nothing needs.
+    scene_needs: ClassVar[str | None] = None
 
     class Params(Settings):
         pass

@@ -75,8 +75,13 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         if run.auto_variants:  # the run's device decides what auto variants mean
             cfg, techniques = resolve_auto(cfg, run.caps(devs.get(run)))
         mix = pinned_elsewhere(cfg, backend)
-        mixed, sides = prepare(build(cfg), backend, devs, alias=alias, mix=mix)
+        build(cfg)  # the config's errors before the scene's
+        owned = scene is None  # loaded here, so nothing else holds its textures
         scene = load_scene_for(cfg, scene)
+        if owned and not mix:  # uploaded once: its pixels go as they are uploaded
+            scene.keep_pixels = False
+        # passes with nothing to do on this scene (points_lines without strokes) left out
+        mixed, sides = prepare(build(cfg, scene), backend, devs, alias=alias, mix=mix)
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
         frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size, alias=alias)

@@ -169,7 +169,7 @@ class Viewer:
         if run.auto_variants:  # auto variants resolve for the device, as rfw run does
             resolved, techniques = resolve_auto(cfg, run.caps(self.devices.get(run)))
         mix = pinned_elsewhere(resolved, self.backend)
-        built = build(resolved)
+        built = build(resolved, self.scene)
         mixed, sides = prepare(built, self.backend, self.devices, mix=mix)
         for name, side in sides.items():  # the scene goes up once per backend, not per change
             if name not in self.uploads:

@@ -97,7 +97,7 @@ def deferred_prepass():
             passes.append(PassEntry("depth_prepass", "depth_prepass"))
             p = replace(p, inputs={"depth": "depth_prepass.depth"},
                         settings={**p.settings, "prepass": True})
-        elif p.name == "lighting":
+        elif p.name in ("lighting", "points_lines"):
             p = replace(p, inputs={**p.inputs, "depth": "depth_prepass.depth"})
         passes.append(p)
     return replace(cfg, name="deferred_prepass", passes=passes)
@@ -113,7 +113,7 @@ def test_prepass_setting_swaps_the_depth_output_for_an_input():
     built = build(config("forward_prepass"))
     assert built.slots["forward"]["depth"] == "depth_prepass.depth"
     plan = compile(built.graph)
-    assert plan.order == ("depth_prepass", "forward", "tonemap")
+    assert plan.order == ("depth_prepass", "forward", "points_lines", "tonemap")
     assert "forward.depth" not in {r.name for r in plan.resources}
     ins, outs = built.passes["forward"].declare()
     assert ins["depth"].read_only and "depth" not in outs

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _open(name: str = "flat", size: str = "32x24"):
     cfg = apply_overrides(load_config(ROOT / "configs" / f"{name}.toml"), [f"size={size}"])
     scene = tiny_scene()
-    return open_frame(build(cfg), "wgpu", scene=scene, camera=camera_for(cfg, scene))
+    return open_frame(build(cfg, scene), "wgpu", scene=scene, camera=camera_for(cfg, scene))
 
 
 def _target(device, usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC):

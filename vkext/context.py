@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.base import SlotContext
+from rfw.context import check_topology, nothing_to_draw
 from rfw.graph.formats import format_info
 from rfw.passes import Pass, Settings
 from rfw.shaders import ShaderError, program_files
@@ -447,30 +448,38 @@ class VkPassContext(SlotContext):
                    defines: dict[str, object] | None = None, depth_compare: str = "less",
                    depth_write: bool = True, cull: str = "back", camera: str = "main",
                    blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
-                   push_constants: bytes | None = None, **bindings: Any) -> int:
+                   topology: str = "triangle-list", push_constants: bytes | None = None,
+                   **bindings: Any) -> int:
         """Draw the scene's instances into ``color`` targets (and ``depth``) with dynamic
         rendering; set 0 takes ``bindings``, sets 1-3 are the scene's. Returns the draws.
+        ``topology`` point-list or line-list draws the scene's strokes (nothing at all
+        where it has none of that kind and nothing is cleared).
 
         The draws are recorded once into a bundle (``vkext.bundles``) and replayed while
         nothing they bake in changes; uniform values are rewritten each frame."""
         if self.scene is None:
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
+        check_topology(self.pass_.name, topology)
+        if nothing_to_draw(self.scene, topology, color, depth):
+            return 0
         prog = self.program("render", shader=shader, defines=defines)
         self._check_extra(prog, {**bindings, "camera": 0, "lights": 0})
         if self.executor.bundles is None or self._pass_bundle is not None:  # inline
             with self.render_pass(color=color, depth=depth,
                                   depth_read_only=not depth_write) as rp:
-                rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend)
+                rp.use(prog, depth_compare=depth_compare, cull=cull, blend=blend,
+                       topology=topology)
                 rp.bind(**bindings)
                 if push_constants is not None:
                     rp.push(push_constants)
                 return self.scene.draw(self.cmd, prog.pipeline_layout.handle, camera=camera,
-                                       alpha=alpha)
+                                       alpha=alpha, topology=topology)
         colors, targets, dimage = self._targets(color, depth)
         first = (targets or [dimage])[0]
         pipe = self.executor.programs.graphics_pipeline(
             prog, **_target_formats(targets, dimage), samples=first.samples,
-            depth_write=depth_write, depth_compare=depth_compare, cull=cull, blend=blend)
+            depth_write=depth_write, depth_compare=depth_compare, cull=cull, blend=blend,
+            topology=topology)
         if push_constants is not None:
             self._check_push(prog, push_constants)
         # the pass's own sets first: cached, with this frame's uniform values written
@@ -498,7 +507,8 @@ class VkPassContext(SlotContext):
                     buf = ffi.new("char[]", bytes(push_constants))
                     lib.vkCmdPushConstants(cmd, layout, prog.stage_flags, 0,
                                            len(push_constants), buf)
-                return self.scene.draw(cmd, layout, camera=camera, alpha=alpha)
+                return self.scene.draw(cmd, layout, camera=camera, alpha=alpha,
+                                       topology=topology)
 
             bundle = self.executor.bundles.record(
                 slot, key, colors=formats["colors"], depth=formats["depth"] or 0,
@@ -755,14 +765,15 @@ class VkRenderPass:
             self.ops.append(op)
 
     def use(self, prog: Program, *, depth_compare: str = "less", cull: str = "back",
-            blend: dict | None = None) -> None:
+            blend: dict | None = None, topology: str = "triangle-list") -> None:
         """Bind ``prog``'s pipeline for this pass's targets (made once per state)."""
         if prog.kind not in ("render", "mesh"):
             raise ShaderError(f"pass '{self.ctx.pass_.name}': {prog.name} is a {prog.kind} "
                               "program; a render pass draws render or mesh programs")
         pipe = self.ctx.executor.programs.graphics_pipeline(
             prog, **_target_formats(self.targets, self.depth), samples=self.samples,
-            depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend)
+            depth_compare=depth_compare, depth_write=self.depth_write, cull=cull, blend=blend,
+            topology=topology)
         self._emit(("pipeline", pipe.handle))
         self.prog = prog
 

@@ -281,9 +281,10 @@ class Programs:
 
     def graphics_pipeline(self, prog: Program, *, colors: Sequence[int], depth: int | None,
                           stencil: bool, samples: int, depth_compare: str, depth_write: bool,
-                          cull: str, blend: dict | None) -> Pipeline:
+                          cull: str, blend: dict | None,
+                          topology: str = "triangle-list") -> Pipeline:
         key = ("graphics", tuple(colors), depth, stencil, samples, depth_compare, depth_write,
-               cull, repr(blend))
+               cull, repr(blend), topology)
         pipe = prog.pipelines.get(key)
         if pipe is not None:
             return pipe
@@ -296,7 +297,9 @@ class Programs:
             stages[i].pName = entry
         vertex = assembly = ffi.NULL  # mesh pipelines: the mesh shader fetches its vertices
         if prog.kind == "render":
-            vertex, assembly = _vertex_input(keep)
+            vertex, assembly = _vertex_input(keep, topology)
+            if topology != "triangle-list":
+                cull = "none"  # points and lines have no faces to cull
         viewport = new("VkPipelineViewportStateCreateInfo", viewportCount=1, scissorCount=1)
         if cull not in _CULL:
             raise ShaderError(f"unknown cull mode '{cull}' (none, front or back)")
@@ -396,8 +399,13 @@ class RayPipeline:
 
 
 
-def _vertex_input(keep: list[Any]) -> tuple[Any, Any]:
-    """The scene's vertex buffers as a vertex input and triangle-list assembly state."""
+_TOPOLOGY = {"triangle-list": "VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST",
+             "line-list": "VK_PRIMITIVE_TOPOLOGY_LINE_LIST",
+             "point-list": "VK_PRIMITIVE_TOPOLOGY_POINT_LIST"}
+
+
+def _vertex_input(keep: list[Any], topology: str = "triangle-list") -> tuple[Any, Any]:
+    """The scene's vertex buffers as a vertex input, and the ``topology`` assembly state."""
     bindings = ffi.new("VkVertexInputBindingDescription[4]")
     attributes = ffi.new("VkVertexInputAttributeDescription[4]")
     for i, (stride, fmt) in enumerate(_VERTEX):
@@ -410,7 +418,7 @@ def _vertex_input(keep: list[Any]) -> tuple[Any, Any]:
                  pVertexBindingDescriptions=bindings, vertexAttributeDescriptionCount=4,
                  pVertexAttributeDescriptions=attributes)
     assembly = new("VkPipelineInputAssemblyStateCreateInfo",
-                   topology=const("VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST"))
+                   topology=const(_TOPOLOGY[topology]))
     return vertex, assembly
 
 

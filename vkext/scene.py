@@ -28,7 +28,7 @@ from rfw.backends.scene_data import (
     lights_bytes,
     main_camera_bytes,
     material_bytes,
-    mip_chain,
+    mip_levels,
     mirrored_arrays,
     mirrored_mask,
     sun_camera_bytes,
@@ -40,7 +40,15 @@ from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import copy_into_uniforms, one_time, record_upload
+from .commands import (
+    TRANSFER_DST,
+    ImageBarrier,
+    barrier,
+    copy_into_uniforms,
+    image_layout,
+    one_time,
+    record_upload,
+)
 from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
@@ -247,9 +255,10 @@ def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
 
 
 def check_instance_limits(scene: Scene, limits: dict[str, Any]) -> int:
-    """The bytes of ``scene``'s instance buffer, or a SceneError naming the scene when one
-    storage descriptor cannot reach every row (``maxStorageBufferRange``)."""
-    size = max(1, len(scene.instances)) * INSTANCE_BYTES
+    """The bytes of ``scene``'s instance buffer (its instances' rows, then its stroke
+    instances'), or a SceneError naming the scene when one storage descriptor cannot reach
+    every row (``maxStorageBufferRange``)."""
+    size = max(1, len(scene.instances) + len(scene.stroke_instances)) * INSTANCE_BYTES
     limit = int(limits.get("maxStorageBufferRange", size))
     if size > limit:
         raise SceneError(f"{len(scene.instances):,} instances need {size:,} bytes of instance "
@@ -274,13 +283,13 @@ class _SameSet:
 
 
 class _Upload:
-    """Everything the scene uploads, through one staging buffer and one submit."""
+    """The scene's buffers, through one staging buffer and one submit (textures go through
+    ``_TextureUpload``)."""
 
     def __init__(self) -> None:
         self.parts: list[np.ndarray] = []
         self.size = 0
         self.buffers: list[tuple[Buffer, int, int]] = []  # (dst, staging offset, bytes)
-        self.images: list[tuple[Image, list[tuple[int, int, int, int]]]] = []
 
     def _add(self, data: np.ndarray) -> int:
         raw = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
@@ -295,13 +304,6 @@ class _Upload:
     def buffer(self, dst: Buffer, data: np.ndarray) -> None:
         self.buffers.append((dst, self._add(data), int(np.asarray(data).nbytes)))
 
-    def image(self, dst: Image, levels: list[np.ndarray]) -> None:
-        regions = []
-        for k, lv in enumerate(levels):
-            h, w = lv.shape[:2]
-            regions.append((self._add(lv), k, w, h))
-        self.images.append((dst, regions))
-
     def submit(self, device: VkDevice) -> None:
         if not self.size:
             return
@@ -312,10 +314,68 @@ class _Upload:
                 staging.write(part, offset)
                 offset += part.size
             with one_time(device, label="scene upload") as cmd:
-                record_upload(cmd, staging, buffers=self.buffers, images=self.images,
-                              buffers_to=_SCENE_READ, images_to=_SAMPLED)
+                record_upload(cmd, staging, buffers=self.buffers, buffers_to=_SCENE_READ)
         finally:
             staging.destroy()
+
+
+# staging bytes per texture copy: the host holds at most this much of the texels uploaded
+TEXTURE_CHUNK = 32 * MiB
+
+
+class _TextureUpload:
+    """Textures streamed through one bounded staging buffer, a submit per ``TEXTURE_CHUNK``
+    of rows, one mip level built while the last one is copied: the host holds one image's
+    pixels, two of its levels and one chunk, not every texture's chain twice over."""
+
+    def __init__(self, device: VkDevice) -> None:
+        self.device = device
+        self.staging: Buffer | None = None
+
+    def image(self, dst: Image, levels: Iterable[np.ndarray]) -> None:
+        need = min(TEXTURE_CHUNK, align_up(dst.width * dst.height * 4 * 4 // 3 + 4096, 16))
+        if self.staging is None or self.staging.bytes < need:
+            self.close()
+            self.staging = staging_buffer(self.device, need, label="scene:textures")
+        pending: list[tuple[int, int, int, int, int]] = []  # (offset, mip, y, width, rows)
+        used, first = 0, True
+        for mip, level in enumerate(levels):
+            h, w = level.shape[:2]
+            step = max(1, self.staging.bytes // (4 * w))
+            for y in range(0, h, step):
+                band = level[y:y + step]
+                if used + band.nbytes > self.staging.bytes:
+                    self._copy(dst, pending, first=first, last=False)
+                    pending, used, first = [], 0, False
+                self.staging.write(band, used)
+                pending.append((used, mip, y, w, band.shape[0]))
+                used = align_up(used + band.nbytes, 16)
+        self._copy(dst, pending, first=first, last=True)
+
+    def _copy(self, dst: Image, regions: list[tuple[int, int, int, int, int]], *,
+              first: bool, last: bool) -> None:
+        assert self.staging is not None
+        with one_time(self.device, label=f"upload {dst.label}") as cmd:
+            if first:  # every mip at once; later chunks write other texels of the same image
+                barrier(cmd, [ImageBarrier(dst, "UNDEFINED", TRANSFER_DST)])
+            arr = ffi.new("VkBufferImageCopy[]", len(regions))
+            for i, (offset, mip, y, w, rows) in enumerate(regions):
+                r = arr[i]
+                r.bufferOffset = offset
+                r.imageSubresource.aspectMask = dst.aspect
+                r.imageSubresource.mipLevel = mip
+                r.imageSubresource.layerCount = 1
+                r.imageOffset.y = y
+                r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, rows, 1
+            lib.vkCmdCopyBufferToImage(cmd, self.staging.handle, dst.handle,
+                                       image_layout(TRANSFER_DST.layout), len(regions), arr)
+            if last:
+                barrier(cmd, [ImageBarrier(dst, TRANSFER_DST, _SAMPLED)])
+
+    def close(self) -> None:
+        if self.staging is not None:
+            self.staging.destroy()
+            self.staging = None
 
 
 @dataclass(frozen=True)
@@ -406,6 +466,7 @@ class VkScene:
         self._transforms = np.asarray([i.transform for i in scene.instances],
                                       np.float64).reshape(-1, 4, 4)
         self._mirrored_meshes(up)
+        self._strokes(up)
 
         # static uniforms: the materials, each at an aligned offset
         blob = bytearray()
@@ -437,16 +498,20 @@ class VkScene:
 
         # textures, their samplers and the defaults
         key = "maxImageDimension2D"
-        self.textures = texture_views(scene, dev.limits.get(key), key,
-                                      lambda t: self._texture(up, t.pixels, t.srgb, t.name))
+        tex = _TextureUpload(dev)
+        try:
+            self.textures = texture_views(scene, dev.limits.get(key), key,
+                                          lambda t: self._texture(tex, t.pixels, t.srgb, t.name))
+            one = np.full((1, 1, 4), 255, np.uint8)
+            flat = np.array([[[128, 128, 255, 255]]], np.uint8)
+            self.white = self._texture(tex, one, False, "white")
+            self.white_srgb = self._texture(tex, one, True, "white_srgb")
+            self.flat_normal = self._texture(tex, flat, False, "flat_normal")
+        finally:
+            tex.close()
         self.samplers = [self._own(make_sampler(
             dev, mag=t.mag_filter, min=t.min_filter, mip=t.mipmap_filter, address_u=t.address_u,
             address_v=t.address_v, label=f"{t.name}:sampler")) for t in scene.textures]
-        one = np.full((1, 1, 4), 255, np.uint8)
-        flat = np.array([[[128, 128, 255, 255]]], np.uint8)
-        self.white = self._texture(up, one, False, "white")
-        self.white_srgb = self._texture(up, one, True, "white_srgb")
-        self.flat_normal = self._texture(up, flat, False, "flat_normal")
         up.submit(dev)
 
         self.default_sampler = self._own(make_sampler(
@@ -464,8 +529,27 @@ class VkScene:
         self.instances_size = check_instance_limits(self.scene, self.device.limits)
         self.instance_buffer = self.allocator.create_buffer(
             self.instances_size, ("storage", "transfer_dst"), label="scene:instances")
-        if self.scene.instances:
-            up.buffer(self.instance_buffer, instance_blocks(self._transforms))
+        placed = [*self._transforms, *(i.transform for i in self.scene.stroke_instances)]
+        if placed:
+            up.buffer(self.instance_buffer, instance_blocks(placed))
+
+    def _strokes(self, up: _Upload) -> None:
+        # points and lines (GpuScene's twin): their fourth stream is COLOR_0 (mesh.glsl);
+        # a scene without any makes no buffer
+        self.strokes: list[_MeshBuffers] = []
+        strokes = self.scene.strokes
+        if not strokes:
+            return
+        streams = [self._pack(up, [np.ascontiguousarray(getattr(m, name), np.float32)
+                                   for m in strokes], "vertex", f"scene:strokes:{name}")
+                   for name in ("positions", "normals", "uvs", "colors")]
+        idx, idx_offs = self._pack(up, [np.ascontiguousarray(m.indices, np.uint32)
+                                        for m in strokes], "index", "scene:strokes:indices")
+        for j, m in enumerate(strokes):
+            vb = ffi.new("VkBuffer[4]", [b.handle for b, _ in streams])
+            offsets = ffi.new("VkDeviceSize[4]", [offs[j] for _, offs in streams])
+            self.strokes.append(_MeshBuffers(vb, offsets, idx.handle, len(m.indices),
+                                             idx_offs[j]))
 
     def _mirrored_meshes(self, up: _Upload) -> None:
         # a mirrored instance draws with two corners swapped and the tangent sign flipped
@@ -504,13 +588,13 @@ class VkScene:
             up.buffer(buf, blob)
         return buf, offsets
 
-    def _texture(self, up: _Upload, pixels: np.ndarray, srgb: bool, label: str) -> ImageView:
-        levels = mip_chain(np.ascontiguousarray(pixels, np.uint8))
-        img = self.allocator.create_image(pixels.shape[1], pixels.shape[0],
-                                          "rgba8unorm-srgb" if srgb else "rgba8unorm",
-                                          ("sampled", "transfer_dst"), mips=len(levels),
-                                          label=label)
-        up.image(img, levels)
+    def _texture(self, up: _TextureUpload, pixels: np.ndarray, srgb: bool,
+                 label: str) -> ImageView:
+        h, w = pixels.shape[:2]
+        img = self.allocator.create_image(w, h, "rgba8unorm-srgb" if srgb else "rgba8unorm",
+                                          ("sampled", "transfer_dst"),
+                                          mips=max(w, h).bit_length(), label=label)
+        up.image(img, mip_levels(np.ascontiguousarray(pixels, np.uint8)))
         return image_view(img, label=f"{label}:view")
 
     def _descriptor_sets(self) -> None:
@@ -615,16 +699,29 @@ class VkScene:
         """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights."""
         return {"camera": self.camera_range("main"), "lights": self.lights_range}
 
+    def draws(self, topology: str = "triangle-list") -> int:
+        """How many draws ``draw`` would record for ``topology`` at most (0: nothing of
+        that kind, so a caller need not begin rendering)."""
+        if topology == "triangle-list":
+            return len(self.scene.instances)
+        return sum(1 for i in self.scene.stroke_instances
+                   if self.scene.strokes[i.mesh].topology == topology)
+
     def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
-             alpha: tuple[str, ...] = ("OPAQUE", "MASK")) -> int:
+             alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
+             topology: str = "triangle-list") -> int:
         """Record every instance whose material's alpha mode is in ``alpha`` with a bound
         graphics pipeline whose layout (``layout``) uses the scene's sets 1 to 3; each
-        draw's ``firstInstance`` is the instance's index (its row in set 3)."""
+        draw's ``firstInstance`` is the instance's index (its row in set 3). ``topology``
+        point-list or line-list: the stroke instances of that kind instead (their rows
+        follow the instances')."""
         point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
         lib.vkCmdBindDescriptorSets(cmd, point, layout, 1, 1, self.camera_sets[camera], 0,
                                     ffi.NULL)
         lib.vkCmdBindDescriptorSets(cmd, point, layout, 3, 1, self.instance_set, 0, ffi.NULL)
         index_type = const("VK_INDEX_TYPE_UINT32")
+        if topology != "triangle-list":
+            return self._draw_strokes(cmd, layout, topology, alpha)
         draws = 0
         last_mesh = last_material = None
         for k, inst in enumerate(self.scene.instances):
@@ -644,6 +741,28 @@ class VkScene:
                 lib.vkCmdBindIndexBuffer(cmd, buffers.index, buffers.index_offset, index_type)
                 last_mesh = (inst.mesh, mirrored)
             lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, k)
+            draws += 1
+        return draws
+
+    def _draw_strokes(self, cmd: Any, layout: Any, topology: str,
+                      alpha: tuple[str, ...]) -> int:
+        point = const("VK_PIPELINE_BIND_POINT_GRAPHICS")
+        draws, base = 0, len(self.scene.instances)
+        last_material = None
+        for k, inst in enumerate(self.scene.stroke_instances):
+            mesh = self.scene.strokes[inst.mesh]
+            buffers = self.strokes[inst.mesh]
+            if mesh.topology != topology or buffers.count == 0 or \
+                    self.scene.materials[mesh.material].alpha_mode not in alpha:
+                continue
+            if mesh.material != last_material:
+                lib.vkCmdBindDescriptorSets(cmd, point, layout, 2, 1,
+                                            self.material_sets[mesh.material], 0, ffi.NULL)
+                last_material = mesh.material
+            lib.vkCmdBindVertexBuffers(cmd, 0, 4, buffers.vertex, buffers.offsets)
+            lib.vkCmdBindIndexBuffer(cmd, buffers.index, buffers.index_offset,
+                                     const("VK_INDEX_TYPE_UINT32"))
+            lib.vkCmdDrawIndexed(cmd, buffers.count, 1, 0, 0, base + k)
             draws += 1
         return draws
 

@@ -23,12 +23,13 @@ from .scene_data import (
     lights_bytes,
     main_camera_bytes,
     material_bytes,
-    mip_chain,
+    mip_levels,
     mirrored_arrays,
     mirrored_mask,
     sun_camera_bytes,
     texture_views,
 )
+from .wgpu_calls import wait_idle
 
 # wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these four;
 # storage is read-only, the only kind a vertex shader may bind)
@@ -38,6 +39,12 @@ _ENTRIES: dict[str, tuple[str, dict[str, str]]] = {
     "sampled_image": ("texture", {"sample_type": "float", "view_dimension": "2d"}),
     "sampler": ("sampler", {"type": "filtering"}),
 }
+
+
+# bytes of texels written to the queue between two waits: wgpu-native holds more than the
+# chunk per write until the wait (peak RSS of 16 4096x4096 textures on lavapipe, forward at
+# 64x64: 1,739 MB at 4 MiB, 2,172 at 32, 2,926 at 128; benchmarks/bench_texture_memory.py)
+TEXTURE_CHUNK = 4 << 20
 
 
 def scene_layout_entries(group: int) -> list[dict]:
@@ -51,9 +58,10 @@ def scene_layout_entries(group: int) -> list[dict]:
 
 
 def check_instance_limits(scene: Scene, limits: dict[str, int]) -> int:
-    """The bytes of ``scene``'s instance buffer, or a SceneError naming the scene when the
-    device cannot bind that much as one storage buffer (wgpu-native would abort)."""
-    size = max(1, len(scene.instances)) * INSTANCE_BYTES
+    """The bytes of ``scene``'s instance buffer (the rows of its instances, then of its
+    stroke instances), or a SceneError naming the scene when the device cannot bind that
+    much as one storage buffer (wgpu-native would abort)."""
+    size = max(1, len(scene.instances) + len(scene.stroke_instances)) * INSTANCE_BYTES
     for key in ("max-storage-buffer-binding-size", "max-buffer-size"):
         limit = int(limits.get(key, size))
         if size > limit:
@@ -112,9 +120,10 @@ class GpuScene:
     def _instances(self) -> Any:
         # one storage buffer, one 128-byte row per instance: written once, bound once
         check_instance_limits(self.scene, self.device.limits)
-        rows = np.zeros((max(1, len(self.scene.instances)), INSTANCE_BYTES // 4), np.float32)
-        if self.scene.instances:
-            rows[:] = instance_blocks([i.transform for i in self.scene.instances])
+        placed = [*self.scene.instances, *self.scene.stroke_instances]
+        rows = np.zeros((max(1, len(placed)), INSTANCE_BYTES // 4), np.float32)
+        if placed:
+            rows[:] = instance_blocks([i.transform for i in placed])
         return self._buffer(rows, wgpu.BufferUsage.STORAGE, "scene.instances")
 
     def _upload_meshes(self) -> None:
@@ -142,17 +151,40 @@ class GpuScene:
                     self._buffer(indices, wgpu.BufferUsage.INDEX, f"{m.name}.indices:mirrored"),
                     len(m.indices))
 
+        # points and lines: the fourth stream is their COLOR_0 (mesh.glsl); nothing is made
+        # for a scene without any
+        self.strokes = [(
+            [self._buffer(m.positions.astype(np.float32), v, f"{m.name}.positions"),
+             self._buffer(m.normals.astype(np.float32), v, f"{m.name}.normals"),
+             self._buffer(m.uvs.astype(np.float32), v, f"{m.name}.uvs"),
+             self._buffer(m.colors.astype(np.float32), v, f"{m.name}.colors")],
+            self._buffer(m.indices.astype(np.uint32), wgpu.BufferUsage.INDEX,
+                         f"{m.name}.indices"),
+            len(m.indices)) for m in self.scene.strokes]
+
     def _texture(self, pixels: np.ndarray, srgb: bool, label: str) -> Any:
-        levels = mip_chain(pixels)
+        h, w = pixels.shape[:2]
         tex = self.device.create_texture(
-            size=(pixels.shape[1], pixels.shape[0], 1), mip_level_count=len(levels),
+            size=(w, h, 1), mip_level_count=max(w, h).bit_length(),
             format="rgba8unorm-srgb" if srgb else "rgba8unorm",
             usage=wgpu.TextureUsage.TEXTURE_BINDING | wgpu.TextureUsage.COPY_DST, label=label)
-        for k, lv in enumerate(levels):
-            h, w = lv.shape[:2]
-            self.device.queue.write_texture({"texture": tex, "mip_level": k},
-                                            np.ascontiguousarray(lv),
-                                            {"bytes_per_row": 4 * w}, (w, h, 1))
+        # in bands of rows, one level at a time, the queue flushed every TEXTURE_CHUNK:
+        # write_texture stages its own copy until a submit, so unflushed writes of every
+        # texture would all be held at once
+        written = 0
+        for k, lv in enumerate(mip_levels(pixels)):
+            lh, lw = lv.shape[:2]
+            step = max(1, TEXTURE_CHUNK // (4 * lw))
+            for y in range(0, lh, step):
+                band = np.ascontiguousarray(lv[y:y + step])
+                self.device.queue.write_texture(
+                    {"texture": tex, "mip_level": k, "origin": (0, y, 0)}, band,
+                    {"bytes_per_row": 4 * lw, "rows_per_image": band.shape[0]},
+                    (lw, band.shape[0], 1))
+                written += band.nbytes
+                if written >= TEXTURE_CHUNK:
+                    wait_idle(self.device)
+                    written = 0
         self._textures.append(tex)
         return tex.create_view()
 
@@ -230,9 +262,10 @@ class GpuScene:
     def _uniform_rows(self) -> int:
         stride = align_up(INSTANCE_BYTES, self.device.limits["min-uniform-buffer-offset-alignment"])
         if self._instance_uniforms is None:
-            rows = np.zeros((max(1, len(self.scene.instances)), stride), np.uint8)
-            if self.scene.instances:
-                blocks = instance_blocks([i.transform for i in self.scene.instances])
+            placed = [*self.scene.instances, *self.scene.stroke_instances]
+            rows = np.zeros((max(1, len(placed)), stride), np.uint8)
+            if placed:
+                blocks = instance_blocks([i.transform for i in placed])
                 rows[:, :INSTANCE_BYTES] = blocks.view(np.uint8)
             self._instance_uniforms = self._buffer(rows, wgpu.BufferUsage.UNIFORM,
                                                    "scene.instances:uniform")
@@ -248,9 +281,17 @@ class GpuScene:
                                                                     self.lights_buffer}}])
         return self._bind_cache[key]
 
+    def draws(self, topology: str = "triangle-list") -> int:
+        """How many draws ``draw`` would record for ``topology`` at most (0: nothing of
+        that kind to draw, so a caller need not begin a pass)."""
+        if topology == "triangle-list":
+            return len(self.scene.instances)
+        return sum(1 for i in self.scene.stroke_instances
+                   if self.scene.strokes[i.mesh].topology == topology)
+
     def draw(self, rp: Any, prog: Any, pipeline: Any, *, camera: str = "main",
              group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
-             dynamic: bool = True) -> int:
+             dynamic: bool = True, topology: str = "triangle-list") -> int:
         """Draw every instance whose material's alpha mode is in ``alpha`` (into a render
         pass or a render bundle); returns draws. Each draw's first instance is the
         instance's index, which the shader reads its row by (``gl_InstanceIndex``).
@@ -264,6 +305,8 @@ class GpuScene:
         shared = dynamic or _binds_storage(prog, 3)
         if shared:
             rp.set_bind_group(3, self._instance_group(prog.layouts[3], None))
+        if topology != "triangle-list":
+            return self._draw_strokes(rp, prog, topology, alpha, shared)
         draws = 0
         last_material = last_mesh = None
         for k, inst in enumerate(self.scene.instances):
@@ -286,6 +329,30 @@ class GpuScene:
                 rp.set_index_buffer(index, "uint32")
                 last_mesh = (inst.mesh, mirrored)
             rp.draw_indexed(count, 1, 0, 0, k)
+            draws += 1
+        return draws
+
+    def _draw_strokes(self, rp: Any, prog: Any, topology: str, alpha: tuple[str, ...],
+                      shared: bool) -> int:
+        """The stroke instances of ``topology`` (point-list or line-list); their rows
+        follow the instances' in the instance buffer."""
+        draws, base = 0, len(self.scene.instances)
+        last_material = None
+        for k, inst in enumerate(self.scene.stroke_instances):
+            mesh = self.scene.strokes[inst.mesh]
+            if mesh.topology != topology or \
+                    self.scene.materials[mesh.material].alpha_mode not in alpha:
+                continue
+            buffers, index, count = self.strokes[inst.mesh]
+            if mesh.material != last_material:
+                rp.set_bind_group(2, self._material_group(prog.layouts[2], mesh.material))
+                last_material = mesh.material
+            if not shared:
+                rp.set_bind_group(3, self._instance_group(prog.layouts[3], base + k))
+            for slot, buf in enumerate(buffers):
+                rp.set_vertex_buffer(slot, buf)
+            rp.set_index_buffer(index, "uint32")
+            rp.draw_indexed(count, 1, 0, 0, base + k)
             draws += 1
         return draws
 

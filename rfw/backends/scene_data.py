@@ -7,13 +7,13 @@ the GLSL twins declare the same offsets.
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 
 from ..scene.limits import check_texture_size
-from ..scene.model import Camera, Light, Material, Mesh, Scene, Texture
+from ..scene.model import Camera, Light, Material, Mesh, Scene, SceneError, Texture
 
 # the scene's groups (Vulkan: sets) as scene.glsl and mesh.glsl declare them: (name, binding,
 # kind as rfw.spirv reflects it). Both backends build their scene layouts from this one table,
@@ -37,36 +37,70 @@ def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
     """A box-filtered chain on the CPU, each level the rounded mean of 2x2 (or 2x1) texels.
     Sums are taken in uint16 (half a float32 level's bytes): the same bytes as averaging in
     float32 and rounding half up, since every partial mean is exact there."""
-    levels = [pixels]
-    while max(levels[-1].shape[:2]) > 1:
-        h, w = levels[-1].shape[:2]
-        p = levels[-1][: h - h % 2 or 1, : w - w % 2 or 1].astype(np.uint16)
-        n = 1
-        if p.shape[0] >= 2:
+    return list(mip_levels(pixels))
+
+
+def mip_levels(pixels: np.ndarray) -> Iterator[np.ndarray]:
+    """``mip_chain`` one level at a time (``pixels`` first), so an uploader holds one level
+    and the next, not the whole chain; each level is built in bands of rows, so the uint16
+    sums are a few MiB however large the image."""
+    level = pixels
+    yield level
+    while max(level.shape[:2]) > 1:
+        level = _half(level)
+        yield level
+
+
+MIP_BAND_TEXELS = 1 << 20  # output texels per band of uint16 sums (16 MiB of RGBA sums in)
+
+
+def _half(src: np.ndarray) -> np.ndarray:
+    h, w = src.shape[:2]
+    rows, cols = (2 if h >= 2 else 1), (2 if w >= 2 else 1)
+    out = np.empty((max(h // 2, 1), max(w // 2, 1), *src.shape[2:]), np.uint8)
+    n = rows * cols
+    step = max(1, MIP_BAND_TEXELS // out.shape[1])
+    for y in range(0, out.shape[0], step):
+        end = min(y + step, out.shape[0])
+        # an odd last row or column is dropped, as the whole-level chain did
+        p = src[y * rows:end * rows, :out.shape[1] * cols].astype(np.uint16)
+        if rows == 2:
             p = p[0::2] + p[1::2]
-            n *= 2
-        if p.shape[1] >= 2:
+        if cols == 2:
             p = p[:, 0::2] + p[:, 1::2]
-            n *= 2
         p += n // 2
         p //= n
-        levels.append(p.astype(np.uint8))
-    return levels
+        out[y:end] = p
+    return out
 
 
 def texture_views(scene: Scene, limit: int | None, key: str,
                   make: Callable[[Texture], Any]) -> list[Any]:
     """One view per ``scene.textures``, made by ``make``. All are checked against the
     device's 2D ``limit`` (``key`` names it) before the first is made, and textures sharing
-    an image in one colour space (a glTF image named by many textures) share one upload."""
+    an image in one colour space (a glTF image named by many textures) share one upload.
+    Where the scene does not keep its pixels (``Scene.keep_pixels``), each image is dropped
+    from its textures once its last view is made."""
     for t in scene.textures:
+        if t.pixels is None:
+            raise SceneError(f"texture '{t.name}': its pixels were dropped after an earlier "
+                             "upload (Scene.keep_pixels is False): load the scene again",
+                             file=scene.source)
         check_texture_size(t.pixels.shape[1], t.pixels.shape[0], limit, key,
                            file=scene.source, name=t.name)
-    views: dict[tuple[int, bool], Any] = {}
+    keys = [(id(t.pixels), t.srgb) for t in scene.textures]
+    sharing: dict[int, list[Texture]] = {}
     for t in scene.textures:
-        if (id(t.pixels), t.srgb) not in views:
-            views[id(t.pixels), t.srgb] = make(t)
-    return [views[id(t.pixels), t.srgb] for t in scene.textures]
+        sharing.setdefault(id(t.pixels), []).append(t)
+    last = {k[0]: i for i, k in enumerate(keys)}
+    views: dict[tuple[int, bool], Any] = {}
+    for i, (t, k) in enumerate(zip(scene.textures, keys, strict=True)):
+        if k not in views:
+            views[k] = make(t)
+        if not scene.keep_pixels and last[k[0]] == i:
+            for u in sharing[k[0]]:
+                u.pixels = None
+    return [views[k] for k in keys]
 
 
 def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 import wgpu
 
 from ..backend import gpu_choice, pick_gpu
-from ..context import check_sampler
+from ..context import check_sampler, check_topology, nothing_to_draw
 from ..errors import naming
 from ..frame import InFlight, frames_in_flight, run_frames
 from ..graph import CompiledGraph
@@ -757,25 +757,31 @@ class PassContext(SlotContext):
                    depth_compare: str = "less", depth_write: bool = True,
                    cull: str = "back", camera: str = "main",
                    blend: dict | None = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
-                   **bindings: Any) -> int:
+                   topology: str = "triangle-list", **bindings: Any) -> int:
         """Draw the scene's instances into ``color`` targets (and ``depth``) with the pass's
         ``vs_main``/``fs_main``; group 0 takes ``bindings``. Returns the number of draws.
+        ``topology`` point-list or line-list draws the scene's strokes instead (nothing at
+        all, no pass begun, where it has none of that kind and nothing is cleared).
 
         The draws are recorded once into a render bundle and replayed; per call site (the
         pass's n-th scene draw) the program, pipeline and group 0 are kept with what they
         were found for, so a frame that draws as the last one did looks none of them up."""
         if self.scene is None:
             raise ShaderError(f"pass '{self.pass_.name}' draws the scene, but none is loaded")
+        check_topology(self.pass_.name, topology)
+        if nothing_to_draw(self.scene, topology, color, depth):
+            return 0
         site = (self.pass_.name, "scene", self._bundles)
         call = (tuple(color), depth, shader, _defines_key(defines), depth_compare,
-                depth_write, cull, camera, repr(blend), tuple(alpha), self.scene)
+                depth_write, cull, camera, repr(blend), tuple(alpha), topology, self.scene)
         sites = _sites(self.executor)
         hit = self._site_hit(sites.get(site), call, bindings)
         if hit is not None:
             prog, pipe, group0, targets, dfmt = hit[3]
         else:
             prog, pipe, group0, targets, dfmt = self._scene_state(
-                color, depth, shader, defines, depth_compare, depth_write, cull, blend, bindings)
+                color, depth, shader, defines, depth_compare, depth_write, cull, blend, bindings,
+                topology)
             sites[site] = (call, tuple(bindings), tuple(bindings.values()),
                            (prog, pipe, group0, targets, dfmt),
                            self._uniform_slots(prog, bindings), [time.monotonic()])
@@ -786,7 +792,8 @@ class PassContext(SlotContext):
         bundle, n = self.executor.bundle(
             (self.pass_.name, self._bundles), key, lambda enc: self.scene.draw(
                 enc, prog, pipe, camera=camera, group0=group0, alpha=alpha,
-                dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3)),
+                dynamic=prog.layouts[3] is self.executor.shaders.scene_layouts.get(3),
+                topology=topology),
             color_formats=targets, depth_format=dfmt, depth_read_only=read_only)
         self._bundles += 1
         self.executor.calls.bundles(self.encoder, self.pass_.name,
@@ -797,7 +804,7 @@ class PassContext(SlotContext):
     def _scene_state(self, color: list[tuple[str, Any]], depth: tuple[str, Any] | None,
                      shader: str | None, defines: dict[str, object] | None,
                      depth_compare: str, depth_write: bool, cull: str, blend: dict | None,
-                     bindings: dict[str, Any]) -> tuple:
+                     bindings: dict[str, Any], topology: str = "triangle-list") -> tuple:
         """The program, pipeline, group 0 and target formats of a scene draw."""
         formats = {k: self.executor.format_of(v) for k, v in bindings.items()}
         prog = self.program("render", shader=shader, defines=defines,
@@ -810,7 +817,7 @@ class PassContext(SlotContext):
                               "pass's) to 3 (the scene's), each declared")
         targets = tuple(self.format(slot) for slot, _ in color)
         dfmt = self.format(depth[0]) if depth is not None else None
-        key = ("scene", targets, dfmt, depth_compare, depth_write, cull, str(blend))
+        key = ("scene", targets, dfmt, depth_compare, depth_write, cull, str(blend), topology)
         pipe = prog.pipelines.get(key)
         if pipe is None:
             frag = None
@@ -830,8 +837,9 @@ class PassContext(SlotContext):
                 layout=prog.pipeline_layout,
                 vertex={"module": prog.stages["vert"][0], "entry_point":
                         prog.stages["vert"][1], "buffers": VERTEX_BUFFERS},
-                primitive={"topology": "triangle-list", "cull_mode": cull,
-                           "front_face": "ccw"},
+                # points and lines have no faces to cull
+                primitive={"topology": topology, "front_face": "ccw", "cull_mode":
+                           cull if topology == "triangle-list" else "none"},
                 depth_stencil=ds, fragment=frag, label=f"{self.pass_.name}:scene")
         group0 = self.bind(prog, bindings, groups=(0,))[0]
         return prog, pipe, group0, targets, dfmt

@@ -49,6 +49,14 @@ def _writes_key(writes: dict | None) -> tuple:
             writes["end_of_pass_write_index"])
 
 
+def wait_idle(device: Any) -> None:
+    """Submit what the queue holds (``write_texture`` staging among it) and block until all
+    of it is done, so wgpu-native frees its staging copies (wgpu-py's
+    ``on_submitted_work_done_sync`` fails against wgpu-native's callback type in 0.32)."""
+    device.queue.submit([])
+    _libf.wgpuDevicePoll(device._internal, True, _ffi.NULL)
+
+
 class FrameCalls:
     """One device's frame calls with kept descriptors (see the module's text)."""
 

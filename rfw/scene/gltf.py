@@ -100,8 +100,8 @@ _WRAPS = {33071: "clamp-to-edge", 33648: "mirror-repeat", 10497: "repeat"}
 
 # what load() reads past, and how its warning says so
 _UNREAD = {
-    "points": "POINTS primitives skipped (only triangles are drawn)",
-    "lines": "LINES, LINE_LOOP or LINE_STRIP primitives skipped (only triangles are drawn)",
+    "stroke_textures": "textures of points and lines not read: drawn with the material's "
+                       "base colour and emissive factors",
     "skins": "skins not read: skinned meshes are drawn unposed, by their nodes' transforms",
     "morphs": "morph targets not read: meshes are drawn with their base shape",
     "animations": "animations not read: the scene is drawn as the file poses it",
@@ -214,7 +214,8 @@ class _Loader:
         self.texels = 0  # of the distinct images decoded so far (limits.MAX_TEXELS)
         self.textures: dict[tuple[int, bool], int | None] = {}
         self.materials: dict[int, int] = {}
-        self.primitives: dict[tuple[int, int], int | None] = {}
+        # (mesh, primitive) -> (a stroke?, its index in scene.strokes or scene.meshes)
+        self.primitives: dict[tuple[int, int], tuple[bool, int]] = {}
         # what the file holds that is not drawn as it means, said in one line each after
         # build(): kind -> the elements (first few named)
         self.unread: dict[str, list[str]] = {k: [] for k in _UNREAD}
@@ -395,10 +396,7 @@ class _Loader:
                       f"{', '.join(sorted(SUPPORTED_EXTENSIONS))})")
 
     def say_unread(self) -> None:
-        """One warning line per kind of thing read past. A file whose primitives are all
-        points or lines is a scene with nothing drawable, rendered as an empty one is (the
-        background, with the scene's own 'nothing is drawable' line): issue 21 treats the
-        two alike."""
+        """One warning line per kind of thing read past."""
         if self.doc.animations:
             self.unread["animations"].append("animations")
         for kind, message in _UNREAD.items():
@@ -616,13 +614,15 @@ class _Loader:
             return n, f", {what} accessors[{index}] with count {n:,}{backed}"
 
         mode = 4 if prim.mode is None else prim.mode
-        if mode not in (4, 5, 6):
-            return (0, ""), (0, "")  # points and lines are not drawn
+        if mode not in _MODES:
+            return (0, ""), (0, "")  # build() says so
         position = getattr(prim.attributes, "POSITION", None) if prim.attributes else None
         v = count(position, "POSITION")
         i = count(prim.indices, "indices") if prim.indices is not None else v
-        if mode != 4:  # a strip or fan of n indices makes n - 2 triangles
+        if mode in (5, 6):  # a strip or fan of n indices makes n - 2 triangles
             i = (3 * max(i[0] - 2, 0), i[1])
+        elif mode in (2, 3):  # a loop or strip of n indices makes n (or n - 1) segments
+            i = (2 * i[0], i[1])
         return v, i
 
     # -- scene graph ----------------------------------------------------------------------
@@ -709,19 +709,20 @@ class _Loader:
             key = (node.mesh, p)
             if key not in self.primitives:
                 mesh_out = self.primitive(node.mesh, p)
-                self.primitives[key] = None if mesh_out is None else len(self.scene.meshes)
-                if mesh_out is not None:
-                    self.scene.meshes.append(mesh_out)
-            if self.primitives[key] is None:  # points or lines: said once, after build()
-                continue
-            self.scene.instances.append(Instance(
-                self.primitives[key], np.ascontiguousarray(world, np.float32),
-                node.name or f"nodes[{index}]"))
+                # points and lines are strokes, placed by stroke instances
+                meshes = self.scene.meshes if mesh_out.topology == "triangle-list" \
+                    else self.scene.strokes
+                self.primitives[key] = (meshes is self.scene.strokes, len(meshes))
+                meshes.append(mesh_out)
+            stroke, k = self.primitives[key]
+            instances = self.scene.stroke_instances if stroke else self.scene.instances
+            instances.append(Instance(k, np.ascontiguousarray(world, np.float32),
+                                      node.name or f"nodes[{index}]"))
 
     # -- geometry -------------------------------------------------------------------------
 
-    def primitive(self, mi: int, pi: int) -> Mesh | None:
-        """The primitive as a Mesh; None for points and lines (valid glTF, not drawn)."""
+    def primitive(self, mi: int, pi: int) -> Mesh:
+        """The primitive as a Mesh: triangles, or a stroke (points or lines)."""
         mesh = self.doc.meshes[mi]
         prim = mesh.primitives[pi]
         where = f"meshes[{mi}].primitives[{pi}]"
@@ -731,9 +732,6 @@ class _Loader:
             mode = self.integer(prim.mode, where, "mode", default=4)
             if mode not in _MODES:
                 self.fail(where, f"mode {mode} is not a glTF primitive mode (0 to 6)")
-            if mode in (0, 1, 2, 3):
-                self.unread["points" if mode == 0 else "lines"].append(where)
-                return None
             if prim.targets:
                 self.unread["morphs"].append(where)
             if "POSITION" not in attrs:
@@ -770,7 +768,7 @@ class _Loader:
                 # KHR_texture_transform is affine, so it may be applied per vertex
                 uvs = uvs @ uv_matrix[:, :2].T + uv_matrix[:, 2]
             colors = attribute("COLOR_0", ("VEC3", "VEC4"))
-            if colors is not None:
+            if colors is not None and mode > 3:
                 material = self.tint(material, colors, where)
 
             if "indices" in decoded:
@@ -784,6 +782,12 @@ class _Loader:
             if len(idx) and int(idx.max()) >= n:
                 self.fail(iwhere, f"index {int(idx.max())} out of range for {n} vertices "
                                   f"(POSITION count)")
+            name = mesh.name or f"meshes[{mi}]"
+            if len(mesh.primitives) > 1:
+                name = f"{name}.{pi}"
+            if mode <= 3:
+                return self.stroke(name, mode, pos, normals, uvs, colors, idx, material,
+                                   where, iwhere)
             idx = self.triangles(idx, mode, iwhere)
 
             if normals is None:
@@ -798,9 +802,6 @@ class _Loader:
             else:
                 tangents[:, :3] = normalize(tangents[:, :3])
                 tangents[:, 3] = np.where(tangents[:, 3] < 0, -1.0, 1.0)
-            name = mesh.name or f"meshes[{mi}]"
-            if len(mesh.primitives) > 1:
-                name = f"{name}.{pi}"
             return Mesh(
                 name=name,
                 positions=np.ascontiguousarray(pos, np.float32),
@@ -841,6 +842,41 @@ class _Loader:
                 self.fail(where, f"attributes.{name}: contains NaN or infinity")
             out[name] = values
         return out
+
+    def stroke(self, name: str, mode: int, pos: np.ndarray, normals: np.ndarray | None,
+               uvs: np.ndarray | None, colors: np.ndarray | None, idx: np.ndarray,
+               material: int, where: str, iwhere: str) -> Mesh:
+        """A POINTS, LINES, LINE_LOOP or LINE_STRIP primitive as a stroke: point-list or
+        line-list indices, COLOR_0 per vertex (RGBA, white without). Its NORMAL is kept but
+        not lit: points_lines draws every stroke unlit (glTF 2.0 section 3.7.2.1 asks that
+        only of those without normals)."""
+        n = len(pos)
+        if mode == 1:
+            if len(idx) % 2:
+                self.fail(iwhere, f"{len(idx)} indices is not a whole number of lines")
+        elif mode in (2, 3):
+            # a strip joins each index to the next; a loop joins the last to the first too
+            ends = np.append(idx[1:], idx[:1]) if mode == 2 and len(idx) > 2 else idx[1:]
+            idx = np.stack([idx[:len(ends)], ends], axis=1).ravel() if len(idx) > 1 \
+                else np.zeros(0, np.int64)
+        m = self.scene.materials[material]
+        if any(t is not None for t in (m.base_color_texture, m.emissive_texture)):
+            self.unread["stroke_textures"].append(where)
+        rgba = np.ones((n, 4))
+        if colors is not None:
+            rgba[:, :colors.shape[1]] = np.clip(colors, 0.0, 1.0)
+        return Mesh(
+            name=name,
+            positions=np.ascontiguousarray(pos, np.float32),
+            normals=np.ascontiguousarray(np.zeros((n, 3)) if normals is None
+                                         else normalize(normals), np.float32),
+            uvs=np.ascontiguousarray(np.zeros((n, 2)) if uvs is None else uvs, np.float32),
+            tangents=np.zeros((n, 4), np.float32),
+            indices=np.ascontiguousarray(idx, np.uint32),
+            material=material,
+            topology="point-list" if mode == 0 else "line-list",
+            colors=np.ascontiguousarray(rgba, np.float32),
+        )
 
     def triangles(self, idx: np.ndarray, mode: int, where: str) -> np.ndarray:
         """Triangle-list indices for TRIANGLES, TRIANGLE_STRIP or TRIANGLE_FAN."""

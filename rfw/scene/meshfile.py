@@ -76,6 +76,14 @@ def _file_normals(geom: trimesh.Trimesh) -> np.ndarray | None:
     return None
 
 
+def _vertex_colors(geom: trimesh.Trimesh) -> np.ndarray | None:
+    """A face-less Trimesh's per-vertex colours, where its file gave some."""
+    visual = getattr(geom, "visual", None)
+    if getattr(visual, "kind", None) == "vertex":
+        return np.asarray(visual.vertex_colors)
+    return None
+
+
 class _Converter:
     def __init__(self, source: str, name: str):
         self.source = source
@@ -88,7 +96,7 @@ class _Converter:
         self.keep: list[Any] = []  # keeps id()-keyed objects alive while converting
 
     def convert(self, loaded: Any) -> Scene:
-        if isinstance(loaded, trimesh.Trimesh):
+        if isinstance(loaded, (trimesh.Trimesh, trimesh.PointCloud)):
             items = [("mesh", np.identity(4), loaded.metadata.get("name") or "mesh", loaded)]
         elif isinstance(loaded, trimesh.Scene):
             items = []
@@ -99,26 +107,32 @@ class _Converter:
             raise SceneError(f"{self.source}: trimesh read a {type(loaded).__name__}, not a "
                              "triangle mesh")
         skipped = set()
+        strokes: dict[str, int] = {}
         for node, transform, gname, geom in items:
-            if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            # a point cloud, or vertices without faces (an OFF or PLY of points)
+            points = isinstance(geom, (trimesh.PointCloud, trimesh.Trimesh)) and \
+                len(geom.vertices) > 0 and not len(getattr(geom, "faces", ()))
+            if not points and (not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0):
                 skipped.add(type(geom).__name__)
                 continue
-            if gname not in self.meshes:
-                mesh = self.mesh(gname, geom)
+            known, meshes = (strokes, self.scene.strokes) if points else \
+                (self.meshes, self.scene.meshes)
+            if gname not in known:
+                mesh = self.points(gname, geom) if points else self.mesh(gname, geom)
                 if mesh is None:
                     continue
-                self.meshes[gname] = len(self.scene.meshes)
-                self.scene.meshes.append(mesh)
+                known[gname] = len(meshes)
+                meshes.append(mesh)
             t = np.asarray(transform, np.float64)
             if t.shape != (4, 4) or not np.all(np.isfinite(t)):
                 raise SceneError(f"{self.source}: node {node!r}: transform is not a finite "
                                  "4x4 matrix")
-            self.scene.instances.append(Instance(self.meshes[gname],
-                                                 np.ascontiguousarray(t, np.float32),
-                                                 str(node)))
-        if not self.scene.instances:
+            placed = self.scene.stroke_instances if points else self.scene.instances
+            placed.append(Instance(known[gname], np.ascontiguousarray(t, np.float32),
+                                   str(node)))
+        if not self.scene.instances and not self.scene.stroke_instances:
             what = f" (only {', '.join(sorted(skipped))})" if skipped else ""
-            raise SceneError(f"{self.source}: no triangles found{what}")
+            raise SceneError(f"{self.source}: no triangles or points found{what}")
         return self.scene.drawable()  # zero-scale nodes: skipped with a warning
 
     def mesh(self, name: str, geom: trimesh.Trimesh) -> Mesh | None:
@@ -162,6 +176,28 @@ class _Converter:
         )
 
     # -- materials -------------------------------------------------------------------------
+
+    def points(self, name: str, geom: Any) -> Mesh | None:
+        """A point cloud as a stroke (point-list), its colours per vertex: the file's bytes
+        taken as sRGB, as triangle meshes' colours are; white without any."""
+        geom = geom if isinstance(geom, trimesh.PointCloud) else \
+            trimesh.PointCloud(geom.vertices, colors=_vertex_colors(geom))
+        pos = np.asarray(geom.vertices, np.float64)
+        if not np.all(np.isfinite(pos)):
+            raise SceneError(f"{self.source}: {name}: a point position is NaN or infinite")
+        n = len(pos)
+        rgba = np.ones((n, 4))
+        colors = np.asarray(getattr(geom, "colors", ()), np.float64)
+        if colors.shape == (n, 4):
+            rgba[:, :3] = srgb_to_linear(colors[:, :3] / 255.0)
+            rgba[:, 3] = colors[:, 3] / 255.0
+        if self.default is None:
+            self.default = self.add(Material(name="default"))
+        return Mesh(name=name, positions=np.ascontiguousarray(pos, np.float32),
+                    normals=np.zeros((n, 3), np.float32), uvs=np.zeros((n, 2), np.float32),
+                    tangents=np.zeros((n, 4), np.float32),
+                    indices=np.arange(n, dtype=np.uint32), material=self.default,
+                    topology="point-list", colors=np.ascontiguousarray(rgba, np.float32))
 
     def material(self, name: str, visual: Any) -> int:
         mat = getattr(visual, "material", None)

@@ -18,7 +18,7 @@ class Texture:
     """An RGBA8 image, row-major, top row first."""
 
     name: str
-    pixels: np.ndarray  # (H, W, 4) uint8
+    pixels: np.ndarray | None  # (H, W, 4) uint8; None once uploaded (Scene.keep_pixels)
     srgb: bool = True  # base color and emissive are sRGB; normal, metal-rough, occlusion linear
     # sampler, in WebGPU terms
     mag_filter: str = "linear"  # linear | nearest
@@ -49,9 +49,15 @@ class Material:
     double_sided: bool = False
 
 
+# how a mesh's indices join its vertices, in WebGPU's names: triangles for ``Scene.meshes``,
+# points or lines (one index per point, two per segment) for ``Scene.strokes``
+TOPOLOGIES = ("triangle-list", "line-list", "point-list")
+
+
 @dataclass
 class Mesh:
-    """One primitive: triangles with one material. Arrays are contiguous."""
+    """One primitive with one material: triangles, or (in ``Scene.strokes``) points or
+    line segments. Arrays are contiguous."""
 
     name: str
     positions: np.ndarray  # (V, 3) float32
@@ -60,6 +66,10 @@ class Mesh:
     tangents: np.ndarray  # (V, 4) float32, xyz + handedness w
     indices: np.ndarray  # (T*3,) uint32
     material: int = 0  # index into Scene.materials
+    topology: str = "triangle-list"  # one of TOPOLOGIES
+    # (V, 4) float32 linear RGBA, the COLOR_0 of a stroke (a point or line primitive), which
+    # is drawn per vertex; triangles carry theirs in the material (None)
+    colors: np.ndarray | None = None
 
     @property
     def triangle_count(self) -> int:
@@ -205,6 +215,14 @@ class Scene:
     lights: list[Light] = field(default_factory=list)
     cameras: list[Camera] = field(default_factory=list)
     source: str | None = None
+    # False: a backend drops each texture's pixels (Texture.pixels = None) once it has
+    # uploaded them, so a texture-heavy scene is not held on the host and on the device at
+    # once; rfw.run sets it for a scene it loaded itself and uploads once
+    keep_pixels: bool = True
+    # points and line segments (glTF modes 0 to 3, point clouds, polylines), drawn one pixel
+    # wide by the points_lines pass; stroke_instances place them (Instance.mesh: a stroke)
+    strokes: list[Mesh] = field(default_factory=list)
+    stroke_instances: list[Instance] = field(default_factory=list)
 
     @property
     def triangle_count(self) -> int:
@@ -215,10 +233,22 @@ class Scene:
         transforms and empty meshes are left out, as renderers leave them out)."""
         problems, world, usable = self._instance_checks()
         keep = usable & np.array([why is None for why in problems], bool)
-        if not keep.any():
+        corners = [world[keep].reshape(-1, 3), *self._stroke_corners()]
+        corners = np.concatenate(corners)
+        if not len(corners):
             return np.full(3, np.inf), np.full(3, -np.inf)
-        corners = world[keep].reshape(-1, 3)
         return corners.min(axis=0), corners.max(axis=0)
+
+    def _stroke_corners(self) -> list[np.ndarray]:
+        """The world corners of each drawable stroke instance's bounds (strokes are few:
+        checked one by one)."""
+        return [_corners(self.strokes[i.mesh], i.transform) for i in self.stroke_instances
+                if 0 <= i.mesh < len(self.strokes) and len(self.strokes[i.mesh].positions)
+                and self.stroke_problem(i) is None]
+
+    def stroke_problem(self, inst: Instance) -> str | None:
+        """``instance_problem`` of a stroke instance (``inst.mesh`` indexes ``strokes``)."""
+        return replace(self, meshes=self.strokes).instance_problem(inst)
 
     def _instance_checks(self) -> tuple[list[str | None], np.ndarray, np.ndarray]:
         """``instance_problem`` of every instance, the (n, 8, 3) world corners of its
@@ -304,13 +334,22 @@ class Scene:
                 keep.append(inst)
             else:
                 warn(f"{self.source or self.name}: instance {inst.name or k!r} skipped: {why}")
-        if not keep and (self.instances or self.source):
+        strokes = []
+        for k, inst in enumerate(self.stroke_instances):
+            why = self.stroke_problem(inst)
+            if why is None:
+                strokes.append(inst)
+            else:
+                warn(f"{self.source or self.name}: points or lines {inst.name or k!r} "
+                     f"skipped: {why}")
+        if not keep and not strokes and (self.instances or self.stroke_instances
+                                         or self.source):
             # one line for both (and for the backends' second look at the loader's scene)
             warn(f"{self.source or self.name}: nothing is drawable (no instances, or every "
                  "one skipped): the images show the background only")
-        if len(keep) == len(self.instances):
+        if len(keep) == len(self.instances) and len(strokes) == len(self.stroke_instances):
             return self
-        return replace(self, instances=keep)
+        return replace(self, instances=keep, stroke_instances=strokes)
 
 
 class SceneError(RfwError):

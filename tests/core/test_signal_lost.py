@@ -70,12 +70,11 @@ def test_a_signal_after_the_commit_says_the_results_are_written(tmp_path, commit
     from rfw.signals import Interrupted
 
     out = tmp_path / "out"
-    with pytest.raises(Interrupted) as caught:
-        with OutputFolder(out) as folder:
-            (folder.staging / "a.txt").write_text("new")
-            if committed:
-                folder.commit()
-            raise Interrupted(15)
+    with pytest.raises(Interrupted) as caught, OutputFolder(out) as folder:
+        (folder.staging / "a.txt").write_text("new")
+        if committed:
+            folder.commit()
+        raise Interrupted(15)
     assert (out / "a.txt").exists() == committed
     line = caught.value.line()
     assert line == (f"rfw: interrupted (after its results were written to {out})"

@@ -41,7 +41,8 @@ def test_ssao_goes_beside_the_shadow_map():
     assert got == [(GRAPHICS, ("gbuffer",), []),
                    (COMPUTE, ("ssao",), [(GRAPHICS, 1)]),
                    (GRAPHICS, ("shadow",), []),
-                   (GRAPHICS, ("lighting", "tonemap", "fxaa"), [(COMPUTE, 1)])]
+                   (GRAPHICS, ("lighting", "points_lines", "tonemap", "fxaa"),
+                    [(COMPUTE, 1)])]
     assert [s.value for s in q.submissions] == [1, 1, 2, 3]
     assert q.transfers == ()  # one family: no ownership to move
     check_sync(q, c.edges)
@@ -52,7 +53,8 @@ def test_switch_off_or_no_second_queue_gives_one_queue():
         q = plan.queues
         assert q.mode == "off" and q.queues == (GRAPHICS,)
         assert len(q.submissions) == 1 and q.submissions[0].passes == plan.order
-        assert plan.order == ("shadow", "gbuffer", "ssao", "lighting", "tonemap", "fxaa")
+        assert plan.order == ("shadow", "gbuffer", "ssao", "lighting", "points_lines",
+                              "tonemap", "fxaa")
     assert "off" in _plan(switch="off").queues.why
     assert "no second queue" in _plan(caps=()).queues.why
 
@@ -219,7 +221,7 @@ def test_graph_plan_prints_queues_submissions_and_transfers():
     out = r.stdout
     assert "queues: graphics, compute (two families" in out
     assert "#1 compute  [ssao]  wait graphics = 1 at ALL_COMMANDS;  signal compute = 1" in out
-    assert "#3 graphics [lighting, tonemap, fxaa]  wait compute = 1" in out
+    assert "#3 graphics [lighting, points_lines, tonemap, fxaa]  wait compute = 1" in out
     assert "ssao.ao: compute -> graphics; release after ssao" in out
     r = _cli("graph", "plan", str(SSAO), "--json", "--caps", "compute_queue")
     q = json.loads(r.stdout)["queues"]

@@ -680,7 +680,7 @@ MALFORMED = {
                          ["accessors[1] (TEXCOORD_0", "normalized"]),
     "negative offset": (_set("accessors.0.byteOffset", -4), ["accessors[0]", "byteOffset"]),
     "zero count": (_accessor_count(0), ["accessors[0]", "count"]),
-    # points and lines are skipped, alone too (tests/scene/test_real_files.py)
+    # points and lines are strokes (tests/scene/test_strokes.py)
     "unknown mode": (_set("meshes.0.primitives.0.mode", 7), [PRIM, "mode 7"]),
     "no position": (_set("meshes.0.primitives.0.attributes", {"TEXCOORD_0": 1}),
                     [PRIM, "no POSITION"]),

@@ -246,7 +246,11 @@ def test_textures_sharing_an_image_render_as_two_copies(tmp_path):
         assert np.abs(a.astype(int) - c).max() > 20, backend
 
 
-def test_mip_chain_is_the_float_chain():
+@pytest.mark.parametrize("band", [None, 3])
+def test_mip_chain_is_the_float_chain(band, monkeypatch):
+    if band is not None:  # levels built in bands of 3 output texels: the same bytes
+        import rfw.backends.scene_data as scene_data
+        monkeypatch.setattr(scene_data, "MIP_BAND_TEXELS", band)
     # sums in uint16, the same bytes as the float32 means rounded half up it replaced
     def float_chain(pixels):
         levels = [pixels]
@@ -273,6 +277,50 @@ def test_mip_chain_is_the_float_chain():
     a = rng.integers(0, 256, (8, 8, 4), np.uint8)
     down = (a.reshape(4, 2, 4, 2, 4).astype(int).sum((1, 3)) // 4).astype(np.uint8)
     assert not np.array_equal(mip_chain(a)[1], down)
+
+
+def test_textures_uploaded_in_small_chunks_render_the_same(tmp_path, monkeypatch):
+    # both backends stream texels through bounded chunks (a few rows, a flush or a submit
+    # each): 4 KiB chunks cut every level of a 64x48 texture into bands and give the same
+    # picture as one chunk; the control, the texture flipped, does not
+    import rfw.backends.gpu_scene as gpu_scene
+    import vkext.scene as vk_scene
+
+    pixels = np.random.default_rng(5).integers(0, 256, (48, 64, 3), np.uint8)
+    (tmp_path / "a.png").write_bytes(png(pixels))
+    (tmp_path / "b.png").write_bytes(png(pixels[::-1].copy()))
+    scene = write(tmp_path, textured(quad_doc(1), ["a.png"], [0]), "a.gltf")
+    flipped = write(tmp_path, textured(quad_doc(1), ["b.png"], [0]), "b.gltf")
+    for backend in ("wgpu", "vk"):
+        whole = _render(tmp_path, scene, backend)
+        with monkeypatch.context() as m:
+            m.setattr(gpu_scene, "TEXTURE_CHUNK", 4096)
+            m.setattr(vk_scene, "TEXTURE_CHUNK", 4096)
+            chunked = _render(tmp_path, scene, backend)
+        assert np.array_equal(whole, chunked), backend
+        assert np.abs(whole.astype(int) - _render(tmp_path, flipped, backend)).max() > 20
+
+
+def test_a_scene_that_does_not_keep_its_pixels_drops_them_once_uploaded(tmp_path):
+    from rfw import load
+    from rfw.render import render
+    from rfw.scene import SceneError, load_scene
+
+    (tmp_path / "a.png").write_bytes(png(np.full((8, 8, 3), 200, np.uint8)))
+    path = write(tmp_path, textured(quad_doc(2), ["a.png"], [0, 0]))
+    cfg = load(ROOT / "configs" / "forward.toml", size=(16, 16))
+    for backend in ("wgpu", "vk"):
+        kept = load_scene(path)
+        render(cfg, scene=kept, frames=1, backend=backend)
+        assert all(t.pixels is not None for t in kept.textures)  # the control: kept
+        render(cfg, scene=kept, frames=1, backend=backend)
+        scene = load_scene(path)
+        scene.keep_pixels = False
+        render(cfg, scene=scene, frames=1, backend=backend)
+        assert [t.pixels for t in scene.textures] == [None, None]
+        with pytest.raises(SceneError, match=r"texture '.*': its pixels were dropped after an "
+                                             r"earlier upload .*load the scene again"):
+            render(cfg, scene=scene, frames=1, backend=backend)
 
 
 def test_bench_reads_back_images_over_pillows_bomb_limit(tmp_path):
