@@ -594,11 +594,10 @@ class Built:
 def build(cfg: Config, scene: Any = None) -> Built:
     """Instantiate the passes and wire their slots into a frame graph. With ``scene``, an
     enabled pass whose ``scene_needs`` that scene lacks (a points_lines pass on a scene
-    without points or lines) is left out as ``enabled = false`` leaves it."""
+    without points or lines) is left out of the graph, not listed as disabled either."""
     if scene is not None:
-        cfg = replace(cfg, passes=[replace(p, enabled=False) if p.enabled
-                                   and not _has_work(cfg, p, scene) else p
-                                   for p in cfg.passes])
+        cfg = replace(cfg, passes=[p for p in cfg.passes
+                                   if not p.enabled or _has_work(cfg, p, scene)])
     enabled = {p.name for p in cfg.passes if p.enabled}
     g = GraphBuilder(cfg.name, size=cfg.size, source=cfg.source)
     instances: dict[str, Pass] = {}

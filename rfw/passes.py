@@ -293,8 +293,8 @@ class Pass:
     side_effect: ClassVar[bool] = False
     backend: ClassVar[str | None] = None  # "vk" for passes that need raw Vulkan (vkext)
     # what a scene must hold for the pass to have work (one of SCENE_NEEDS, e.g. "strokes"):
-    # a run on a scene without it leaves the pass out, as ``enabled = false`` would, so it
-    # records nothing and has no timing row. Only for passes whose outputs nothing needs.
+    # a run on a scene without it leaves the pass out of the graph, so it records nothing
+    # and has no timing row. Only for passes whose outputs nothing reads.
     scene_needs: ClassVar[str | None] = None
 
     class Params(Settings):

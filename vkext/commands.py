@@ -529,6 +529,29 @@ def record_upload(cmd: Any, staging: Buffer, *,
             memory_barriers=[(COPY_WRITE, after)] if buffers else ())
 
 
+def record_image_bands(cmd: Any, staging: Buffer, image: Image,
+                       bands: Sequence[tuple[int, int, int, int, int]], *, first: bool,
+                       last: bool, to: State | str = "SHADER_READ_ONLY_OPTIMAL") -> None:
+    """Record one chunk of an image upload streamed through ``staging``: ``bands`` are
+    (staging offset, mip, first row, width, rows). The ``first`` chunk discards the image's
+    old contents (every mip), a later one waits for the chunk before it (the same image's
+    copies), and the ``last`` leaves the image in ``to``."""
+    barrier(cmd, [ImageBarrier(image, "UNDEFINED" if first else TRANSFER_DST, TRANSFER_DST)])
+    arr = ffi.new("VkBufferImageCopy[]", len(bands))
+    for i, (offset, mip, y, w, rows) in enumerate(bands):
+        r = arr[i]
+        r.bufferOffset = offset
+        r.imageSubresource.aspectMask = image.aspect
+        r.imageSubresource.mipLevel = mip
+        r.imageSubresource.layerCount = 1
+        r.imageOffset.y = y
+        r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, rows, 1
+    lib.vkCmdCopyBufferToImage(cmd, staging.handle, image.handle,
+                               image_layout(TRANSFER_DST.layout), len(bands), arr)
+    if last:
+        barrier(cmd, [ImageBarrier(image, TRANSFER_DST, to)])
+
+
 def upload_image(device: VkDevice, image: Image, array: Any,
                  layout_after: State | str = "SHADER_READ_ONLY_OPTIMAL", *,
                  layout_before: State | str = "UNDEFINED", mip: int = 0, layer: int = 0,

@@ -40,15 +40,7 @@ from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import (
-    TRANSFER_DST,
-    ImageBarrier,
-    barrier,
-    copy_into_uniforms,
-    image_layout,
-    one_time,
-    record_upload,
-)
+from .commands import copy_into_uniforms, one_time, record_image_bands, record_upload
 from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
@@ -356,21 +348,8 @@ class _TextureUpload:
               first: bool, last: bool) -> None:
         assert self.staging is not None
         with one_time(self.device, label=f"upload {dst.label}") as cmd:
-            if first:  # every mip at once; later chunks write other texels of the same image
-                barrier(cmd, [ImageBarrier(dst, "UNDEFINED", TRANSFER_DST)])
-            arr = ffi.new("VkBufferImageCopy[]", len(regions))
-            for i, (offset, mip, y, w, rows) in enumerate(regions):
-                r = arr[i]
-                r.bufferOffset = offset
-                r.imageSubresource.aspectMask = dst.aspect
-                r.imageSubresource.mipLevel = mip
-                r.imageSubresource.layerCount = 1
-                r.imageOffset.y = y
-                r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, rows, 1
-            lib.vkCmdCopyBufferToImage(cmd, self.staging.handle, dst.handle,
-                                       image_layout(TRANSFER_DST.layout), len(regions), arr)
-            if last:
-                barrier(cmd, [ImageBarrier(dst, TRANSFER_DST, _SAMPLED)])
+            record_image_bands(cmd, self.staging, dst, regions, first=first, last=last,
+                               to=_SAMPLED)
 
     def close(self) -> None:
         if self.staging is not None:

@@ -76,14 +76,6 @@ def _file_normals(geom: trimesh.Trimesh) -> np.ndarray | None:
     return None
 
 
-def _vertex_colors(geom: trimesh.Trimesh) -> np.ndarray | None:
-    """A face-less Trimesh's per-vertex colours, where its file gave some."""
-    visual = getattr(geom, "visual", None)
-    if getattr(visual, "kind", None) == "vertex":
-        return np.asarray(visual.vertex_colors)
-    return None
-
-
 class _Converter:
     def __init__(self, source: str, name: str):
         self.source = source
@@ -109,9 +101,9 @@ class _Converter:
         skipped = set()
         strokes: dict[str, int] = {}
         for node, transform, gname, geom in items:
-            # a point cloud, or vertices without faces (an OFF or PLY of points)
-            points = isinstance(geom, (trimesh.PointCloud, trimesh.Trimesh)) and \
-                len(geom.vertices) > 0 and not len(getattr(geom, "faces", ()))
+            # what trimesh reads as a point cloud (a PLY or OBJ of vertices only); a Trimesh
+            # left without faces (its NaN corners dropped, an OFF of 0 faces) is refused
+            points = isinstance(geom, trimesh.PointCloud) and len(geom.vertices) > 0
             if not points and (not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0):
                 skipped.add(type(geom).__name__)
                 continue
@@ -177,11 +169,9 @@ class _Converter:
 
     # -- materials -------------------------------------------------------------------------
 
-    def points(self, name: str, geom: Any) -> Mesh | None:
+    def points(self, name: str, geom: trimesh.PointCloud) -> Mesh | None:
         """A point cloud as a stroke (point-list), its colours per vertex: the file's bytes
         taken as sRGB, as triangle meshes' colours are; white without any."""
-        geom = geom if isinstance(geom, trimesh.PointCloud) else \
-            trimesh.PointCloud(geom.vertices, colors=_vertex_colors(geom))
         pos = np.asarray(geom.vertices, np.float64)
         if not np.all(np.isfinite(pos)):
             raise SceneError(f"{self.source}: {name}: a point position is NaN or infinite")

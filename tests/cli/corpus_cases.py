@@ -225,7 +225,8 @@ GLB_CASES: list[tuple[str, bytes, str]] = [
 # (id, file name, bytes, words of the line besides the file name)
 MESH_CASES: list[tuple[str, str, bytes, tuple[str, ...]]] = [
     ("obj-empty", "m.obj", b"", ()),
-    ("obj-no-faces", "m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ("triangle",)),
+    # vertices only: a point cloud, drawn (tests/scene/test_strokes.py); no vertices either
+    ("obj-no-faces", "m.obj", b"vn 0 0 1\nvt 0 0\n", ("triangle",)),
     ("obj-face-out-of-range", "m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", ()),
     ("obj-nan-vertex", "m.obj", b"v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", ()),
     ("obj-garbage", "m.obj", bytes(range(256)) * 8, ()),

@@ -24,7 +24,7 @@ def test_set_toggles_passes_and_settings():
                                "size=320x200"])
     built = build(on)
     plan = compile(built.graph)
-    assert plan.order == ("shadow", "gbuffer", "lighting", "tonemap")
+    assert plan.order == ("shadow", "gbuffer", "lighting", "points_lines", "tonemap")
     assert built.passes["lighting"].params.ambient == 0.25
     assert built.slots["lighting"]["shadow"] == "shadow.depth"
     assert plan.size == (320, 200)

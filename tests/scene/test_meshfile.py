@@ -147,7 +147,7 @@ def test_scene_graph_instances():
     ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n",
      "bad.ply: cannot read it as a mesh"),
     ("empty.stl", b"", "empty.stl"),
-    ("nothing.off", b"OFF\n0 0 0\n", "nothing.off"),
+    ("points.off", b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "points.off"),
 ])
 def test_broken_files_raise_scene_error(tmp_path, name, data, message):
     path = tmp_path / name

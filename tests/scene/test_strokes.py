@@ -157,9 +157,12 @@ def test_mesh_file_points_are_a_point_cloud_with_their_colours(tmp_path):
     assert scene.meshes == [] and len(scene.stroke_instances) == 1
     assert cloud.topology == "point-list" and cloud.indices.tolist() == [0, 1, 2, 3]
     assert cloud.colors.tolist() == [[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1], [1, 1, 1, 1]]
-    # vertices without faces (OFF) are points too; no vertices at all is refused
-    (tmp_path / "p.off").write_text("OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n")
-    assert load_meshfile(tmp_path / "p.off").strokes[0].indices.tolist() == [0, 1, 2]
+    # an OBJ of vertices only is one too; a triangle whose NaN corner trimesh dropped is not
+    (tmp_path / "p.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    assert load_meshfile(tmp_path / "p.obj").strokes[0].indices.tolist() == [0, 1, 2]
+    (tmp_path / "n.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(SceneError, match="no triangles or points found"):
+        load_meshfile(tmp_path / "n.obj")
     images = {}
     for backend in ("wgpu", "vk"):
         images[backend], err = render(tmp_path / "p.ply", tmp_path / backend, backend)

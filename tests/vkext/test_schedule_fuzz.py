@@ -118,8 +118,8 @@ class Fuzzer:
     def __init__(self, cfg: Any, device: Any, scene: Any, *, alias: bool = True):
         self.device, self.alias = device, alias
         self.cfg, _ = resolve_auto(cfg, device.caps)
-        self.built = build(self.cfg)
         scene = load_scene_for(self.cfg, scene if self.cfg.scene == "default" else None)
+        self.built = build(self.cfg, scene)  # as rfw run builds it: for this scene
         self.scene = VkScene(device, scene, camera_for(self.cfg, scene))
         self.scene.set_viewport(self.cfg.size)
 
