@@ -12,7 +12,7 @@ run: system venv
 	$(BIN)/rfw run
 
 test: system venv
-	$(BIN)/python -m pytest -q -n 2
+	$(BIN)/python -m pytest -q -n 2 --durations=25
 
 system:
 	@bash scripts/setup-system.sh
