@@ -66,7 +66,7 @@ def fast_parse(parser: Any, cdecl: str) -> tuple[Any, int] | None:
     if m is None:
         return None
     result = _named(parser, m.group(1))
-    texts = [a for a in m.group(2).split(",")] if m.group(2).strip() else []
+    texts = m.group(2).split(",") if m.group(2).strip() else []
     args = [_one(parser, a) for a in texts]
     if result is None or any(a is None for a in args) or "..." in m.group(2):
         return None

@@ -25,8 +25,8 @@ def _slow(parser, cdecl):
 def test_fast_answers_are_the_parsers(parser):
     names = sorted(k.split(" ", 1)[1] for k in parser._declarations if k.startswith("typedef "))
     assert len(names) > 400  # wgpu-native's header (432 typedefs in 0.32)
-    sample = names[:: max(1, len(names) // 40)] + ["uint8_t", "uint32_t", "char", "intptr_t",
-                                                    "float", "void"]
+    sample = [*names[:: max(1, len(names) // 40)], "uint8_t", "uint32_t", "char", "intptr_t",
+              "float", "void"]
     checked = 0
     for name in sample:
         forms = [f"{name} *", f"{name} const *", f"{name}[]", f"{name} [4]"]
