@@ -55,6 +55,19 @@ def check() -> None:
         raise Interrupted(_pending)
 
 
+def _quiet_unraisable(hook):
+    """A ``sys.unraisablehook`` that drops an :class:`Interrupted` Python could not raise
+    (it came while a ``__del__`` or weakref callback ran; :func:`check` raises it again)
+    instead of printing it with a traceback; everything else goes to ``hook``."""
+
+    def unraisable(info) -> None:
+        if isinstance(info.exc_value, Interrupted):
+            return
+        hook(info)
+
+    return unraisable
+
+
 def _again(signum: int, frame: FrameType | None) -> None:
     os.write(2, b"rfw: interrupted\n")
     os._exit(128 + signum)
@@ -81,15 +94,20 @@ def early() -> None:
 def installed() -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` within the block (in the main thread;
     elsewhere nothing changes), the handlers before it are put back after it."""
+    import sys
+
     global _pending
     try:
         old = {s: signal.signal(s, _first) for s in SIGNALS}
     except ValueError:  # not the main thread
         yield
         return
+    hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_unraisable(hook)
     try:
         yield
     finally:
         _pending = None
+        sys.unraisablehook = hook
         for s, handler in old.items():
             signal.signal(s, handler)
