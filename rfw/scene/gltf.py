@@ -1111,7 +1111,7 @@ class _Loader:
                     # 16-bit greyscale: keep the high byte rather than clipping
                     grey = (np.asarray(im, np.uint32) >> 8).astype(np.uint8)
                     im = Image.fromarray(grey, "L")
-                rgba = np.array(im.convert("RGBA"), np.uint8)
+                rgba = _rgba(im)
             except (OSError, ValueError, SyntaxError, MemoryError) as e:
                 self.fail(where, f"cannot decode the image ({type(e).__name__}: {e})")
         return np.ascontiguousarray(rgba)
@@ -1216,3 +1216,19 @@ class _Loader:
             return
         light.direction = tuple(map(float, normalize(direction[None])[0]))
         self.scene.lights.append(light)
+
+
+# rows converted at a time: the whole image converted at once held the decoded image, its
+# RGBA copy in Pillow and the array at once (2.8 GB for a 16384x16384 RGB PNG, not 1.8)
+_RGBA_BAND_TEXELS = 1 << 22
+
+
+def _rgba(im: Any) -> np.ndarray:
+    """A loaded Pillow image as an (H, W, 4) uint8 array, converted band by band."""
+    w, h = im.size
+    out = np.empty((h, w, 4), np.uint8)
+    step = max(1, _RGBA_BAND_TEXELS // max(w, 1))
+    for y in range(0, h, step):
+        band = im.crop((0, y, w, min(y + step, h))).convert("RGBA")
+        out[y:y + band.size[1]] = np.asarray(band)
+    return out

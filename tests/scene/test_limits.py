@@ -397,3 +397,22 @@ def _declared_png(width: int, height: int) -> bytes:
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + \
         chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize("mode", ["RGB", "LA", "P", "RGBA"])
+def test_images_converted_in_bands_are_the_whole_conversion(mode, monkeypatch):
+    # the glTF loader converts a decoded image to RGBA a few rows at a time (its peak is one
+    # copy, not two): 100-texel bands of a 53x37 image give Pillow's whole conversion
+    from PIL import Image
+
+    import rfw.scene.gltf as gltf
+
+    rng = np.random.default_rng(2)
+    im = Image.fromarray(rng.integers(0, 256, (37, 53, 3), np.uint8))
+    im = im.convert(mode)
+    if mode == "P":
+        im.info["transparency"] = 5
+    monkeypatch.setattr(gltf, "_RGBA_BAND_TEXELS", 100)
+    whole = np.array(im.convert("RGBA"))
+    assert np.array_equal(gltf._rgba(im), whole)
+    assert not np.array_equal(gltf._rgba(im.transpose(Image.FLIP_TOP_BOTTOM)), whole)
