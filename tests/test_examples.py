@@ -266,3 +266,31 @@ def test_plugin_pass_out_folder_is_checked_before_rendering(tmp_path):
     done = example("plugin_pass.py", "--size", "32x18", "--out", "a/b", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "a" / "b" / "invert.inverted.png").is_file()
+
+
+def readme_python() -> str:
+    """The README's pasteable Python example: the first python block of its API section."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("### Python API and notebooks", 1)[1]
+    return section.split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_readme_python_example_runs_as_written(tmp_path):
+    from .conftest import tree_env
+
+    (tmp_path / "configs").symlink_to(ROOT / "configs")
+    code = readme_python()
+    p = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=tree_env(),
+                       capture_output=True, text=True, timeout=300, check=False)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert [line.split(" ", 1)[0] for line in lines] == ["wgpu", "vk"], lines
+    for line in lines:  # the override reached the graph: the shadow pass ran and was timed
+        assert line.split(" ", 1)[1].startswith("(180, 320, 4) {'shadow': "), line
+    saved = tmp_path / "out" / "api"
+    assert sorted(f.name for f in saved.iterdir()) == ["timings.json", "tonemap.ldr.png"]
+    # the control: the same example with the override left out has no shadow pass
+    p = subprocess.run([sys.executable, "-c", code.replace(', "shadow.enabled=true"', "")],
+                       cwd=tmp_path, env=tree_env(), capture_output=True, text=True,
+                       timeout=300, check=False)
+    assert p.returncode == 0 and "'shadow'" not in p.stdout, p.stdout
