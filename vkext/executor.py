@@ -37,6 +37,7 @@ from rfw import env
 from rfw.backends.base import FrameExecutor
 from rfw.context import check_sampler
 from rfw.errors import naming
+from rfw.exec.timing import pass_timings
 from rfw.frame import InFlight, frames_in_flight, run_frames
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
@@ -118,13 +119,6 @@ def vk_query(*args: Any) -> int:
     return lib.vkGetQueryPoolResults(*args)
 
 
-@dataclass
-class PassTiming:
-    name: str
-    gpu_ms: list[float] = field(default_factory=list)
-    cpu_ms: list[float] = field(default_factory=list)
-
-
 @dataclass(eq=False)
 class FrameSlot:
     """What one frame in flight owns until it is finished: its command buffer (and pool),
@@ -195,7 +189,7 @@ class VkExecutor(FrameExecutor):
         self.alias = alias
         self.memory_info = dict(memory_info or {})
         self.frame_index = 0
-        self.timings = {name: PassTiming(name) for name in plan.order}
+        self.timings = pass_timings(plan.order)
         self._position = {name: k for k, name in enumerate(plan.order)}
         self._accels = {r.name: GLOBAL for r in plan.resources if r.kind == "accel"}
         check_passes(plan, passes)

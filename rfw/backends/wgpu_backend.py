@@ -26,6 +26,7 @@ import wgpu
 from ..backend import gpu_choice, pick_gpu
 from ..context import check_sampler, check_topology, nothing_to_draw
 from ..errors import naming
+from ..exec.timing import pass_timings
 from ..frame import InFlight, frames_in_flight, run_frames
 from ..graph import CompiledGraph
 from ..graph.compile import IMPLIED_CAPS, ResourcePlan
@@ -511,13 +512,6 @@ def _dimension(wtype: str) -> str:
 # the per-pass recording context
 
 
-@dataclass
-class PassTiming:
-    name: str
-    gpu_ms: list[float] = field(default_factory=list)
-    cpu_ms: list[float] = field(default_factory=list)
-
-
 def _sites(executor: Any) -> dict[tuple, tuple]:
     """Per call site (pass, n-th dispatch or scene draw): the last call and what it found
     (kept with the executor)."""
@@ -974,7 +968,7 @@ class Executor(FrameExecutor):
         self.present = tuple(present)  # outputs a window samples to show them
         self.shaders = ShaderCache(device)
         self.frame_index = 0
-        self.timings = {name: PassTiming(name) for name in plan.order}
+        self.timings = pass_timings(plan.order)
         # a bridge's side on this backend (rfw.frame): the host copies, nothing is recorded
         self._bridges = tuple(name for name in plan.order if name not in passes and
                               name.startswith("bridge.") and all(
