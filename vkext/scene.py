@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.scene_data import (
-    INSTANCE_BYTES,
     SCENE_GROUPS,
+    check_instance_limits,
     instance_blocks,
     lights_bytes,
     main_camera_bytes,
@@ -35,7 +35,7 @@ from rfw.backends.scene_data import (
     texture_views,
 )
 from rfw.graph.sync import State
-from rfw.scene.model import Camera, Scene, SceneError
+from rfw.scene.model import Camera, Scene
 from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
@@ -246,17 +246,9 @@ def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
 # the scene
 
 
-def check_instance_limits(scene: Scene, limits: dict[str, Any]) -> int:
-    """The bytes of ``scene``'s instance buffer (its instances' rows, then its stroke
-    instances'), or a SceneError naming the scene when one storage descriptor cannot reach
-    every row (``maxStorageBufferRange``)."""
-    size = max(1, len(scene.instances) + len(scene.stroke_instances)) * INSTANCE_BYTES
-    limit = int(limits.get("maxStorageBufferRange", size))
-    if size > limit:
-        raise SceneError(f"{len(scene.instances):,} instances need {size:,} bytes of instance "
-                         f"data, over this device's maxStorageBufferRange ({limit:,}): at most "
-                         f"{limit // INSTANCE_BYTES:,} fit", file=scene.name, element="instances")
-    return size
+# what one storage descriptor of the instance rows must reach
+# (rfw.backends.scene_data.check_instance_limits)
+INSTANCE_LIMIT_KEYS = ("maxStorageBufferRange",)
 
 
 class _SameSet:
@@ -505,7 +497,8 @@ class VkScene:
 
     def _instances(self, up: _Upload) -> None:
         # every instance's row (scene_data.instance_blocks) in one storage buffer
-        self.instances_size = check_instance_limits(self.scene, self.device.limits)
+        self.instances_size = check_instance_limits(self.scene, self.device.limits,
+                                                    INSTANCE_LIMIT_KEYS)
         self.instance_buffer = self.allocator.create_buffer(
             self.instances_size, ("storage", "transfer_dst"), label="scene:instances")
         placed = [*self._transforms, *(i.transform for i in self.scene.stroke_instances)]

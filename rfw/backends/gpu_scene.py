@@ -13,12 +13,13 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Scene, SceneError
+from ..scene.model import Camera, Scene
 from ..scene.sides import with_back_faces
 from ..units import align_up
 from .scene_data import (
     INSTANCE_BYTES,
     SCENE_GROUPS,
+    check_instance_limits,
     instance_blocks,
     lights_bytes,
     main_camera_bytes,
@@ -57,19 +58,8 @@ def scene_layout_entries(group: int) -> list[dict]:
     return out
 
 
-def check_instance_limits(scene: Scene, limits: dict[str, int]) -> int:
-    """The bytes of ``scene``'s instance buffer (the rows of its instances, then of its
-    stroke instances), or a SceneError naming the scene when the device cannot bind that
-    much as one storage buffer (wgpu-native would abort)."""
-    size = max(1, len(scene.instances) + len(scene.stroke_instances)) * INSTANCE_BYTES
-    for key in ("max-storage-buffer-binding-size", "max-buffer-size"):
-        limit = int(limits.get(key, size))
-        if size > limit:
-            fit = limit // INSTANCE_BYTES
-            raise SceneError(f"{len(scene.instances):,} instances need {size:,} bytes of "
-                             f"instance data, over this device's {key} ({limit:,}): at "
-                             f"most {fit:,} fit", file=scene.name, element="instances")
-    return size
+# what one storage binding of the instance rows must fit (scene_data.check_instance_limits)
+INSTANCE_LIMIT_KEYS = ("max-storage-buffer-binding-size", "max-buffer-size")
 
 
 class GpuScene:
@@ -119,7 +109,7 @@ class GpuScene:
 
     def _instances(self) -> Any:
         # one storage buffer, one 128-byte row per instance: written once, bound once
-        check_instance_limits(self.scene, self.device.limits)
+        check_instance_limits(self.scene, self.device.limits, INSTANCE_LIMIT_KEYS)
         placed = [*self.scene.instances, *self.scene.stroke_instances]
         rows = np.zeros((max(1, len(placed)), INSTANCE_BYTES // 4), np.float32)
         if placed:

@@ -74,6 +74,23 @@ def _half(src: np.ndarray) -> np.ndarray:
     return out
 
 
+def check_instance_limits(scene: Scene, limits: dict[str, Any], keys: tuple[str, ...]) -> int:
+    """The bytes of ``scene``'s instance buffer (one row per instance, then per stroke
+    instance), or a SceneError naming the scene when it is over one of the device's
+    ``limits`` named by ``keys`` (the backend's: how much one storage binding can reach;
+    wgpu-native would abort, a driver might read past the range)."""
+    rows = len(scene.instances) + len(scene.stroke_instances)
+    size = max(1, rows) * INSTANCE_BYTES
+    for key in keys:
+        limit = int(limits.get(key, size))
+        if size > limit:
+            raise SceneError(f"{rows:,} instances need {size:,} bytes of instance data, over "
+                             f"this device's {key} ({limit:,}): at most "
+                             f"{limit // INSTANCE_BYTES:,} fit", file=scene.name,
+                             element="instances")
+    return size
+
+
 def texture_views(scene: Scene, limit: int | None, key: str,
                   make: Callable[[Texture], Any]) -> list[Any]:
     """One view per ``scene.textures``, made by ``make``. All are checked against the

@@ -11,16 +11,21 @@ from __future__ import annotations
 import pytest
 
 from rfw.backends import gpu_scene
-from rfw.backends.scene_data import INSTANCE_BYTES
+from rfw.backends.scene_data import INSTANCE_BYTES, check_instance_limits
 from rfw.scene import SceneError, stress
 from rfw.spirv import compile_glsl, readonly_blocks_marked, reflect
 
-_WGPU_LIMITS = ("max-storage-buffer-binding-size", "max-buffer-size")
+_WGPU_LIMITS = gpu_scene.INSTANCE_LIMIT_KEYS
 
 
 def _vk_check():
     vk_scene = pytest.importorskip("vkext.scene")
-    return vk_scene.check_instance_limits
+    return lambda scene, limits: check_instance_limits(scene, limits,
+                                                       vk_scene.INSTANCE_LIMIT_KEYS)
+
+
+def _wgpu_check(scene, limits):
+    return check_instance_limits(scene, limits, gpu_scene.INSTANCE_LIMIT_KEYS)
 
 
 @pytest.mark.parametrize("key", _WGPU_LIMITS)
@@ -28,9 +33,9 @@ def test_wgpu_refuses_instances_over_a_limit_in_one_line(key):
     scene = stress(1000)
     need = 1000 * INSTANCE_BYTES
     limits = {k: 1 << 30 for k in _WGPU_LIMITS}
-    assert gpu_scene.check_instance_limits(scene, {**limits, key: need}) == need  # just fits
+    assert _wgpu_check(scene, {**limits, key: need}) == need  # just fits
     with pytest.raises(SceneError) as e:
-        gpu_scene.check_instance_limits(scene, {**limits, key: need - 1})
+        _wgpu_check(scene, {**limits, key: need - 1})
     line = str(e.value)
     assert "\n" not in line
     assert line.startswith("stress:1000: instances: 1,000 instances need 128,000 bytes")
@@ -50,7 +55,7 @@ def test_vk_refuses_instances_over_the_storage_range_in_one_line():
 def test_the_full_stress_scene_fits_webgpus_default_limits():
     # 100,000 rows are 12.8 MB: far under WebGPU's default binding size (128 MiB)
     scene = stress()
-    assert gpu_scene.check_instance_limits(
+    assert _wgpu_check(
         scene, {"max-storage-buffer-binding-size": 128 << 20, "max-buffer-size": 256 << 20}) \
         == 100_000 * INSTANCE_BYTES
 
