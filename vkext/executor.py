@@ -35,8 +35,8 @@ import numpy as np
 
 from rfw import env
 from rfw.backends.base import FrameExecutor
-from rfw.context import check_sampler
 from rfw.errors import naming
+from rfw.exec.samplers import Samplers
 from rfw.exec.timing import pass_timings
 from rfw.frame import InFlight, frames_in_flight, run_frames
 from rfw.graph import CompiledGraph
@@ -214,7 +214,7 @@ class VkExecutor(FrameExecutor):
                          ((r.name, r.name.removesuffix("@prev")) for r in plan.resources
                           if r.history and r.name.endswith("@prev"))]
         self._views: dict[tuple[int, bool, int | None], ImageView] = {}
-        self._samplers: dict[tuple[str, str, str | None], Sampler] = {}
+        self._samplers = Samplers(self._make_sampler)
         self._paths: dict[tuple[str, str | None], list[Path]] = {}
         # VkRenderingInfo per pass, targets and clears (vkext.context builds them)
         self.rendering_infos: dict[tuple, tuple[Any, list[Any]]] = {}
@@ -360,15 +360,13 @@ class VkExecutor(FrameExecutor):
     def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
                 compare: str | None = None) -> Sampler:
         """A sampler made once per (filter, address, compare) and kept until ``destroy``."""
-        check_sampler(filter, address, compare)
-        key = (filter, address, compare)
-        s = self._samplers.get(key)
-        if s is None:
-            s = self._samplers[key] = make_sampler(
-                self.device, mag=filter, min=filter, mip=filter, address_u=address,
-                address_v=address, address_w=address, compare=compare,
-                label=f"rfw:sampler:{filter}:{address}" + (f":{compare}" if compare else ""))
-        return s
+        return self._samplers.get(filter, address, compare)
+
+    def _make_sampler(self, filter: str, address: str, compare: str | None) -> Sampler:
+        return make_sampler(
+            self.device, mag=filter, min=filter, mip=filter, address_u=address,
+            address_v=address, address_w=address, compare=compare,
+            label=f"rfw:sampler:{filter}:{address}" + (f":{compare}" if compare else ""))
 
     def shader_paths(self, pass_: Pass, shader: str | None = None) -> list[Path]:
         """``vkext.fitting.shader_paths``, looked up once per pass and shader: a bare name
@@ -766,7 +764,7 @@ class VkExecutor(FrameExecutor):
                     self.transients, self.allocator):
             if obj is not None:
                 obj.destroy()
-        for smp in self._samplers.values():
+        for smp in self._samplers:
             smp.destroy()
         self._samplers.clear()
         for v in self._views.values():

@@ -24,8 +24,9 @@ import numpy as np
 import wgpu
 
 from ..backend import gpu_choice, pick_gpu
-from ..context import check_sampler, check_topology, nothing_to_draw
+from ..context import check_topology, nothing_to_draw
 from ..errors import naming
+from ..exec.samplers import Samplers
 from ..exec.timing import pass_timings
 from ..frame import InFlight, frames_in_flight, run_frames
 from ..graph import CompiledGraph
@@ -982,7 +983,7 @@ class Executor(FrameExecutor):
         self._textures: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
-        self._samplers: dict[tuple[str, str, str | None], Any] = {}
+        self._samplers = Samplers(self._make_sampler)
         # bind groups by layout and bound objects: [group, what it holds, frame last used]
         self._bind_groups: dict[tuple, list] = {}
         # (pass, its n-th scene draw) -> (key, bundle, draws): replayed while the key holds
@@ -1057,15 +1058,13 @@ class Executor(FrameExecutor):
     def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
                 compare: str | None = None) -> Any:
         """A sampler made once per (filter, address, compare) and kept by the executor."""
-        check_sampler(filter, address, compare)
-        key = (filter, address, compare)
-        s = self._samplers.get(key)
-        if s is None:
-            s = self._samplers[key] = self.device.device.create_sampler(
-                mag_filter=filter, min_filter=filter, mipmap_filter=filter,
-                address_mode_u=address, address_mode_v=address, address_mode_w=address,
-                compare=compare, label=f"rfw:sampler:{filter}:{address}")
-        return s
+        return self._samplers.get(filter, address, compare)
+
+    def _make_sampler(self, filter: str, address: str, compare: str | None) -> Any:
+        return self.device.device.create_sampler(
+            mag_filter=filter, min_filter=filter, mipmap_filter=filter,
+            address_mode_u=address, address_mode_v=address, address_mode_w=address,
+            compare=compare, label=f"rfw:sampler:{filter}:{address}")
 
     def uniform(self, owner: str, name: str, data: bytes) -> Any:
         """The uniform buffer of ``owner``'s binding ``name`` holding ``data``: written

@@ -1,0 +1,44 @@
+"""rfw.exec: the executors' shared half (issue 22), one definition used by both backends."""
+
+from __future__ import annotations
+
+import pytest
+
+from rfw.exec.samplers import Samplers
+from rfw.exec.timing import PassTiming, pass_timings
+from rfw.shaders import ShaderError
+
+
+def test_samplers_are_made_once_per_key_and_checked_first():
+    made = []
+
+    def make(filter, address, compare):
+        made.append((filter, address, compare))
+        return object()
+
+    s = Samplers(make)
+    a = s.get("linear", "repeat", None)
+    assert s.get("linear", "repeat", None) is a and len(s) == 1
+    b = s.get("nearest", "repeat", "less")
+    assert b is not a and made == [("linear", "repeat", None), ("nearest", "repeat", "less")]
+    assert list(s) == [a, b]
+    with pytest.raises(ShaderError, match="filter"):  # refused before the backend is asked
+        s.get("cubic", "repeat", None)
+    assert len(made) == 2
+    s.clear()
+    assert len(s) == 0 and s.get("linear", "repeat", None) is not a  # made again
+
+
+def test_pass_timings_follow_the_plan_order():
+    t = pass_timings(("gbuffer", "lighting"))
+    assert list(t) == ["gbuffer", "lighting"]
+    assert t["gbuffer"] == PassTiming("gbuffer") and t["gbuffer"].gpu_ms == []
+
+
+def test_both_backends_use_the_shared_definitions():
+    import vkext.executor as vk
+    from rfw.backends import wgpu_backend as wg
+
+    for module in (wg, vk):
+        assert module.pass_timings is pass_timings and module.Samplers is Samplers
+        assert not hasattr(module, "PassTiming") or module.PassTiming is PassTiming
