@@ -76,17 +76,24 @@ def fast_parse(parser: Any, cdecl: str) -> tuple[Any, int] | None:
     return model.RawFunctionType(tuple(types), result[0], False, None), 0
 
 
+_SLOW: Any = None  # cffi's own parse_type_and_quals, once install() has put the fast path first
+
+
 def install() -> None:
     """Route every cffi parser's type strings through :func:`fast_parse` first (once)."""
+    global _SLOW
     from cffi import cparser
 
-    if getattr(cparser.Parser, "_rfw_fast", False):
+    if _SLOW is not None:
         return
-    slow = cparser.Parser.parse_type_and_quals
+    _SLOW = slow = cparser.Parser.parse_type_and_quals
 
     def parse_type_and_quals(self: Any, cdecl: str) -> tuple[Any, int]:
         return fast_parse(self, cdecl) or slow(self, cdecl)
 
     cparser.Parser.parse_type_and_quals = parse_type_and_quals
-    cparser.Parser._rfw_fast = True
-    cparser.Parser._rfw_slow = slow
+
+
+def slow_parse(parser: Any, cdecl: str) -> tuple[Any, int]:
+    """cffi's own answer for ``cdecl`` (what :func:`fast_parse` is checked against)."""
+    return (_SLOW or type(parser).parse_type_and_quals)(parser, cdecl)

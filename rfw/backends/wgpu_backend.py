@@ -513,15 +513,6 @@ def _dimension(wtype: str) -> str:
 # the per-pass recording context
 
 
-def _sites(executor: Any) -> dict[tuple, tuple]:
-    """Per call site (pass, n-th dispatch or scene draw): the last call and what it found
-    (kept with the executor)."""
-    sites = executor.__dict__.get("_rfw_call_sites")
-    if sites is None:
-        sites = executor.__dict__["_rfw_call_sites"] = {}
-    return sites
-
-
 def _defines_key(defines: dict[str, object] | None) -> tuple:
     return tuple(sorted(defines.items())) if defines else ()
 
@@ -672,7 +663,7 @@ class PassContext(SlotContext):
         site = (self.pass_.name, self._dispatches)
         self._dispatches += 1
         call = (shader, entry, _defines_key(defines), tuple(threads), self.scene)
-        sites = _sites(self.executor)
+        sites = self.executor.call_sites
         hit = self._site_hit(sites.get(site), call, bindings)
         if hit is not None:
             prog, pipe, bgs, groups = hit[3]
@@ -769,7 +760,7 @@ class PassContext(SlotContext):
         site = (self.pass_.name, "scene", self._bundles)
         call = (tuple(color), depth, shader, _defines_key(defines), depth_compare,
                 depth_write, cull, camera, repr(blend), tuple(alpha), topology, self.scene)
-        sites = _sites(self.executor)
+        sites = self.executor.call_sites
         hit = self._site_hit(sites.get(site), call, bindings)
         if hit is not None:
             prog, pipe, group0, targets, dfmt = hit[3]
@@ -984,6 +975,8 @@ class Executor(FrameExecutor):
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
         self._samplers = Samplers(self._make_sampler)
+        # per call site (pass, n-th dispatch or scene draw): the last call and what it found
+        self.call_sites: dict[tuple, tuple] = {}
         # bind groups by layout and bound objects: [group, what it holds, frame last used]
         self._bind_groups: dict[tuple, list] = {}
         # (pass, its n-th scene draw) -> (key, bundle, draws): replayed while the key holds

@@ -5,21 +5,23 @@ not answer goes to the parser."""
 from __future__ import annotations
 
 import pytest
-from cffi import cparser, model
+from cffi import model
 
-from rfw.backends.cffi_types import fast_parse
+from rfw.backends.cffi_types import fast_parse, slow_parse
 
 
 @pytest.fixture(scope="module")
 def parser():
     from wgpu.backends.wgpu_native._ffi import ffi
 
-    assert cparser.Parser._rfw_fast  # installed by importing rfw.backends
+    from rfw.backends import cffi_types
+
+    assert cffi_types._SLOW is not None  # installed by importing rfw.backends
     return ffi._parser
 
 
 def _slow(parser, cdecl):
-    return cparser.Parser._rfw_slow(parser, cdecl)
+    return slow_parse(parser, cdecl)
 
 
 def test_fast_answers_are_the_parsers(parser):
