@@ -8,6 +8,7 @@ validation layer's leak report at ``vkDestroyDevice``/``vkDestroyInstance`` stay
 from __future__ import annotations
 
 import itertools
+import threading
 import warnings
 from collections import Counter
 from types import SimpleNamespace
@@ -317,6 +318,9 @@ class VkDevice:
         self._sink = ffi.new_handle(self.messages)
         self._keep: list[Any] = []  # cffi memory that must outlive the calls using it
         self.fn = SimpleNamespace()
+        # ray casting on this device (vkext.raycast): its lock, and a raycaster per method
+        self.raycast_lock = threading.RLock()
+        self.raycasters: dict[str, Any] = {}
         try:
             self._create_instance(validation, sync_validation,
                                   validation if debug_utils is None else debug_utils)

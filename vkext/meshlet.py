@@ -233,12 +233,10 @@ class MeshletScene:
 
 def meshlet_scene(vscene: VkScene) -> MeshletScene:
     """The scene's :class:`MeshletScene`, built on first use and destroyed with the scene."""
-    ms = getattr(vscene, "_rfw_meshlets", None)
-    if ms is None:
-        ms = MeshletScene(vscene)
-        vscene._rfw_meshlets = ms
-        vscene._objects.append(ms)  # VkScene.destroy() destroys it (before its allocator)
-    return ms
+    if vscene.meshlets is None:
+        vscene.meshlets = MeshletScene(vscene)
+        vscene._objects.append(vscene.meshlets)  # destroyed with the scene, before its allocator
+    return vscene.meshlets
 
 
 def scene_of(ctx: Any) -> MeshletScene:

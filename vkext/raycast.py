@@ -852,7 +852,7 @@ def device_lock(device: VkDevice) -> threading.RLock:
     buffers, reuses its fences and submits to the device's one queue, none of which may be
     used by two threads at once (Vulkan's external synchronization). Casts from several
     threads take turns; each gets the hits a cast alone would."""
-    return device.__dict__.setdefault("_rfw_raycast_lock", threading.RLock())
+    return device.raycast_lock
 
 
 def raycaster(device: VkDevice, method: str = "auto") -> Raycaster:
@@ -860,7 +860,7 @@ def raycaster(device: VkDevice, method: str = "auto") -> Raycaster:
     pipeline takes longest to make); the device destroys it with everything else."""
     method = pick_method(device, method)
     with device_lock(device):  # two threads' first scenes make one raycaster
-        cache = device.__dict__.setdefault("_rfw_raycasters", {})
+        cache = device.raycasters
         rc = cache.get(method)
         if rc is None or rc.pipeline is None:
             rc = cache[method] = Raycaster(device, method)

@@ -394,6 +394,7 @@ class VkScene:
         self.camera = camera or scene.default_camera()
         self.size = (1, 1)
         self._objects: list[Any] = []
+        self.meshlets: Any = None  # vkext.meshlet.MeshletScene, made by the first meshlet pass
         self.allocator = BlockAllocator(device, block_size=block_size, label="scene")
         try:
             self._build()
