@@ -114,11 +114,7 @@ def one_frame(executor: Any, *, last: bool) -> None:
     from .signals import check
 
     check()  # a signal whose first raise was swallowed still ends the run here
-    executor.drain_after_frame = last
-    try:
-        executor.frame()
-    finally:
-        executor.drain_after_frame = False
+    executor.frame(drain=last)
 
 
 @dataclass
@@ -364,7 +360,6 @@ class Frame:
             return
         one_frame(self, last=last)
 
-    drain_after_frame = False  # the last frame of a run drains (inside frame(): the bench's clock)
 
     def keep_in_flight(self, frames: int) -> None:
         """Keep up to ``frames`` frames in flight on every executor that has frames in
@@ -388,7 +383,7 @@ class Frame:
 
         set_frame_camera(self, camera)
 
-    def frame(self) -> None:
+    def frame(self, drain: bool = False) -> None:
         exs = self.executors
         for ex in exs.values():
             ex.begin_frame()
@@ -410,7 +405,7 @@ class Frame:
             timing.bytes = int(data.nbytes)
         for ex in exs.values():
             ex.end_frame()
-        if self.drain_after_frame:
+        if drain:
             self.drain()
         self.frame_index += 1
 

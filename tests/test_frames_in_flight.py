@@ -82,8 +82,8 @@ def test_the_last_timed_frame_drains_inside_its_frame_call(backend, monkeypatch)
     after: list[tuple[int, int]] = []  # (frames in flight, cpu samples of one pass)
     frame = FrameExecutor.frame
 
-    def timed(self):
-        frame(self)
+    def timed(self, drain=False):
+        frame(self, drain)
         after.append((self.in_flight.busy, len(next(iter(self.timings.values())).cpu_ms)))
 
     monkeypatch.setattr(FrameExecutor, "frame", timed)

@@ -244,7 +244,6 @@ class VkExecutor(FrameExecutor):
         self._query_flags = vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT
         self._frame_start = _memory_dependency(FRAME_BEFORE, FRAME_AFTER)
         self.in_flight = InFlight([])
-        self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
         self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
         self._frame_barriers = {p: [_chained(b) for b in bs] for p, bs in self._barriers.items()}
         # async compute: the plan's submissions on two queues (vkext.queues); None: one
@@ -629,8 +628,8 @@ class VkExecutor(FrameExecutor):
 
     def end_frame(self) -> None:
         """Submit what is left without waiting: the frame's timings are appended when it
-        is finished (its slot comes round again, or a drain). One frame in flight (or the
-        last frame of ``run``) waits here, as every frame did before frames in flight."""
+        is finished (its slot comes round again, or a drain). One frame in flight waits
+        here (the last frame of ``run`` drains after: ``frame(drain=True)``), as every frame did before frames in flight."""
         slot = self._frame_slot
         slot.fence = self._submit()
         if self._keep:  # what the slot's command buffer now holds, for a frame to replay
@@ -639,7 +638,7 @@ class VkExecutor(FrameExecutor):
         self._pending = []
         self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
         self.frame_index += 1
-        if len(self.in_flight) == 1 or self.drain_after_frame:
+        if len(self.in_flight) == 1:
             self.drain()
 
     def _submit(self) -> Any:

@@ -38,13 +38,21 @@ class FrameExecutor:
     def end_frame(self) -> None:
         raise NotImplementedError
 
-    def frame(self) -> None:
-        """Record, submit and wait for one frame; timings per pass are appended."""
+    def drain(self) -> None:
+        """Wait until every frame in flight is done (a backend without frames in flight
+        has none)."""
+
+    def frame(self, drain: bool = False) -> None:
+        """Record and submit one frame; timings per pass are appended. ``drain`` also waits
+        for the frames in flight, this one included (the last frame of a run does, so a
+        clock around ``frame()`` counts the wait)."""
         self.begin_frame()
         for name in self.plan.order:  # type: ignore[attr-defined]
             self.record(name)
         self.end_frame()
+        if drain:
+            self.drain()
 
     def run(self, frames: int = 1) -> None:
-        for _ in range(frames):
-            self.frame()
+        for k in range(frames):
+            self.frame(drain=k == frames - 1)

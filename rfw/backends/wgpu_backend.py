@@ -990,7 +990,6 @@ class Executor(FrameExecutor):
         self.calls = FrameCalls(device.device)
         self.stamps: Stamps | None = None
         self.in_flight = InFlight([])
-        self.drain_after_frame = False  # rfw.frame.run_frames: the last frame of a run drains
         self.keep_in_flight(frames_in_flight())
         check_caps(passes, device.caps)
         for p in passes.values():
@@ -1232,8 +1231,8 @@ class Executor(FrameExecutor):
 
     def end_frame(self) -> None:
         """Submit what is left without waiting: the frame's timings are appended when it
-        is finished (its slot comes round again, or a drain). One frame in flight (or the
-        last frame of ``run``) waits here, as every frame did before frames in flight."""
+        is finished (its slot comes round again, or a drain). One frame in flight waits
+        here (the last frame of ``run`` drains after: ``frame(drain=True)``), as every frame did before frames in flight."""
         slot, owners = self._frame_slot, self._query_owner
         self._submit(slot, last=True)
         # bind groups unused last frame and this one name objects no pass binds any more
@@ -1243,7 +1242,7 @@ class Executor(FrameExecutor):
         frame = (self.frame_index, owners, self._cpu, self._gpu, self._recorded)
         self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
         self.frame_index += 1
-        if len(self.in_flight) == 1 or self.drain_after_frame:
+        if len(self.in_flight) == 1:
             self.drain()
 
     def _submit(self, slot: FrameSlot, *, last: bool) -> bool:

@@ -43,9 +43,9 @@ class FrameClock:
         original = cls.frame
         clock = self
 
-        def frame(self: Any) -> None:
+        def frame(self: Any, drain: bool = False) -> None:
             t = time.perf_counter()
-            original(self)
+            original(self, drain)
             clock.ends.append((t, time.perf_counter()))
 
         cls.frame = frame  # type: ignore[method-assign]
