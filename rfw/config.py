@@ -591,13 +591,19 @@ class Built:
     slots: dict[str, dict[str, str]]  # pass -> slot -> resource
 
 
+def for_scene(cfg: Config, scene: Any) -> Config:
+    """``cfg`` without the enabled passes whose ``scene_needs`` ``scene`` lacks (a
+    points_lines pass on a scene without points or lines): not listed as disabled either.
+    ``cfg`` itself where every pass has work."""
+    passes = [p for p in cfg.passes if not p.enabled or _has_work(cfg, p, scene)]
+    return cfg if len(passes) == len(cfg.passes) else replace(cfg, passes=passes)
+
+
 def build(cfg: Config, scene: Any = None) -> Built:
-    """Instantiate the passes and wire their slots into a frame graph. With ``scene``, an
-    enabled pass whose ``scene_needs`` that scene lacks (a points_lines pass on a scene
-    without points or lines) is left out of the graph, not listed as disabled either."""
+    """Instantiate the passes and wire their slots into a frame graph; with ``scene``, for
+    that scene (:func:`for_scene`)."""
     if scene is not None:
-        cfg = replace(cfg, passes=[p for p in cfg.passes
-                                   if not p.enabled or _has_work(cfg, p, scene)])
+        cfg = for_scene(cfg, scene)
     enabled = {p.name for p in cfg.passes if p.enabled}
     g = GraphBuilder(cfg.name, size=cfg.size, source=cfg.source)
     instances: dict[str, Pass] = {}

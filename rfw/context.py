@@ -143,14 +143,14 @@ def check_topology(pass_name: str, topology: Any) -> None:
 
 def nothing_to_draw(scene: Any, topology: str, color: Sequence[tuple[str, Any]],
                     depth: tuple[str, Any] | None) -> bool:
-    """Whether a stroke draw may be left out whole: the scene (GpuScene, VkScene) has
-    nothing of ``topology`` and no target is cleared, so a scene without points or lines
-    costs its points_lines pass no render pass at all."""
+    """Whether a stroke draw may be left out whole: the uploaded scene (GpuScene, VkScene:
+    its ``.scene``) has nothing of ``topology`` and no target is cleared, so it costs the
+    pass no render pass at all."""
     if topology == "triangle-list" or any(clear is not None for _, clear in color):
         return False
     if depth is not None and depth[1] is not None:
         return False
-    return scene.draws(topology) == 0
+    return scene.scene.draw_count(topology) == 0
 
 
 def check_sampler(filter: str, address: str, compare: str | None) -> None:

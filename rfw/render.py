@@ -8,7 +8,7 @@ from typing import Any
 
 from .backend import Devices, get_backend
 from .camera_path import path_for, run_path
-from .config import MAX_FRAMES, Config, build, pass_class, resolve_auto
+from .config import MAX_FRAMES, Config, build, for_scene, pass_class, resolve_auto
 from .errors import RfwError, check_number
 from .fileio import to_png_array as to_png_array  # moved to fileio; imported from here
 from .fileio import write_run
@@ -75,13 +75,15 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         if run.auto_variants:  # the run's device decides what auto variants mean
             cfg, techniques = resolve_auto(cfg, run.caps(devs.get(run)))
         mix = pinned_elsewhere(cfg, backend)
-        build(cfg)  # the config's errors before the scene's
+        built = build(cfg)  # the config's errors before the scene's
         owned = scene is None  # loaded here, so nothing else holds its textures
         scene = load_scene_for(cfg, scene)
         if owned and not mix:  # uploaded once: its pixels go as they are uploaded
             scene.keep_pixels = False
         # passes with nothing to do on this scene (points_lines without strokes) left out
-        mixed, sides = prepare(build(cfg, scene), backend, devs, alias=alias, mix=mix)
+        if for_scene(cfg, scene) is not cfg:
+            built = build(cfg, scene)
+        mixed, sides = prepare(built, backend, devs, alias=alias, mix=mix)
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
         frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size, alias=alias)

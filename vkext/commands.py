@@ -513,30 +513,17 @@ def record_upload(cmd: Any, staging: Buffer, *,
         vk.vkCmdCopyBuffer(cmd, staging.handle, dst.handle, 1,
                            [vk.VkBufferCopy(srcOffset=offset, dstOffset=0, size=size)])
     for img, regions in images:
-        arr = ffi.new("VkBufferImageCopy[]", len(regions))
-        for i, (offset, mip, w, h) in enumerate(regions):
-            r = arr[i]
-            r.bufferOffset = offset
-            r.imageSubresource.aspectMask = img.aspect
-            r.imageSubresource.mipLevel = mip
-            r.imageSubresource.layerCount = 1
-            r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, h, 1
-        lib.vkCmdCopyBufferToImage(cmd, staging.handle, img.handle,
-                                   image_layout(TRANSFER_DST.layout), len(regions), arr)
+        _copy_bands(cmd, staging, img, [(offset, mip, 0, w, h) for offset, mip, w, h in regions])
     after = buffers_to or ANY_ACCESS
     # one memory barrier covers every buffer copied
     barrier(cmd, [ImageBarrier(img, TRANSFER_DST, images_to) for img, _ in images],
             memory_barriers=[(COPY_WRITE, after)] if buffers else ())
 
 
-def record_image_bands(cmd: Any, staging: Buffer, image: Image,
-                       bands: Sequence[tuple[int, int, int, int, int]], *, first: bool,
-                       last: bool, to: State | str = "SHADER_READ_ONLY_OPTIMAL") -> None:
-    """Record one chunk of an image upload streamed through ``staging``: ``bands`` are
-    (staging offset, mip, first row, width, rows). The ``first`` chunk discards the image's
-    old contents (every mip), a later one waits for the chunk before it (the same image's
-    copies), and the ``last`` leaves the image in ``to``."""
-    barrier(cmd, [ImageBarrier(image, "UNDEFINED" if first else TRANSFER_DST, TRANSFER_DST)])
+def _copy_bands(cmd: Any, staging: Buffer, image: Image,
+                bands: Sequence[tuple[int, int, int, int, int]]) -> None:
+    """One ``vkCmdCopyBufferToImage`` of (staging offset, mip, first row, width, rows)
+    regions into ``image``, which is in TRANSFER_DST."""
     arr = ffi.new("VkBufferImageCopy[]", len(bands))
     for i, (offset, mip, y, w, rows) in enumerate(bands):
         r = arr[i]
@@ -548,6 +535,17 @@ def record_image_bands(cmd: Any, staging: Buffer, image: Image,
         r.imageExtent.width, r.imageExtent.height, r.imageExtent.depth = w, rows, 1
     lib.vkCmdCopyBufferToImage(cmd, staging.handle, image.handle,
                                image_layout(TRANSFER_DST.layout), len(bands), arr)
+
+
+def record_image_bands(cmd: Any, staging: Buffer, image: Image,
+                       bands: Sequence[tuple[int, int, int, int, int]], *, first: bool,
+                       last: bool, to: State | str = "SHADER_READ_ONLY_OPTIMAL") -> None:
+    """Record one chunk of an image upload streamed through ``staging``: ``bands`` are
+    (staging offset, mip, first row, width, rows). The ``first`` chunk discards the image's
+    old contents (every mip), a later one waits for the chunk before it (the same image's
+    copies), and the ``last`` leaves the image in ``to``."""
+    barrier(cmd, [ImageBarrier(image, "UNDEFINED" if first else TRANSFER_DST, TRANSFER_DST)])
+    _copy_bands(cmd, staging, image, bands)
     if last:
         barrier(cmd, [ImageBarrier(image, TRANSFER_DST, to)])
 

@@ -672,14 +672,6 @@ class VkScene:
         """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights."""
         return {"camera": self.camera_range("main"), "lights": self.lights_range}
 
-    def draws(self, topology: str = "triangle-list") -> int:
-        """How many draws ``draw`` would record for ``topology`` at most (0: nothing of
-        that kind, so a caller need not begin rendering)."""
-        if topology == "triangle-list":
-            return len(self.scene.instances)
-        return sum(1 for i in self.scene.stroke_instances
-                   if self.scene.strokes[i.mesh].topology == topology)
-
     def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
              alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
              topology: str = "triangle-list") -> int:

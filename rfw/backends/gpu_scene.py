@@ -271,14 +271,6 @@ class GpuScene:
                                                                     self.lights_buffer}}])
         return self._bind_cache[key]
 
-    def draws(self, topology: str = "triangle-list") -> int:
-        """How many draws ``draw`` would record for ``topology`` at most (0: nothing of
-        that kind to draw, so a caller need not begin a pass)."""
-        if topology == "triangle-list":
-            return len(self.scene.instances)
-        return sum(1 for i in self.scene.stroke_instances
-                   if self.scene.strokes[i.mesh].topology == topology)
-
     def draw(self, rp: Any, prog: Any, pipeline: Any, *, camera: str = "main",
              group0: Any = None, alpha: tuple[str, ...] = ("OPAQUE", "MASK"),
              dynamic: bool = True, topology: str = "triangle-list") -> int:

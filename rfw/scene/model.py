@@ -239,6 +239,14 @@ class Scene:
             return np.full(3, np.inf), np.full(3, -np.inf)
         return corners.min(axis=0), corners.max(axis=0)
 
+    def draw_count(self, topology: str = "triangle-list") -> int:
+        """How many draws a backend's ``draw`` records for ``topology`` at most: the
+        instances for triangles, else the stroke instances of that kind (0: a caller need
+        not begin a render pass)."""
+        if topology == "triangle-list":
+            return len(self.instances)
+        return sum(1 for i in self.stroke_instances if self.strokes[i.mesh].topology == topology)
+
     def _stroke_corners(self) -> list[np.ndarray]:
         """The world corners of each drawable stroke instance's bounds (strokes are few:
         checked one by one)."""
