@@ -34,7 +34,7 @@ class PassContext(Protocol):
     """The pass-facing context: slots, their resources, and ways to record work."""
 
     pass_: Any  # the recording pass
-    scene: Any  # the uploaded scene, or None without one
+    scene: Any  # the uploaded scene (rfw.authoring.SceneView), or None without one
     frame: int  # frames recorded before this one
 
     # slots and resources -------------------------------------------------------------------
@@ -74,13 +74,6 @@ class PassContext(Protocol):
         clamp-to-edge | repeat | mirror-repeat; ``compare``: a depth comparison)."""
 
     # recording -----------------------------------------------------------------------------
-    def replay(self, *key: Any) -> bool:
-        """Call first in ``record``: True when the backend executed again the commands
-        this pass recorded in an earlier frame for the same settings, slot resources, scene
-        and ``key`` (whatever else the commands depend on: bytes the pass computes), and
-        ``record`` returns; False when it records (a backend that can keep the commands
-        keeps them for such a frame). A backend that cannot replay always says False."""
-
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps (``Pass.steps``): the graph's
         barriers between steps (a mip written, then read) are recorded here."""

@@ -296,6 +296,11 @@ class Pass:
     # a run on a scene without it leaves the pass out of the graph, so it records nothing
     # and has no timing row. Only for passes whose outputs nothing reads.
     scene_needs: ClassVar[str | None] = None
+    # "auto": the pass's commands depend on nothing but its settings, the resources behind
+    # its slots, the scene and ``replay_key(ctx)``, so an executor that can keep them
+    # executes them again instead of calling ``record`` (rfw.exec.replay); False: recorded
+    # every frame (commands that depend on anything else, e.g. bytes computed per frame)
+    replay: ClassVar[str | bool] = False
 
     class Params(Settings):
         pass
@@ -351,7 +356,14 @@ class Pass:
         return ()
 
     def setup(self, ctx: Any) -> None:
-        """Create persistent GPU objects (pipelines, samplers). Called once per device."""
+        """Make what the pass keeps across frames (tables of the scene as buffers:
+        ``ctx.buffer``); ``ctx`` is a :class:`rfw.authoring.SetupContext`. Called once per
+        executor, before its first frame."""
+
+    def replay_key(self, ctx: Any) -> Any:
+        """What else a ``replay = "auto"`` pass's commands depend on (hashable; read before
+        ``record`` with the same ``ctx``): none by default."""
+        return ()
 
     def record(self, ctx: Any) -> None:
         raise NotImplementedError(f"{type(self).__name__}.record")

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rfw.authoring import MESH_SHADER
 from rfw.backends.base import SlotContext
 from rfw.context import check_topology, nothing_to_draw
 from rfw.graph.formats import format_info
@@ -116,30 +117,24 @@ class VkPassContext(SlotContext):
         record_barriers(self.cmd, barriers, self.executor.resources)
         self._step = index
 
-    def replay(self, *key: Any) -> bool:
-        """Execute again the commands this pass recorded in an earlier frame for the same
-        settings, slot resources, scene and ``key`` (whatever else its commands depend on),
-        and say so (True: ``record`` returns at once). False: ``record`` goes on, and its
-        commands are recorded into a bundle (``vkext.bundles``) kept for such a frame. Call
-        it first, before recording anything. Without bundles (``RFW_VK_BUNDLES=0``) or
-        under synchronization validation it is always False: the layer does not report
-        hazards between two bundles (a broken plan's went unreported: test_schedule_fuzz),
-        so there every pass records its commands into the frame. So it is for a pass on a
-        compute-only queue family (async compute): bundles are the graphics family's."""
+    def can_replay(self) -> bool:
+        """Whether this pass's commands may go into a bundle kept for a later frame
+        (``rfw.exec.replay``: the executor asks before ``record``). Not without bundles
+        (``RunOptions.bundles``) or under synchronization validation: the layer does not
+        report hazards between two bundles (a broken plan's went unreported:
+        test_schedule_fuzz), so there every pass records its commands into the frame. Nor
+        for a pass on a compute-only queue family (async compute): bundles are the graphics
+        family's."""
         ex = self.executor
         if ex.bundles is None or self.device.sync_validation:
             return False
-        if ex.queues is not None and self.pass_.name in ex.queues.elsewhere:
-            return False  # bundles come from the graphics family's pool: not for its queue
-        if self._pass_bundle is not None or self._step >= 0 or self._draw_calls \
-                or self._set_calls:
-            return False  # too late: commands were recorded already
-        try:
-            full = ("pass", type(self.pass_), _settings_key(self.pass_.params),
-                    tuple(self._slot_objects()), self.scene, key)
-            hash(full)
-        except TypeError:  # an unhashable part: record every frame
-            return False
+        return ex.queues is None or self.pass_.name not in ex.queues.elsewhere
+
+    def replayed(self, full: tuple) -> bool:
+        """Execute again the bundle recorded for ``full`` (the pass's replay key, built
+        before ``record``) and say so (True: ``record`` is not called). False: ``record``
+        goes on, its commands recorded into a bundle kept under ``full``."""
+        ex = self.executor
         slot = (self.pass_.name, -1)
         bundle = ex.bundles.find(slot, full)
         if bundle is not None and bundle.usable():
@@ -164,7 +159,30 @@ class VkPassContext(SlotContext):
                 lib.vkCmdExecuteCommands(self._cmd, 1, self.executed.handles)
         return self._cmd
 
-    def _slot_objects(self) -> list[Any]:
+    # mesh shaders: a capability of passes that declare MESH_SHADER (rfw.authoring) ---------
+    @property
+    def meshlets(self) -> Any:
+        """The scene's meshlets (``vkext.meshlet.MeshletScene``), for a pass that declares
+        ``requires = (MESH_SHADER, ...)``."""
+        from .meshlet import scene_of
+
+        if MESH_SHADER not in self.pass_.requires:
+            raise ShaderError(f"pass '{self.pass_.name}' draws meshlets but does not declare "
+                              f"requires = ({MESH_SHADER!r},)")
+        return scene_of(self)
+
+    def draw_meshlets(self, *, color: Sequence[tuple[str, Any]],
+                      depth: tuple[str, Any] | None, flags: int, phase: str,
+                      freeze: bool = False, depth_compare: str = "less-equal",
+                      cull: str = "back") -> int:
+        """``vkext.meshlet.draw_meshlets`` into this pass's slots."""
+        from .meshlet import draw_meshlets
+
+        self.meshlets  # noqa: B018  (the capability's check)
+        return draw_meshlets(self, color=color, depth=depth, flags=flags, phase=phase,
+                             freeze=freeze, depth_compare=depth_compare, cull=cull)
+
+    def slot_objects(self) -> list[Any]:
         """The objects behind the pass's slots (history images swap between frames)."""
         ex = self.executor
         out = []
@@ -684,11 +702,6 @@ def _target_formats(targets: list[Image], depth: Image | None) -> dict[str, Any]
     return {"colors": [t.vk_format for t in targets],
             "depth": depth.vk_format if depth is not None else None,
             "stencil": bool(depth is not None and depth.info.stencil)}
-
-
-def _settings_key(params: Any) -> tuple:
-    """A pass's settings as a key: their type and values."""
-    return (type(params), tuple(vars(params).items())) if params is not None else ()
 
 
 def _frozen(clear: Any) -> Any:

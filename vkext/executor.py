@@ -25,7 +25,6 @@ every frame (the benchmarks' baseline).
 
 from __future__ import annotations
 
-import time
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -33,14 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from rfw import env
-from rfw.backends.base import FrameExecutor
-from rfw.errors import naming
-from rfw.exec.samplers import Samplers
-from rfw.exec.timing import pass_timings
-from rfw.frame import InFlight, frames_in_flight, run_frames
+from rfw.exec.core import ExecutorCore
 from rfw.graph import CompiledGraph
 from rfw.graph.sync import State
+from rfw.options import RunOptions, check_options
 from rfw.passes import Pass
 from rfw.shaders import ShaderError
 from rfw.units import MiB
@@ -175,21 +170,20 @@ def _runs(slots: list[int]) -> list[tuple[int, int]]:
     return out
 
 
-class VkExecutor(FrameExecutor):
+class VkExecutor(ExecutorCore):
     """Owns the images and buffers of one compiled graph on one device and records frames."""
 
     def __init__(self, device: VkDevice, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: VkScene | None = None,
                  readback: tuple[str, ...] = (), *, alias: bool = True,
-                 memory_info: dict[str, Any] | None = None):
+                 memory_info: dict[str, Any] | None = None,
+                 options: RunOptions | None = None):
+        options = check_options(options)
         plan, self.poison = poison.prepare(plan)  # schedule fuzzing: poisoned transients
-        self.device, self.plan, self.passes, self.slots = device, plan, passes, slots
-        self.scene = scene
-        self.readback = tuple(readback)
+        self.device = device
+        self._init_core(plan, passes, slots, scene, readback, options)
         self.alias = alias
         self.memory_info = dict(memory_info or {})
-        self.frame_index = 0
-        self.timings = pass_timings(plan.order)
         self._position = {name: k for k, name in enumerate(plan.order)}
         self._accels = {r.name: GLOBAL for r in plan.resources if r.kind == "accel"}
         check_passes(plan, passes)
@@ -210,11 +204,7 @@ class VkExecutor(FrameExecutor):
                                  None)
                     self._start[a.resource] = (first.src if first else a.state).layout or \
                         "UNDEFINED"
-        self._history = [(copy, name) for copy, name in
-                         ((r.name, r.name.removesuffix("@prev")) for r in plan.resources
-                          if r.history and r.name.endswith("@prev"))]
         self._views: dict[tuple[int, bool, int | None], ImageView] = {}
-        self._samplers = Samplers(self._make_sampler)
         self._paths: dict[tuple[str, str | None], list[Path]] = {}
         # VkRenderingInfo per pass, targets and clears (vkext.context builds them)
         self.rendering_infos: dict[tuple, tuple[Any, list[Any]]] = {}
@@ -236,14 +226,13 @@ class VkExecutor(FrameExecutor):
         # whole-frame replay: a frame that would record what its slot's command buffer holds
         # submits it again (so it is not one-time-submit); RFW_VK_FRAME_REPLAY=0 records
         # every frame, the baseline a benchmark measures against in the same run
-        self.frame_replay = env.get("RFW_VK_FRAME_REPLAY")
+        self.frame_replay = options.frame_replay
         self.primaries = 0  # primary command buffers begun (what tests count)
         self._begin_info = ffi.new("VkCommandBufferBeginInfo*", {
             "sType": vk.VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
             "flags": 0 if self.frame_replay else vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT})
         self._query_flags = vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT
         self._frame_start = _memory_dependency(FRAME_BEFORE, FRAME_AFTER)
-        self.in_flight = InFlight([])
         self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
         self._frame_barriers = {p: [_chained(b) for b in bs] for p, bs in self._barriers.items()}
         # async compute: the plan's submissions on two queues (vkext.queues); None: one
@@ -253,15 +242,14 @@ class VkExecutor(FrameExecutor):
         try:
             self._allocate()
             self.programs = Programs(device, scene)
-            self.keep_in_flight(frames_in_flight())
+            self.keep_in_flight(options.in_flight())
             # descriptor sets written once and scene draws recorded once, then replayed
-            # (vkext.bundles); RFW_VK_BUNDLES=0 writes and records them every frame: the
-            # baseline a benchmark measures against in the same run
-            if env.get("RFW_VK_BUNDLES"):
+            # (vkext.bundles); RunOptions(bundles=False) (RFW_VK_BUNDLES=0) writes and
+            # records them every frame: the baseline a benchmark measures against
+            if options.bundles:
                 self.sets = SetCache(device, self.allocator)
                 self.bundles = BundleCache(device)
-            for p in passes.values():
-                p.setup(self)
+            self._setup_passes(frozenset(device.caps))
         except BaseException:
             self.destroy()
             raise
@@ -356,10 +344,12 @@ class VkExecutor(FrameExecutor):
         """The state the plan puts ``resource`` in for ``pass_name``."""
         return self._states.get((pass_name, resource))
 
-    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
-                compare: str | None = None) -> Sampler:
-        """A sampler made once per (filter, address, compare) and kept until ``destroy``."""
-        return self._samplers.get(filter, address, compare)
+    def _make_buffer(self, label: str, data: np.ndarray, usage: tuple[str, ...]) -> Buffer:
+        """A host-visible buffer holding ``data`` (a pass's setup tables), freed with the
+        persistent allocator."""
+        buf = self.allocator.create_buffer(data.nbytes, usage, host_visible=True, label=label)
+        buf.write(data)
+        return buf
 
     def _make_sampler(self, filter: str, address: str, compare: str | None) -> Sampler:
         return make_sampler(
@@ -377,9 +367,6 @@ class VkExecutor(FrameExecutor):
             paths = self._paths[key] = shader_paths(pass_, shader)
         return paths
 
-    def scene_bindings(self) -> dict[str, Any]:
-        return self.scene.bindings() if self.scene is not None else {}
-
     def memory(self) -> dict[str, Any]:
         """Transient bytes allocated against the plan's numbers."""
         tm = self.transients
@@ -391,18 +378,7 @@ class VkExecutor(FrameExecutor):
         return out
 
     # frames -------------------------------------------------------------------------------
-    def keep_in_flight(self, frames: int) -> None:
-        """Keep up to ``frames`` frames in flight (:func:`rfw.frame.frames_in_flight`): one
-        :class:`FrameSlot` each. Frames in flight now are finished first."""
-        frames = frames_in_flight(frames)
-        self.drain()
-        for slot in self.in_flight.slots:
-            slot.destroy(self.device)
-        self.in_flight = InFlight([])
-        for k in range(frames):
-            self.in_flight.slots.append(self._slot(k))
-
-    def _slot(self, k: int) -> FrameSlot:
+    def _make_slot(self, k: int) -> FrameSlot:
         dev = self.device
         pool = CommandPool(dev, transient=False, label=f"rfw:frames{k}")
         slot = FrameSlot(pool, pool.allocate(1)[0], None, FrameDescriptors(dev),
@@ -428,20 +404,9 @@ class VkExecutor(FrameExecutor):
                 label=f"rfw:camera{k}")
         return slot
 
-    def run(self, frames: int = 1) -> None:
-        """``frames`` frames; returns once they are done (the last one drains)."""
-        run_frames(self, frames)
-
-    def drain(self) -> None:
-        """Wait for every frame in flight; their timings are appended, oldest first."""
-        self.in_flight.drain()
-
     # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
-    def begin_frame(self) -> None:
-        """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded
-        and wait, ``end_frame`` to submit the rest without waiting. The frame takes the
-        next slot once the frame that used it last is finished; its descriptors and
-        uniforms live until the slot comes round again.
+    def _before_frame(self) -> None:
+        """A frame's descriptors and uniforms live until its slot comes round again.
 
         A frame records while earlier ones run, so what it writes from the host must not
         be what they read: settings (a pass's ``params``) and the scene it draws are host
@@ -456,7 +421,8 @@ class VkExecutor(FrameExecutor):
         if last is not None and (len(last) != len(inputs) or
                                  any(a is not b for a, b in zip(last, inputs, strict=False))):
             self.drain()
-        slot = self._frame_slot = self.in_flight.slot(self.frame_index)
+
+    def _open(self, slot: FrameSlot) -> None:
         if slot.camera is not None and slot.camera_data != self.scene.camera_blob:
             # its last frame is finished (slot() waited for it): no copy reads these bytes
             slot.camera_data = self.scene.camera_blob
@@ -464,10 +430,6 @@ class VkExecutor(FrameExecutor):
         self.pool, self.cmd, self.timestamps = slot.pool, slot.cmd, slot.timestamps
         self.descriptors, self.ring = slot.descriptors, slot.ring
         dev, ts = self.device, self.timestamps
-        if self.frame_index:  # ping-pong: last frame's value is this frame's @prev
-            for copy, name in self._history:
-                if copy in self.images and name in self.images:
-                    self.images[copy], self.images[name] = self.images[name], self.images[copy]
         # the resource map the frame's barriers use, made once per frame (after the swap)
         self._frame_resources = self.resources
         self.descriptors.reset()
@@ -485,10 +447,11 @@ class VkExecutor(FrameExecutor):
         self._split = False  # flushed mid-frame: not one submit, not kept for replay
         if not self._replaying:
             self._reset_primary()
-        self._cpu: dict[str, float] = {}
-        self._gpu: dict[str, float] = {}
         self._pending: list[int] = []  # timestamp slots written since the last flush
-        self._recorded: list[str] = []
+
+    def _swap(self, a: str, b: str) -> None:
+        if a in self.images and b in self.images:
+            self.images[a], self.images[b] = self.images[b], self.images[a]
 
     def _reset_primary(self) -> None:
         slot = self._frame_slot
@@ -550,98 +513,94 @@ class VkExecutor(FrameExecutor):
         if self.timestamps is not None:
             self._timestamp(self.cmd, 2 * k + 1)
 
-    def record(self, name: str) -> None:
-        """Record pass ``name``: its debug label, the plan's barriers for it, a timestamp
-        before and after, and ``record(ctx)``. A pass without an instance (a bridge's side
-        on this device) records its barriers only: the copy itself goes through the host
-        (``rfw.frame``), between flushes."""
-        if self.queues is not None:  # async compute: the command buffer of the pass's batch
+    def _enter(self, name: str, *, bridge: bool) -> None:
+        # the command buffer pass ``name`` records into: its batch's (async compute), the
+        # frame's (begun on first use), or none while the frame is replayed whole
+        if self.queues is not None:
             self.cmd = self.queues.command_buffer(name, self._frame_slot, self._frame_resources)
             self._recording = True
-        p = self.passes.get(name)
         self._name = None
-        if self._replaying and p is None:  # a bridge's side: recorded from here on
+        if self._replaying and bridge:  # a bridge's side: recorded from here on
             self.catch_up()
         if not self._replaying and not self._recording:
             self._begin()
         self._name = name
+
+    def _bridge(self, name: str) -> None:
+        """A bridge's side on this device records its barriers only: the copy itself goes
+        through the host (``rfw.frame``), between flushes."""
         try:
-            if self._replaying:
-                self._replay_pass(name, p)
-                return
+            self._enter(name, bridge=True)
             with label(self.device, self.cmd, name):
-                k = self._prefix(name)
-                if p is None:
-                    self._done.append((name, None))
-                    return
-                ctx = self._record_pass(name, p, self.cmd)
-                self._suffix(k)
-                self._done.append((name, ctx.executed) if not ctx.direct else (name, None))
+                self._prefix(name)
+                self._done.append((name, None))
         except BaseException:
-            self._recording = self._replaying = False
-            self._frame_slot.holds = None
-            self.pool.reset()  # drop the half-recorded commands
+            self._abandon()
             raise
         finally:
             self._name = None
 
-    def _record_pass(self, name: str, p: Pass, cmd: Any) -> VkPassContext:
-        ctx = VkPassContext(self, p, cmd, self.slots[name])
-        t = time.perf_counter()
-        with naming(f"pass '{name}'"):
-            p.record(ctx)
-            ctx.finish()
-        self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
-        k = self._position[name]
-        if self.timestamps is not None:
-            self._pending.append(k)
-        self._recorded.append(name)
-        return ctx
-
-    def _replay_pass(self, name: str, p: Pass) -> None:
-        # the pass records with no command buffer: it gets one (catch_up) once it records
-        # anything but the bundle the slot's command buffer executes here
-        ctx = self._record_pass(name, p, None)
-        if self._replaying and ctx.executed is None:  # it recorded nothing: nor did it then
-            self.catch_up()
+    def _context(self, name: str, p: Pass) -> VkPassContext:
+        """Pass ``name``'s context, after its debug label, the plan's barriers for it and
+        its begin timestamp. In a frame replayed whole it has no command buffer: it gets
+        one (``catch_up``) once it records anything but the bundle the slot's command
+        buffer executes here."""
+        self._enter(name, bridge=False)
+        self._pass_replaying = self._replaying
         if self._replaying:
-            self._done.append((name, ctx.executed))
-            return
-        self._suffix(self._position[name])
-        end_label(self.device, self.cmd)
-        self._done.append((name, ctx.executed) if not ctx.direct else (name, None))
+            return VkPassContext(self, p, None, self.slots[name])
+        begin_label(self.device, self.cmd, name)
+        self._prefix(name)
+        return VkPassContext(self, p, self.cmd, self.slots[name])
+
+    def _recorded_pass(self, name: str, ctx: VkPassContext) -> None:
+        # the end timestamp and label; what the slot's command buffer now executes here
+        try:
+            if self.timestamps is not None:
+                self._pending.append(self._position[name])
+            if self._pass_replaying and self._replaying:
+                if ctx.executed is None:  # it recorded nothing: nor did it then
+                    self.catch_up()
+                else:
+                    self._done.append((name, ctx.executed))
+                    return
+            self._suffix(self._position[name])
+            end_label(self.device, self.cmd)
+            self._done.append((name, ctx.executed) if not ctx.direct else (name, None))
+        finally:
+            self._name = None
+
+    def _abandon(self) -> None:
+        self._recording = self._replaying = False
+        self._name = None
+        if self._frame_slot is not None:
+            self._frame_slot.holds = None
+        if self.pool is not None:
+            self.pool.reset()  # drop the half-recorded commands
 
     def _timestamp(self, cmd: Any, index: int) -> None:
         # TimestampPool.write without its checks: the executor numbers its own queries
         lib.vkCmdWriteTimestamp2(cmd, self._ts_stage, self.timestamps.handle, index)
 
-    def flush(self) -> None:
-        """Submit what was recorded since the last flush, wait for it and collect its
-        timestamps (a bridge then copies what it wrote). Nothing recorded: nothing happens."""
-        fence = self._submit()
-        if fence is None:
-            return
-        self._split = True
-        self._wait(fence)
-        self._collect(self._frame_slot, self._pending, self._gpu)
-        self._pending = []
-
-    def end_frame(self) -> None:
-        """Submit what is left without waiting: the frame's timings are appended when it
-        is finished (its slot comes round again, or a drain). One frame in flight waits
-        here (the last frame of ``run`` drains after: ``frame(drain=True)``), as every frame did before frames in flight."""
-        slot = self._frame_slot
-        slot.fence = self._submit()
-        if self._keep:  # what the slot's command buffer now holds, for a frame to replay
+    def _submit(self, slot: FrameSlot, *, last: bool) -> Any:
+        """Submit what was recorded (``_send_frame``) and return how to finish it: wait for
+        its fence, then read its timestamps. A flush (not ``last``) that submits splits the
+        frame (no longer one submit kept for replay); the frame's last submit records what
+        the slot's command buffer now holds, for a frame to replay."""
+        fence = self._send_frame()
+        if not last:
+            if fence is None:
+                return None
+            self._split = True
+            pending, self._pending = self._pending, []
+            return lambda append: self._finish(slot, fence, pending, append)
+        slot.fence = fence
+        if self._keep:
             slot.holds = (tuple(self._frame_resources.values()), tuple(self._done))
-        frame = (self._cpu, self._gpu, self._pending, self._recorded)
-        self._pending = []
-        self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
-        self.frame_index += 1
-        if len(self.in_flight) == 1:
-            self.drain()
+        pending, self._pending = self._pending, []
+        return lambda append: self._finish(slot, None, pending, append)
 
-    def _submit(self) -> Any:
+    def _send_frame(self) -> Any:
         """End the command buffer and submit it: its fence, or None if nothing was recorded.
         A replayed frame submits the slot's command buffer as it is (or records the rest
         of it first, if the frame had fewer passes)."""
@@ -693,17 +652,16 @@ class VkExecutor(FrameExecutor):
         finally:
             vk.vkDestroyFence(dev, fence, None)
 
-    def _finish(self, slot: FrameSlot, cpu: dict[str, float], gpu: dict[str, float],
-                pending: list[int], recorded: list[str]) -> None:
-        """Wait for a submitted frame, then append its timings of the passes recorded."""
-        fence, slot.fence = slot.fence, None
+    def _finish(self, slot: FrameSlot, fence: Any, pending: list[int], append: Any) -> None:
+        """Wait for a submit (``fence``; None: the slot's frame), then hand its GPU ms per
+        pass to ``append`` (None without timestamps)."""
+        if fence is None:
+            fence, slot.fence = slot.fence, None
         if fence is not None:
             self._wait(fence)
+        gpu: dict[str, float] = {}
         self._collect(slot, pending, gpu)
-        for name in dict.fromkeys(recorded):
-            self.timings[name].cpu_ms.append(cpu[name])
-            if slot.timestamps is not None:
-                self.timings[name].gpu_ms.append(gpu[name])
+        append(gpu if slot.timestamps is not None else None)
 
     def _collect(self, slot: FrameSlot, pending: list[int], gpu: dict[str, float]) -> None:
         # a finished submit's timestamps, per pass, added to the frame's GPU ms: one query
@@ -743,29 +701,24 @@ class VkExecutor(FrameExecutor):
         return read_image(self.device, img, layout_now=now,
                           layout_after=state if state is not None else None)
 
-    def destroy(self) -> None:
-        """Destroy every Vulkan object the executor made (safe to call twice); frames in
-        flight are finished first (or dropped, if that fails)."""
-        in_flight = getattr(self, "in_flight", InFlight([]))
-        failed = None
-        try:
-            if self.device.alive:
-                in_flight.drain()
-        except Exception as e:  # destroy everything still, then say what went wrong
-            failed = e
-        in_flight.forget()
+    # teardown (ExecutorCore.destroy calls these) -----------------------------------------
+    def _can_drain(self) -> bool:
+        return self.device.alive
+
+    def _idle(self) -> None:
         if self.device.alive:
             self.device.wait_idle()
-        for slot in in_flight.slots:
-            slot.destroy(self.device)
-        in_flight.slots.clear()
+
+    def _destroy_slot(self, slot: FrameSlot) -> None:
+        slot.destroy(self.device)
+
+    def _release(self) -> None:
         for obj in (self.bundles, self.sets, self.programs, getattr(self, "queues", None),
                     self.transients, self.allocator):
             if obj is not None:
                 obj.destroy()
         for smp in self._samplers:
             smp.destroy()
-        self._samplers.clear()
         for v in self._views.values():
             v.destroy()
         self._views.clear()
@@ -773,5 +726,3 @@ class VkExecutor(FrameExecutor):
         self.bundles = self.sets = None
         self.transients = self.allocator = None
         self.ring = None
-        if failed is not None:
-            raise failed

@@ -226,6 +226,17 @@ class MeshletScene:
                           self.draw_count if count is None else count,
                           float(viewport[0]), float(viewport[1]))
 
+    def flags(self, *, cone: bool = False, frustum: bool = False, occlusion: bool = False,
+              triangles: bool = False, colors: bool = False) -> int:
+        """meshlet.glsl's F_* flags (:func:`flags_of`)."""
+        return flags_of(cone=cone, frustum=frustum, occlusion=occlusion, triangles=triangles,
+                        colors=colors)
+
+    def check_capacity(self, ctx: Any) -> None:
+        """The pass's buffers hold every draw's command and visibility word
+        (:func:`check_capacity`)."""
+        check_capacity(ctx, self)
+
     def destroy(self) -> None:
         """The buffers belong to the scene's allocator, which frees them."""
         self.buffers.clear()

@@ -1,7 +1,6 @@
 """Acceleration structures of the scene, for the passes that trace rays."""
 
-from rfw import Pass, Settings, register_pass
-from rfw.graph import AccelStructure
+from rfw.authoring import AccelStructure, Pass, Settings, register_pass
 
 
 @register_pass("accel_build")
@@ -31,10 +30,10 @@ class AccelBuildPass(Pass):
         allow_update: bool = False  # refit the TLAS each frame instead of rebuilding it
         compact: bool = False  # compact the BLAS after their build
 
-    def setup(self, ex) -> None:
+    def setup(self, ctx) -> None:
         self.accel = None
-        if ex.scene is not None:
-            self.accel = self._scene_accel(ex.scene)
+        if ctx.scene is not None:
+            self.accel = self._scene_accel(ctx.scene)
 
     def _scene_accel(self, scene):
         p = self.params

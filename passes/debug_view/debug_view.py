@@ -2,10 +2,16 @@
 
 from typing import ClassVar
 
-from rfw import ComputePass, Settings, SettingsError, Tex2D, register_pass
-from rfw.graph import Slot
-from rfw.graph.errors import did_you_mean
-from rfw.graph.formats import format_info
+from rfw.authoring import (
+    ComputePass,
+    Settings,
+    SettingsError,
+    Slot,
+    Tex2D,
+    did_you_mean,
+    format_info,
+    register_pass,
+)
 
 # mode names and their numbers (configs may use either)
 MODES = {"color": 0, "normals": 1, "depth": 2, "heatmap": 3}
@@ -26,6 +32,8 @@ class DebugViewPass(ComputePass):
     Depth formats bind as ``texture_depth_2d``; other formats read channel values directly.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "debug_view.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {"source": Tex2D(desc="any float, unorm or depth texture")}
     outputs: ClassVar[dict[str, Slot]] = {
@@ -45,8 +53,6 @@ class DebugViewPass(ComputePass):
                                 f"got {self.params.range}")
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings and images as a recorded frame
-            return
         fmt = format_info(ctx.format("source"))
         defines = {"MODE": self.mode}
         if fmt.depth:

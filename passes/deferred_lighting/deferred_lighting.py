@@ -1,7 +1,6 @@
 """Deferred PBR lighting: G-buffer in, linear HDR radiance out."""
 
-from rfw import ComputePass, Settings, register_pass
-from rfw.graph import Texture
+from rfw.authoring import ComputePass, Settings, Texture, register_pass
 
 
 @register_pass("deferred_lighting")
@@ -12,6 +11,8 @@ class DeferredLightingPass(ComputePass):
     mask (``rt_shadows``: bit i set where light i reaches the pixel, for all lights), or
     both."""
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "deferred_lighting.comp.glsl"
     inputs = {
         "albedo": Texture(desc="base color"),
@@ -31,8 +32,6 @@ class DeferredLightingPass(ComputePass):
         ambient: float = 1.0  # sky ambient multiplier
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images and scene as a recorded frame
-            return
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}
         extra = {"t_shadow": ctx.sampled("shadow"), "s_shadow": ctx.scene.shadow_sampler} \
             if ctx.has("shadow") else {}

@@ -2,8 +2,7 @@
 
 from typing import ClassVar
 
-from rfw import RenderPass, register_pass
-from rfw.graph import DepthAttachment, Slot
+from rfw.authoring import DepthAttachment, RenderPass, Slot, register_pass
 
 
 @register_pass("depth_prepass")
@@ -15,12 +14,12 @@ class DepthPrepassPass(RenderPass):
     materials are left out: without a fragment stage their cut-outs would write depth.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "depth_prepass"
     outputs: ClassVar[dict[str, Slot]] = {
         "depth": DepthAttachment("depth32float", desc="scene depth, 0 near 1 far"),
     }
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, image and scene as a recorded frame
-            return
         ctx.draw_scene(depth=("depth", 1.0), alpha=("OPAQUE",))

@@ -1,7 +1,6 @@
 """Hierarchical depth (Hi-Z) pyramid: max-reduced depth mips for occlusion culling."""
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.graph import Part, Step
+from rfw.authoring import ComputePass, Part, Settings, Step, Tex2D, register_pass
 
 
 @register_pass("depth_pyramid")
@@ -17,6 +16,8 @@ class DepthPyramidPass(ComputePass):
     Each level is a declared step (level L reads mip L - 1, writes mip L): the compiled
     graph plans the barrier on mip L - 1 before level L, as between passes."""
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "depth_pyramid.comp.glsl"
     inputs = {"depth": Tex2D(desc="scene depth, 0 near 1 far")}
     outputs = {"pyramid": Tex2D("r32float", size_of="depth",
@@ -40,8 +41,6 @@ class DepthPyramidPass(ComputePass):
                          for lv in range(1, self._levels())))
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same images (and so levels) as a recorded frame
-            return
         w, h = ctx.extent("pyramid")
         ctx.step(0)
         ctx.dispatch(threads=(w, h), defines={"FROM_DEPTH": 1}, t_depth=ctx.sampled("depth"),

@@ -2,9 +2,7 @@
 
 from typing import Annotated
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment
-from rfw.passes import Range
+from rfw.authoring import Attachment, DepthAttachment, Range, RenderPass, Settings, register_pass
 
 
 @register_pass("flat")
@@ -20,6 +18,8 @@ class FlatPass(RenderPass):
     pyvista/VTK (``tests/bench/test_peer_images.py`` measures how close they come).
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "flat"
     outputs = {
         "color": Attachment("rgba8unorm", desc="shaded colour, linear, background black"),
@@ -30,8 +30,6 @@ class FlatPass(RenderPass):
         ambient: Annotated[float, Range(0.0, 1.0)] = 0.25  # share of the colour without light
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images and scene as a recorded frame
-            return
         # masks and blending read textures: without them every material is opaque
         ctx.draw_scene(color=[("color", (0.0, 0.0, 0.0, 1.0))], depth=("depth", 1.0),
                        alpha=("OPAQUE", "MASK", "BLEND"), u_params=self.params)

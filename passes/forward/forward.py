@@ -1,8 +1,14 @@
 """Forward PBR: each fragment shaded while the scene is rasterised."""
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment, Texture
-from rfw.passes import DepthPrepassMixin
+from rfw.authoring import (
+    Attachment,
+    DepthAttachment,
+    DepthPrepassMixin,
+    RenderPass,
+    Settings,
+    Texture,
+    register_pass,
+)
 
 # fed by depth_prepass.depth when the prepass setting is on: tested, never written
 
@@ -18,6 +24,8 @@ class ForwardPass(DepthPrepassMixin, RenderPass):
     opaque ones behind them, resolve in draw order.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "forward"
     inputs = {
         "shadow": Texture(optional=True, desc="sun shadow map"),
@@ -33,8 +41,6 @@ class ForwardPass(DepthPrepassMixin, RenderPass):
         prepass: bool = False  # test against a depth input instead of writing depth
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images and scene as a recorded frame
-            return
         defines = {"HAS_SHADOW": 1} if ctx.has("shadow") else {}
         extra = {"t_shadow": ctx.sampled("shadow"), "s_shadow": ctx.scene.shadow_sampler} \
             if ctx.has("shadow") else {}

@@ -2,8 +2,7 @@
 
 from typing import ClassVar
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.graph import Slot
+from rfw.authoring import ComputePass, Settings, Slot, Tex2D, register_pass
 
 
 @register_pass("fxaa")
@@ -13,6 +12,8 @@ class FXAAPass(ComputePass):
     softens single-pixel features. Luma is taken from the encoded values, as FXAA intends.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "fxaa.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {"ldr": Tex2D(desc="display-encoded color (rgba8unorm)")}
     outputs: ClassVar[dict[str, Slot]] = {
@@ -26,8 +27,6 @@ class FXAAPass(ComputePass):
         search_steps: int = 12  # edge-walk iterations per side (1-12)
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings and images as a recorded frame
-            return
         # clamped bilinear reads: the edge walk samples between texels
         ctx.dispatch(threads=ctx.extent("color"), t_ldr=ctx.sampled("ldr"),
                      s_linear=ctx.sampler(filter="linear", address="clamp-to-edge"),

@@ -1,8 +1,12 @@
 """G-buffer: the scene's materials rasterised into screen-space attributes."""
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment
-from rfw.passes import DepthPrepassMixin
+from rfw.authoring import (
+    GBUFFER,
+    DepthPrepassMixin,
+    RenderPass,
+    Settings,
+    register_pass,
+)
 
 # fed by depth_prepass.depth when the prepass setting is on: tested, never written
 
@@ -18,21 +22,15 @@ class GBufferPass(DepthPrepassMixin, RenderPass):
     overlap each other, or opaque ones behind them, resolve in draw order.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "gbuffer"
-    outputs = {
-        "albedo": Attachment("rgba8unorm-srgb", desc="base color (alpha: coverage)"),
-        "normal": Attachment("rgba16float", desc="world-space normal"),
-        "material": Attachment("rgba8unorm", desc="occlusion, roughness, metallic"),
-        "emissive": Attachment("rgba16float", desc="emitted radiance"),
-        "depth": DepthAttachment("depth32float", desc="0 near, 1 far"),
-    }
+    outputs = dict(GBUFFER)
 
     class Params(Settings):
         prepass: bool = False  # test against a depth input instead of writing depth
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images and scene as a recorded frame
-            return
         clear = (0.0, 0.0, 0.0, 0.0)
         color = [("albedo", clear), ("normal", clear), ("material", clear), ("emissive", clear)]
         # less-equal with or without a prepass: where two surfaces tie in depth the last one

@@ -1,9 +1,16 @@
 """Meshlet instance culling: the indirect draws, counters and visibility of a meshlet
 G-buffer pass, as graph buffers."""
 
-from rfw import ComputePass, Settings, register_pass
-from rfw.graph import Buffer, Step, Storage
-from rfw.passes import SettingsError
+from rfw.authoring import (
+    MESH_SHADER,
+    Buffer,
+    ComputePass,
+    Settings,
+    SettingsError,
+    Step,
+    Storage,
+    register_pass,
+)
 
 PHASES = ("single", "early", "late")
 COUNTER_BYTES = 4 * 13  # shaders/common/meshlet.glsl's C_COUNT words
@@ -33,9 +40,10 @@ class MeshletCullPass(ComputePass):
     setting to raise); ``freeze`` keeps culling from the camera the freeze began with."""
 
     shader = "meshlet_cull.comp.glsl"
-    requires = ("VK_EXT_mesh_shader",)
+    requires = (MESH_SHADER,)
     backend = "vk"
     counts_meshlets = True  # vkext.meshlet finds the counters by this
+    replay = "auto"
 
     class Params(Settings):
         frustum: bool = True  # cull instances outside the frustum
@@ -75,20 +83,19 @@ class MeshletCullPass(ComputePass):
         return (Step("clear", writes=("counters", "visibility")),
                 Step("cull", reads="counters", writes=("commands", "counters", "visibility")))
 
-    def record(self, ctx) -> None:
-        from vkext.meshlet import FRUSTUM, check_capacity, scene_of
+    def replay_key(self, ctx):
+        # and the culling camera; the first frame's first phase also clears the visibility
+        return (ctx.meshlets.cull_camera(self.params.freeze),
+                ctx.frame == 0 and self.params.phase != "late")
 
-        ms = scene_of(ctx)
-        check_capacity(ctx, ms)
+    def record(self, ctx) -> None:
+        ms = ctx.meshlets
+        ms.check_capacity(ctx)
         p = self.params
         if p.freeze and p.phase == "late":
             return  # frozen: the late phase draws nothing (the pyramid is the view's)
         phase = "single" if p.freeze else p.phase
         camera = ms.cull_camera(p.freeze)
-        # the same settings, buffers, scene and culling camera as a recorded frame (the
-        # first frame's first phase also clears the visibility)
-        if ctx.replay(camera, ctx.frame == 0 and p.phase != "late"):
-            return
         bindings = {"commands": ctx.buffer("commands"), "counters": ctx.buffer("counters"),
                     "visibility": ctx.buffer("visibility"), "cull_camera": camera,
                     **ms.bindings()}
@@ -101,4 +108,4 @@ class MeshletCullPass(ComputePass):
                          push_constants=ms.push(0, phase, count=words), **bindings)
             ctx.step(1)
         ctx.dispatch(threads=(ms.draw_count,), push_constants=ms.push(
-            FRUSTUM if p.frustum else 0, phase), **bindings)
+            ms.flags(frustum=p.frustum), phase), **bindings)

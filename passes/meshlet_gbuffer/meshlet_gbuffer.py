@@ -1,9 +1,18 @@
 """G-buffer through task and mesh shaders: the gbuffer pass's outputs from meshlets."""
 
-from passes.gbuffer.gbuffer import GBufferPass
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, Buffer, DepthAttachment, Storage, Texture
-from rfw.passes import SettingsError
+from rfw.authoring import (
+    GBUFFER,
+    MESH_SHADER,
+    Attachment,
+    Buffer,
+    DepthAttachment,
+    RenderPass,
+    Settings,
+    SettingsError,
+    Storage,
+    Texture,
+    register_pass,
+)
 
 PHASES = ("single", "early", "late")
 
@@ -35,14 +44,15 @@ class MeshletGBufferPass(RenderPass):
 
     shader = "meshlet_gbuffer.mesh.glsl"
     type = "mesh"
-    requires = ("VK_EXT_mesh_shader",)
+    requires = (MESH_SHADER,)
     backend = "vk"
+    replay = "auto"
     inputs = {
         "commands": Buffer(usage=("indirect",), desc="indirect commands (meshlet_cull)"),
         "counters": Storage(desc="the frame's culling counters (added to)"),
         "visibility": Storage(desc="visibility words: read (early), recorded (single, late)"),
     }
-    outputs = dict(GBufferPass.outputs)
+    outputs = dict(GBUFFER)
 
     class Params(Settings):
         cone: bool = True  # cull meshlets whose normal cone faces away from the camera
@@ -66,13 +76,12 @@ class MeshletGBufferPass(RenderPass):
                                  desc="max-depth pyramid of the early depth (depth_pyramid)")
         return {**self.inputs, **ins}, {}
 
-    def record(self, ctx) -> None:
-        from vkext.meshlet import draw_meshlets, flags_of, scene_of
+    def replay_key(self, ctx):
+        # and the culling camera
+        return ctx.meshlets.cull_camera(self.params.freeze)
 
+    def record(self, ctx) -> None:
         p = self.params
-        # the same settings, images, buffers, scene and culling camera as a recorded frame
-        if ctx.replay(scene_of(ctx).cull_camera(p.freeze)):
-            return
         phase = p.phase
         if p.freeze and phase != "single":
             if phase == "late":
@@ -82,7 +91,7 @@ class MeshletGBufferPass(RenderPass):
         clear = None if late else (0.0, 0.0, 0.0, 0.0)
         color = [(k, clear) for k in ("albedo", "normal", "material", "emissive")]
         # the cone test is the perspective one (apex to camera position): back faces only
-        flags = flags_of(cone=p.cone, frustum=p.frustum, occlusion=late,
+        flags = ctx.meshlets.flags(cone=p.cone, frustum=p.frustum, occlusion=late,
                          triangles=p.triangles, colors=p.colors)
-        draw_meshlets(ctx, color=color, depth=("depth", None if late else 1.0), flags=flags,
+        ctx.draw_meshlets(color=color, depth=("depth", None if late else 1.0), flags=flags,
                       phase=phase, freeze=p.freeze, depth_compare="less-equal", cull="back")

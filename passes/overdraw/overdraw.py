@@ -2,9 +2,15 @@
 
 from typing import ClassVar
 
-from rfw import RenderPass, Settings, SettingsError, register_pass
-from rfw.graph import Attachment, Slot
-from rfw.graph.errors import did_you_mean
+from rfw.authoring import (
+    Attachment,
+    RenderPass,
+    Settings,
+    SettingsError,
+    Slot,
+    did_you_mean,
+    register_pass,
+)
 
 # every fragment adds its output to what is there
 _ADD = {"src_factor": "one", "dst_factor": "one", "operation": "add"}
@@ -20,6 +26,8 @@ class OverdrawPass(RenderPass):
     in heatmap mode.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "overdraw"
     outputs: ClassVar[dict[str, Slot]] = {
         "count": Attachment("rgba16float", desc="fragments per pixel, in every channel"),
@@ -35,8 +43,6 @@ class OverdrawPass(RenderPass):
                                 f"'{self.params.cull}'" + did_you_mean(self.params.cull, _CULL))
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, image and scene as a recorded frame
-            return
         ctx.draw_scene(color=[("count", (0.0, 0.0, 0.0, 0.0))], depth=None,
                        cull=self.params.cull, blend={"color": _ADD, "alpha": _ADD},
                        alpha=("OPAQUE", "MASK", "BLEND"))

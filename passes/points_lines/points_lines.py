@@ -2,8 +2,7 @@
 
 from typing import ClassVar
 
-from rfw import RenderPass, register_pass
-from rfw.graph import Attachment, DepthAttachment, Slot
+from rfw.authoring import Attachment, DepthAttachment, RenderPass, Slot, register_pass
 
 
 @register_pass("points_lines")
@@ -21,6 +20,8 @@ class PointsLinesPass(RenderPass):
     timing row).
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "points_lines"
     inputs: ClassVar[dict[str, Slot]] = {
         "color": Attachment(desc="the shaded image, drawn over in place"),
@@ -31,8 +32,6 @@ class PointsLinesPass(RenderPass):
     scene_needs = "strokes"  # left out of a run whose scene has no points or lines
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same images and scene as a recorded frame
-            return
         for topology in ("line-list", "point-list"):
             ctx.draw_scene(color=[("color", None)], depth=("depth", None), depth_write=False,
                            alpha=("OPAQUE", "MASK", "BLEND"), topology=topology)

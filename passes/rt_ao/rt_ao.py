@@ -1,8 +1,6 @@
 """Ray-traced ambient occlusion from the G-buffer's depth and normals."""
 
-from rfw import Tex2D, register_pass
-from rfw.graph import AccelStructure
-from rfw.passes import RayTracedPass
+from rfw.authoring import AccelStructure, RayTracedPass, Tex2D, register_pass
 
 
 @register_pass("rt_ao")

@@ -2,9 +2,7 @@
 
 import numpy as np
 
-from rfw import Tex2D, register_pass
-from rfw.graph import AccelStructure
-from rfw.passes import RayTracedPass
+from rfw.authoring import AccelStructure, RayTracedPass, Tex2D, register_pass
 
 # the std430 twins of rt_primary.glsl's GpuMesh and GpuMaterial
 MESH_DTYPE = np.dtype([("positions", "<u8"), ("uvs", "<u8"), ("indices", "<u8"),
@@ -35,9 +33,9 @@ class RTPrimaryPass(RayTracedPass):
         "albedo": Tex2D("rgba16float", desc="linear base color of the closest hit"),
     }
 
-    def setup(self, ex) -> None:
+    def setup(self, ctx) -> None:
         """The scene's mesh, instance and material tables (host-visible storage buffers)."""
-        scene = ex.scene
+        scene = ctx.scene
         self.tables = None
         if scene is None:
             return
@@ -53,10 +51,7 @@ class RTPrimaryPass(RayTracedPass):
         self.tables = {}
         for name, data in (("meshes", meshes), ("instances", instances),
                            ("materials", materials)):
-            buf = ex.allocator.create_buffer(data.nbytes, ("storage",), host_visible=True,
-                                             label=f"{self.name}:{name}")
-            buf.write(data)
-            self.tables[name] = buf
+            self.tables[name] = ctx.buffer(f"{self.name}:{name}", data)
 
     def record(self, ctx) -> None:
         scene = ctx.scene

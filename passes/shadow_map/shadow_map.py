@@ -2,15 +2,15 @@
 
 from typing import Annotated
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import DepthAttachment, SizeRule
-from rfw.passes import Range
+from rfw.authoring import DepthAttachment, Range, RenderPass, Settings, SizeRule, register_pass
 
 
 @register_pass("shadow_map")
 class ShadowMapPass(RenderPass):
     """Depth of the scene as seen by the sun, for PCF lookups in lighting passes."""
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "shadow_map"
     outputs = {"depth": DepthAttachment("depth32float", desc="sun depth, 0 near 1 far")}
 
@@ -22,7 +22,5 @@ class ShadowMapPass(RenderPass):
         return {}, {"depth": self.outputs["depth"].with_(size=size)}
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, image and scene as a recorded frame
-            return
         # front faces culled: thin geometry still shadows, and acne moves to back faces
         ctx.draw_scene(depth=("depth", 1.0), camera="sun", cull="front")

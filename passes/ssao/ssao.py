@@ -2,9 +2,7 @@
 
 from typing import ClassVar
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.graph import Slot, Step
-from rfw.graph.formats import format_info
+from rfw.authoring import ComputePass, Settings, Slot, Step, Tex2D, format_info, register_pass
 
 
 @register_pass("ssao")
@@ -23,6 +21,8 @@ class SSAOPass(ComputePass):
     the compiled graph plans the barrier on ``ao_raw`` between them.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "ssao.comp.glsl"
     inputs: ClassVar[dict[str, Slot]] = {
         "depth": Tex2D(desc="scene depth, 0 near 1 far (a depth format, or r32float)"),
@@ -51,8 +51,6 @@ class SSAOPass(ComputePass):
                 Step("blur", reads="ao_raw", writes="ao"))
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings and images as a recorded frame
-            return
         # depth buffers bind as texture_depth_2d, copies (tests, readbacks) as plain floats
         defines = {"DEPTH_TEXTURE": 1} if format_info(ctx.format("depth")).depth else {}
         depth = ctx.sampled("depth")

@@ -1,12 +1,14 @@
 """Tonemap: linear HDR scene color to display-encoded LDR."""
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
+from rfw.authoring import ComputePass, Settings, Tex2D, register_pass
 
 
 @register_pass("tonemap")
 class TonemapPass(ComputePass):
     """Exposure, then a filmic curve (ACES fit), then sRGB encoding."""
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "tonemap.comp.glsl"
     inputs = {"hdr": Tex2D(desc="linear HDR scene color")}
     outputs = {"ldr": Tex2D("rgba8unorm", size_of="hdr", desc="display color")}
@@ -17,7 +19,5 @@ class TonemapPass(ComputePass):
         sky: tuple[float, float, float] = (0.55, 0.7, 0.95)  # where hdr alpha is 0
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings and images as a recorded frame
-            return
         ctx.dispatch(threads=ctx.extent("ldr"), t_hdr=ctx.sampled("hdr"),
                      o_ldr=ctx.storage("ldr"), u_params=self.params)

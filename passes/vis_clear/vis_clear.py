@@ -2,9 +2,7 @@
 
 from typing import Annotated
 
-from rfw import ComputePass, Settings, register_pass
-from rfw.graph import Buffer
-from rfw.passes import Range, SettingsError
+from rfw.authoring import Buffer, ComputePass, Range, Settings, SettingsError, register_pass
 
 WORD = 8  # bytes of one pixel's word: depth bits high, the id's complement low
 
@@ -20,6 +18,7 @@ class VisClearPass(ComputePass):
 
     shader = "vis_clear.comp.glsl"
     backend = "vk"
+    replay = "auto"
 
     class Params(Settings):
         # the largest output; at most what one row of 65,535 workgroups of 256 reaches
@@ -29,12 +28,13 @@ class VisClearPass(ComputePass):
         return {}, {"ids": Buffer(WORD * self.params.max_pixels, usage=("storage",),
                                   desc="per pixel: depth bits << 32 | ~id, all ones: none")}
 
+    def replay_key(self, ctx):
+        # and the pixel count: the size the scene's camera was set for
+        return ctx.scene.size
+
     def record(self, ctx) -> None:
-        # the output's pixels: the size the scene's camera was set for
         size = ctx.scene.size
         check_pixels(self.name, self.params.max_pixels, size)
-        if ctx.replay(size):  # the same buffer and pixel count as a recorded frame
-            return
         ctx.dispatch(threads=(size[0] * size[1],), ids=ctx.buffer("ids"))
 
 

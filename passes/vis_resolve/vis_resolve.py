@@ -2,12 +2,17 @@
 
 import numpy as np
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.backends.scene_data import instance_blocks, material_bytes
-from rfw.graph import Buffer
-from rfw.passes import SettingsError
-
-from ..visbuffer.visbuffer import triangle_bits
+from rfw.authoring import (
+    Buffer,
+    ComputePass,
+    Settings,
+    SettingsError,
+    Tex2D,
+    instance_blocks,
+    material_bytes,
+    register_pass,
+    triangle_bits,
+)
 
 # the std430 twins of vis_resolve.comp.glsl's VisMesh, VisInstance and VisMaterial
 MESH_DTYPE = np.dtype([("addresses", "<u8", 5), ("material", "<u4"), ("pad", "<u4")])
@@ -33,6 +38,8 @@ class VisResolvePass(ComputePass):
     reads from the G-buffer's attachment. Vulkan only.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "vis_resolve.comp.glsl"
     requires = ("descriptor_indexing", "buffer_device_address")
     backend = "vk"
@@ -61,14 +68,14 @@ class VisResolvePass(ComputePass):
                                                   "(visbuffer write = atomic)")}, \
             dict(self.outputs)
 
-    def setup(self, ex) -> None:
+    def setup(self, ctx) -> None:
         """The scene's mesh, instance and material tables (host-visible storage buffers),
         and what every dispatch binds besides them (fixed while the scene is)."""
         self.tables = None
-        if ex.scene is None:
+        if ctx.scene is None:
             return
-        scene = ex.scene
-        tables = {name: _buffer(ex, f"{self.name}:{name}", data)
+        scene = ctx.scene
+        tables = {name: ctx.buffer(f"{self.name}:{name}", data)
                   for name, data in scene_tables(scene).items()}
         textures, samplers = texture_lists(scene)
         self.defines = {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers),
@@ -76,8 +83,6 @@ class VisResolvePass(ComputePass):
         self.tables = {**tables, "textures": textures, "samplers": samplers}
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images and scene (its tables) as recorded
-            return
         ids = {"t_ids": ctx.sampled("ids")} if self.params.ids == "image" else \
             {"ids": ctx.buffer("ids")}
         defines = self.defines if self.params.ids == "image" else {**self.defines, "ATOMIC": 1}
@@ -125,8 +130,3 @@ def scene_tables(vk_scene) -> dict[str, np.ndarray]:
 def _or(index: int | None, fallback: int) -> int:
     return fallback if index is None else index
 
-
-def _buffer(ex, label: str, data: np.ndarray):
-    buf = ex.allocator.create_buffer(data.nbytes, ("storage",), host_visible=True, label=label)
-    buf.write(data)
-    return buf

@@ -1,9 +1,15 @@
 """Visibility buffer: the nearest surface's instance and triangle per pixel, and depth."""
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment, Storage
-from rfw.passes import SettingsError
-from rfw.scene.model import SceneError
+from rfw.authoring import (
+    Attachment,
+    DepthAttachment,
+    RenderPass,
+    Settings,
+    SettingsError,
+    Storage,
+    register_pass,
+    triangle_bits,
+)
 
 WRITES = ("attachment", "atomic")
 
@@ -30,6 +36,8 @@ class VisBufferPass(RenderPass):
     feature, and the instance comes from the draw's firstInstance.
     """
 
+    # its commands depend on nothing but its settings, slot resources and scene
+    replay = "auto"
     shader = "visbuffer"
     requires = ("geometry_shader",)
     backend = "vk"
@@ -52,14 +60,12 @@ class VisBufferPass(RenderPass):
                                      "kept by atomic min")},
                 {"depth": self.outputs["depth"]})
 
-    def setup(self, ex) -> None:
+    def setup(self, ctx) -> None:
         # fixed while the scene is: the split of the id's bits
-        self.defines = {} if ex.scene is None else \
-            {"TRIANGLE_BITS": triangle_bits(ex.scene.scene)}
+        self.defines = {} if ctx.scene is None else \
+            {"TRIANGLE_BITS": triangle_bits(ctx.scene.scene)}
 
     def record(self, ctx) -> None:
-        if ctx.replay():  # the same settings, images, buffer and scene as a recorded frame
-            return
         if self.params.write == "attachment":
             # less-equal as the gbuffer pass draws: equal depths resolve to the same surface
             ctx.draw_scene(color=[("ids", None)], depth=("depth", 1.0),
@@ -73,17 +79,3 @@ class VisBufferPass(RenderPass):
         ctx.draw_scene(depth=("depth", None), depth_compare="less-equal", alpha=("MASK",),
                        defines={**self.defines, "ATOMIC": 1}, ids=ids)
 
-
-def triangle_bits(scene) -> int:
-    """How many low bits of an id hold the triangle: what the instances' index leaves of
-    32 bits. A scene whose instances and largest mesh do not fit raises a SceneError."""
-    instance_bits = max(1, (len(scene.instances) - 1).bit_length())
-    bits = 32 - instance_bits
-    triangles = max((len(m.indices) // 3 for m in scene.meshes), default=0)
-    if triangles > 1 << bits:
-        raise SceneError(f"{len(scene.instances):,} instances and a mesh of {triangles:,} "
-                         "triangles do not fit the visibility buffer's 32-bit ids "
-                         f"({instance_bits} bits for the instance leave {bits} for the "
-                         "triangle): use the raster G-buffer (geometry=raster)",
-                         element="visbuffer")
-    return bits

@@ -218,10 +218,17 @@ def test_a_pass_on_another_family_records_instead_of_replaying(vk_device, monkey
 
     cfg = apply_overrides(load_config(SSAO), ["async_compute=on", "size=32x18"])
     replayed: list[tuple[str, bool]] = []
-    real_replay, real_init = VkPassContext.replay, AsyncQueues.__init__
+    real_can, real_replayed, real_init = (VkPassContext.can_replay, VkPassContext.replayed,
+                                          AsyncQueues.__init__)
 
-    def watched(self, *key):
-        got = real_replay(self, *key)
+    def can(self):  # asked before every record: a False here records the pass
+        got = real_can(self)
+        if not got:
+            replayed.append((self.pass_.name, False))
+        return got
+
+    def watched(self, full):
+        got = real_replayed(self, full)
         replayed.append((self.pass_.name, got))
         return got
 
@@ -229,7 +236,8 @@ def test_a_pass_on_another_family_records_instead_of_replaying(vk_device, monkey
         real_init(self, device, plan)
         self.elsewhere = frozenset(p for p, q in plan.queue_of.items() if q == COMPUTE)
 
-    monkeypatch.setattr(VkPassContext, "replay", watched)
+    monkeypatch.setattr(VkPassContext, "can_replay", can)
+    monkeypatch.setattr(VkPassContext, "replayed", watched)
     monkeypatch.setattr(AsyncQueues, "__init__", elsewhere)
     monkeypatch.setattr(vk_device, "sync_validation", False)  # replay is off under it
     render_vk(cfg, frames=3, device=vk_device)

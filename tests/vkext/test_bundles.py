@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from rfw.config import apply_overrides, build, load_config
+from rfw.options import RunOptions
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
@@ -25,7 +26,6 @@ def _frames(vk_device, monkeypatch, config: str, sets: list[str], frames: int, *
     """Run ``frames`` frames on one executor; per frame the output image and the scene draw
     calls recorded (``VkScene.draw`` calls, instances). ``settings``: frame -> pass ->
     settings changed before it records; ``swap_scene``: frame -> a scene to draw from then."""
-    monkeypatch.setenv("RFW_VK_BUNDLES", "1" if bundles else "0")
     calls: list[int] = []
     draw = VkScene.draw
 
@@ -44,7 +44,8 @@ def _frames(vk_device, monkeypatch, config: str, sets: list[str], frames: int, *
     try:
         scenes[0].set_viewport(cfg.size)
         ex = VkExecutor(vk_device, plan, built.passes, built.slots, scenes[0],
-                        readback=tuple(plan.outputs), memory_info=info)
+                        readback=tuple(plan.outputs), memory_info=info,
+                        options=RunOptions(bundles=bundles))
         for k in range(frames):
             for name, values in (settings or {}).get(k, {}).items():
                 ex.passes[name].params = ex.passes[name].params.replace(**values)

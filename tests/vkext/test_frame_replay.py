@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from rfw.config import apply_overrides, build, load_config
+from rfw.options import RunOptions
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
@@ -31,7 +32,6 @@ def _run(vk_device, monkeypatch, config: str, frames: int, *, replay: bool = Tru
          settings=None, sync: bool = False) -> tuple[list[int], list[np.ndarray], dict[str, tuple[int, int]]]:
     """``frames`` frames, two in flight, read after each batch of ``settings`` (frame ->
     pass -> settings changed before it): primaries begun per batch, images, samples."""
-    monkeypatch.setenv("RFW_VK_FRAME_REPLAY", "1" if replay else "0")
     monkeypatch.setattr(vk_device, "sync_validation", sync)
     cfg = apply_overrides(load_config(ROOT / "configs" / f"{config}.toml"), ["size=64x48"])
     built = build(cfg)
@@ -42,7 +42,8 @@ def _run(vk_device, monkeypatch, config: str, frames: int, *, replay: bool = Tru
     try:
         vscene.set_viewport(cfg.size)
         ex = VkExecutor(vk_device, plan, built.passes, built.slots, vscene,
-                        readback=tuple(plan.outputs), memory_info=info)
+                        readback=tuple(plan.outputs), memory_info=info,
+                        options=RunOptions(frame_replay=replay))
         ex.keep_in_flight(2)
         cuts = sorted({0, frames, *(settings or {})})
         for start, stop in pairwise(cuts):

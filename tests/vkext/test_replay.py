@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from rfw.config import apply_overrides, build, load_config
+from rfw.options import RunOptions
 from vkext.context import VkPassContext
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
@@ -34,7 +35,6 @@ def _frames(vk_device, monkeypatch, config: str, sets: list[str], frames: int, *
     """Run ``frames`` frames on one executor; per frame the first output and what it
     recorded: dispatches per pass, scene draws and mesh-task draws. ``settings``: frame ->
     pass -> settings changed before it; ``camera``: frame -> camera position from then."""
-    monkeypatch.setenv("RFW_VK_BUNDLES", "1" if bundles else "0")
     monkeypatch.setattr(vk_device, "sync_validation", sync)
     counts: Counter = Counter()
     dispatch, draw = VkPassContext.dispatch, VkScene.draw
@@ -65,7 +65,8 @@ def _frames(vk_device, monkeypatch, config: str, sets: list[str], frames: int, *
     try:
         vscene.set_viewport(cfg.size)
         ex = VkExecutor(vk_device, plan, built.passes, built.slots, vscene,
-                        readback=tuple(plan.outputs), memory_info=info)
+                        readback=tuple(plan.outputs), memory_info=info,
+                        options=RunOptions(bundles=bundles))
         for k in range(frames):
             for name, values in (settings or {}).get(k, {}).items():
                 ex.passes[name].params = ex.passes[name].params.replace(**values)

@@ -237,7 +237,7 @@ def test_wgpu_refuses_the_visibility_buffer_in_one_line(tmp_path):
 def test_ids_hold_instance_and_triangle_in_32_bits():
     from types import SimpleNamespace as NS
 
-    from passes.visbuffer.visbuffer import triangle_bits
+    from rfw.authoring import triangle_bits
     from rfw.errors import RfwError
 
     def scene(instances: int, triangles: int):
