@@ -88,7 +88,7 @@ class Bench:
     def __init__(self) -> None:
         import wgpu
 
-        from rfw.backends.wgpu_backend import Device
+        from rfw.backends.wgpu import Device
         self.wgpu = wgpu
         self.dev = Device()
         if "timestamp-query" not in self.dev.features:

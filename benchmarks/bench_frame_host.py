@@ -61,7 +61,7 @@ def count_waits(backend: str) -> list[float]:
             if hasattr(owner, name):  # an older tree calls the wrapper only
                 _timed(owner, name, waited)
     else:
-        from rfw.backends.wgpu_backend import FrameSlot
+        from rfw.backends.wgpu.timestamps import FrameSlot
 
         _timed(FrameSlot, "wait", waited)
     return waited

@@ -2,7 +2,7 @@
 
 A pass reaches its resources by slot name and records work through these methods only; it
 never touches a backend's executor, device or private objects, so the same ``record`` runs
-on every backend (``rfw.backends.wgpu_backend.PassContext``, ``vkext.context.VkPassContext``
+on every backend (``rfw.backends.wgpu.PassContext``, ``vkext.context.VkPassContext``
 and any plug-in's). What a method returns (a texture view, an image binding, a sampler) is
 backend-specific: a pass hands it on to ``dispatch`` or ``draw_scene`` unopened.
 

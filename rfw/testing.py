@@ -21,8 +21,8 @@ def run_pass(cls: type[Pass], inputs: dict[str, tuple[str, np.ndarray]], *,
     Inputs become external images filled from the arrays; outputs are read back as arrays of
     their texel type. A scene is needed only by passes that draw one.
     """
-    from .backends.gpu_scene import GpuScene
-    from .backends.wgpu_backend import Device, Executor
+    from .backends.wgpu import Device, Executor
+    from .backends.wgpu.scene import GpuScene
 
     _check_args(cls, inputs, settings, frames, size)
     inst = cls(cls.id or cls.__name__, **(settings or {}))

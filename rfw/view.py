@@ -87,7 +87,7 @@ class Viewer:
                  backend: str | None = None, validation: bool = False):
         from rendercanvas.glfw import RenderCanvas, loop
 
-        from .backends.wgpu_backend import Device
+        from .backends.wgpu import Device
 
         self.cfg = cfg
         self.loop = loop
@@ -231,7 +231,7 @@ class Viewer:
 
     def _shown_texture(self) -> Any:
         """The texture the window shows: a copy of the output on the window's device."""
-        from .backends.wgpu_backend import wgpu_format
+        from .backends.wgpu.resources import wgpu_format
 
         r = self.frame.plan.resource(self.output)
         old = self._shown

@@ -88,7 +88,7 @@ def tiny_scene() -> Scene:
 
 @pytest.fixture(scope="session")
 def device():
-    from rfw.backends.wgpu_backend import Device
+    from rfw.backends.wgpu import Device
 
     return Device()
 

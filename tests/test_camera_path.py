@@ -305,7 +305,7 @@ def _drains(monkeypatch, backend: str, sets: list[str]) -> tuple[int, dict, list
     if backend == "vk":
         from vkext.executor import VkExecutor as cls
     else:
-        from rfw.backends.wgpu_backend import Executor as cls
+        from rfw.backends.wgpu import Executor as cls
     calls, busy = [], []
     original, write = cls.drain, rfw.camera_path.set_frame_camera
 

@@ -130,18 +130,18 @@ def test_mirrored_scene_renders_the_flipped_image(case):
 
 def _unfixed_winding(monkeypatch) -> None:
     # the old behaviour: every instance drawn with its mesh's own winding
-    import rfw.backends.gpu_scene as gpu_scene
+    import rfw.backends.wgpu.scene as wgpu_scene
     import vkext.meshlet
     import vkext.scene
 
-    for module in (gpu_scene, vkext.scene):
+    for module in (wgpu_scene, vkext.scene):
         monkeypatch.setattr(module, "mirrored_mask", lambda models: np.zeros(len(models), bool))
     monkeypatch.setattr(vkext.meshlet, "is_mirrored", lambda transform: False)
 
 
 def _unfixed_tangents(monkeypatch) -> None:
     # mirrored winding, but the tangent sign kept: the normal map tilts the wrong way
-    import rfw.backends.gpu_scene as gpu_scene
+    import rfw.backends.wgpu.scene as wgpu_scene
     import vkext.scene
     from rfw.backends.scene_data import mirrored_arrays
 
@@ -150,7 +150,7 @@ def _unfixed_tangents(monkeypatch) -> None:
         tangents[:, 3] *= -1.0
         return indices, tangents
 
-    for module in (gpu_scene, vkext.scene):
+    for module in (wgpu_scene, vkext.scene):
         monkeypatch.setattr(module, "mirrored_arrays", keep_sign)
 
 

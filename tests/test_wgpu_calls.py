@@ -1,5 +1,5 @@
-"""The wgpu frame's fixed calls (rfw.backends.wgpu_calls) and batched timestamp reads
-(rfw.backends.wgpu_backend.Stamps): descriptors are built once and replayed, a new
+"""The wgpu frame's fixed calls (rfw.backends.wgpu.calls) and batched timestamp reads
+(rfw.backends.wgpu.timestamps.Stamps): descriptors are built once and replayed, a new
 attachment builds a new one, validation errors still raise, a submit's index is what a frame
 waits for, and every frame gets its timing samples, whether its batch was read whole or a
 drain read part of it."""
@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import wgpu
 
-from rfw.backends import wgpu_backend
-from rfw.backends.wgpu_calls import FrameCalls
+from rfw.backends.wgpu import executor
+from rfw.backends.wgpu.calls import FrameCalls
+from rfw.backends.wgpu.timestamps import Stamps
 from rfw.config import apply_overrides, build, load_config
 from rfw.frame import camera_for, open_frame
 
@@ -100,7 +101,7 @@ def test_wait_is_for_the_submit_by_index(gpu):
 
 @pytest.mark.parametrize("frames", [1, 5, 16, 21, 40])
 def test_every_frame_gets_its_samples_across_batches(frames, monkeypatch):
-    monkeypatch.setattr(wgpu_backend, "STAMP_BATCH", 8)
+    monkeypatch.setattr(executor, "STAMP_BATCH", 8)
     frame = _open("deferred")
     try:
         ex = next(iter(frame.executors.values()))
@@ -118,15 +119,15 @@ def test_every_frame_gets_its_samples_across_batches(frames, monkeypatch):
 
 
 def test_a_batch_is_read_only_after_its_last_frame(monkeypatch):
-    monkeypatch.setattr(wgpu_backend, "STAMP_BATCH", 8)
+    monkeypatch.setattr(executor, "STAMP_BATCH", 8)
     reads: list[int] = []
-    real = wgpu_backend.Stamps.read
+    real = Stamps.read
 
     def counted(self):
         reads.append(len(self.unread))
         real(self)
 
-    monkeypatch.setattr(wgpu_backend.Stamps, "read", counted)
+    monkeypatch.setattr(Stamps, "read", counted)
     frame = _open()
     try:
         frame.run(1)

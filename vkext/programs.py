@@ -48,7 +48,7 @@ KINDS = {"compute": ("comp",), "render": ("vert", "frag"), "mesh": ("task", "mes
 RASTER = ("render", "mesh")
 # the device capability a kind of program needs (the others run everywhere)
 NEEDS = {"mesh": "VK_EXT_mesh_shader", "ray_tracing": "VK_KHR_ray_tracing_pipeline"}
-# the scene's vertex buffers (gpu_scene.VERTEX_BUFFERS): one attribute per buffer
+# the scene's vertex buffers (rfw.backends.wgpu.scene.VERTEX_BUFFERS): one attribute per buffer
 _VERTEX = ((12, "VK_FORMAT_R32G32B32_SFLOAT"), (12, "VK_FORMAT_R32G32B32_SFLOAT"),
            (8, "VK_FORMAT_R32G32_SFLOAT"), (16, "VK_FORMAT_R32G32B32A32_SFLOAT"))
 

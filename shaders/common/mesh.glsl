@@ -1,7 +1,7 @@
 // scene geometry: vertex layout, material (set 2) and instances (set 3)
 //
 // a vertex shader defines MESH_VERTEX_INPUT before including this file to declare the
-// vertex attributes (WGSL's VertexIn): one buffer per attribute, see gpu_scene.VERTEX_BUFFERS
+// vertex attributes (WGSL's VertexIn): one buffer per attribute, see wgpu.scene.VERTEX_BUFFERS
 #ifndef RFW_MESH_GLSL
 #define RFW_MESH_GLSL
 

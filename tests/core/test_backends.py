@@ -188,7 +188,7 @@ def test_a_source_tree_reads_the_groups_from_pyproject(monkeypatch):
     monkeypatch.setattr(plugins, "_installed", lambda: False)
     monkeypatch.setattr(plugins.importlib.metadata, "entry_points", lambda group: [])
     eps = plugins.entry_points("rfw.backends")
-    assert {ep.name: ep.value for ep in eps} == {"wgpu": "rfw.backends.wgpu_plugin:WgpuBackend",
+    assert {ep.name: ep.value for ep in eps} == {"wgpu": "rfw.backends.wgpu.backend:WgpuBackend",
                                                "vk": "vkext.backend:VkBackend"}
     assert {ep.name: ep.value for ep in plugins.entry_points("rfw.passes")} == \
         _pyproject_passes()

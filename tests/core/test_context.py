@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from rfw.backends.wgpu_backend import PassContext as WgpuContext
+from rfw.backends.wgpu import PassContext as WgpuContext
 from rfw.context import PassContext, RayTracingContext, members, signature_problems
 from rfw.shaders import ShaderError
 from vkext.context import VkPassContext

@@ -37,7 +37,7 @@ def test_pass_timings_follow_the_plan_order():
 
 def test_both_backends_use_the_shared_definitions():
     import vkext.executor as vk
-    from rfw.backends import wgpu_backend as wg
+    from rfw.backends.wgpu import executor as wg
 
     for module in (wg, vk):
         assert module.pass_timings is pass_timings and module.Samplers is Samplers

@@ -66,7 +66,7 @@ def test_identical_transients_share_textures(device, scene):
     # the deferred graph with shadows: no two transients match, so none share
     built = build(cfg("deferred", "shadow.enabled=true"))
     plan = compile(built.graph)
-    from rfw.backends.wgpu_backend import share_textures
+    from rfw.backends.wgpu.resources import share_textures
 
     names = list(plan.order)
     spans = {r.name: (names.index(r.first), names.index(r.last)) for r in plan.resources}
@@ -142,7 +142,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
 """)
     monkeypatch.setattr(_Count, "folder", classmethod(lambda cls: tmp_path))
     img = np.arange(64, dtype=np.uint8).reshape(8, 8, 1).repeat(4, axis=2)
-    from rfw.backends.wgpu_backend import Executor
+    from rfw.backends.wgpu import Executor
     from rfw.graph import GraphBuilder, Texture
     from rfw.graph.resources import SizeRule
 

@@ -65,7 +65,7 @@ def test_reflect_bindings(tmp_path):
 
 
 def test_compile_errors_point_at_the_original_file(tmp_path, device):
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
 
     write(tmp_path, "inc.wgsl", "fn helper() -> f32 { return 1.0; }\n")
     bad = write(tmp_path, "bad.comp.wgsl", '#include "inc.wgsl"\n\n@compute @workgroup_size(1)\n'
@@ -77,7 +77,7 @@ def test_compile_errors_point_at_the_original_file(tmp_path, device):
 
 
 def test_glsl_compile_errors_point_at_the_original_file(tmp_path, device, monkeypatch):
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
 
     monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
     write(tmp_path, "inc.glsl", "float helper() { return 1.0; }\n")
@@ -134,7 +134,7 @@ def test_invalid_utf8_names_file_and_line(tmp_path, where):
 
 def test_an_edited_include_recompiles(tmp_path, device, monkeypatch):
     # the wgpu program cache skips hashing on a hit, but not past a changed include
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
 
     monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
     inc = write(tmp_path, "k.glsl", "const uint K = 1u;\n")
@@ -176,7 +176,7 @@ void main() { gl_Position = camera.view_proj * (instance.model * vec4(v_position
      "render", r"declares u_extra in group 1, which the scene owns \(camera, lights\)"),
 ])
 def test_wgpu_refuses_what_it_cannot_run(tmp_path, device, monkeypatch, files, kind, message):
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
 
     monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
     paths = [write(tmp_path, name, text) for name, text in files.items()]
@@ -187,7 +187,7 @@ def test_wgpu_refuses_what_it_cannot_run(tmp_path, device, monkeypatch, files, k
 def test_wgpu_takes_a_scene_raster_program(tmp_path, device, monkeypatch):
     # negative control of the scene-group refusal: the plain vertex shader is accepted, and
     # its groups 1-3 are the scene's shared layouts
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
 
     monkeypatch.setenv("RFW_CACHE_SPIRV", str(tmp_path / "cache"))
     cache = ShaderCache(device)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rfw.backends.gpu_scene import GpuScene
+from rfw.backends.wgpu.scene import GpuScene
 from rfw.config import apply_overrides, build, load_config
 from rfw.frame import open_frame
 
@@ -131,7 +131,7 @@ def test_replayed_frames_touch_no_shader_file(device, monkeypatch):
     # a pass's program is looked up from memory between looks at its sources (RECHECK_S)
     from pathlib import Path
 
-    from rfw.backends import wgpu_backend
+    from rfw.backends.wgpu import context, programs
 
     frame = _frame(device, "deferred_ssao_shadows")
     try:
@@ -144,10 +144,12 @@ def test_replayed_frames_touch_no_shader_file(device, monkeypatch):
             return real(self, *a, **kw)
 
         monkeypatch.setattr(Path, "stat", counting_stat)
-        monkeypatch.setattr(wgpu_backend, "RECHECK_S", 1e9)  # however slow the frames are
+        for module in (programs, context):  # however slow the frames are
+            monkeypatch.setattr(module, "RECHECK_S", 1e9)
         frame.run(2)
         assert stats == []
-        monkeypatch.setattr(wgpu_backend, "RECHECK_S", 0.0)  # negative control: look always
+        for module in (programs, context):  # negative control: look always
+            monkeypatch.setattr(module, "RECHECK_S", 0.0)
         frame.run(1)
         assert any(p.suffix == ".glsl" for p in stats)
     finally:
@@ -156,7 +158,7 @@ def test_replayed_frames_touch_no_shader_file(device, monkeypatch):
 
 def test_a_cleared_program_cache_is_not_bypassed(device):
     # rfw view's R clears ShaderCache.programs: the next lookup makes the program again
-    from rfw.backends.wgpu_backend import ShaderCache
+    from rfw.backends.wgpu.programs import ShaderCache
     from rfw.shaders import program_files
 
     cache = ShaderCache(device)

@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rfw.backends import wgpu_backend
-from rfw.backends.gpu_scene import GpuScene
-from rfw.backends.wgpu_backend import Executor, ShaderCache, _same_call
+from rfw.backends.wgpu import Executor, context, programs
+from rfw.backends.wgpu.context import _same_call
+from rfw.backends.wgpu.programs import ShaderCache
+from rfw.backends.wgpu.scene import GpuScene
 from rfw.config import apply_overrides, build, load_config
 from rfw.frame import open_frame
 from rfw.passes import Settings
@@ -39,7 +40,8 @@ def lookups(monkeypatch):
 
     monkeypatch.setattr(ShaderCache, "recent", counting_recent)
     monkeypatch.setattr(Executor, "bind_group", counting_bind_group)
-    monkeypatch.setattr(wgpu_backend, "RECHECK_S", 1e9)  # however slow the frames are
+    for module in (programs, context):  # however slow the frames are
+        monkeypatch.setattr(module, "RECHECK_S", 1e9)
     return counts
 
 
@@ -61,19 +63,21 @@ def test_repeated_calls_look_nothing_up(device, lookups, monkeypatch):
         # past the hot-reload interval every call looks at its sources, and keeps its
         # program while they are unchanged
         stamps = []
-        real = wgpu_backend._stamps
+        real = programs._stamps
 
         def counting_stamps(paths):
             out = real(paths)
             stamps.append(out)
             return out
 
-        monkeypatch.setattr(wgpu_backend, "_stamps", counting_stamps)
-        monkeypatch.setattr(wgpu_backend, "RECHECK_S", 0.0)
+        for module in (programs, context):
+            monkeypatch.setattr(module, "_stamps", counting_stamps)
+            monkeypatch.setattr(module, "RECHECK_S", 0.0)
         frame.run(1)
         assert len(stamps) >= 6 and lookups["programs"] == 0
         # negative control: changed sources look the program up again
-        monkeypatch.setattr(wgpu_backend, "_stamps", lambda paths: ())
+        for module in (programs, context):
+            monkeypatch.setattr(module, "_stamps", lambda paths: ())
         frame.run(1)
         assert lookups["programs"] >= 6
     finally:

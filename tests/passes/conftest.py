@@ -5,6 +5,6 @@ import pytest
 
 @pytest.fixture(scope="session")
 def device():
-    from rfw.backends.wgpu_backend import Device
+    from rfw.backends.wgpu import Device
 
     return Device()

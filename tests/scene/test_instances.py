@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import pytest
 
-from rfw.backends import gpu_scene
 from rfw.backends.scene_data import INSTANCE_BYTES, check_instance_limits
+from rfw.backends.wgpu import scene as wgpu_scene
 from rfw.scene import SceneError, stress
 from rfw.spirv import compile_glsl, readonly_blocks_marked, reflect
 
-_WGPU_LIMITS = gpu_scene.INSTANCE_LIMIT_KEYS
+_WGPU_LIMITS = wgpu_scene.INSTANCE_LIMIT_KEYS
 
 
 def _vk_check():
@@ -25,7 +25,7 @@ def _vk_check():
 
 
 def _wgpu_check(scene, limits):
-    return check_instance_limits(scene, limits, gpu_scene.INSTANCE_LIMIT_KEYS)
+    return check_instance_limits(scene, limits, wgpu_scene.INSTANCE_LIMIT_KEYS)
 
 
 @pytest.mark.parametrize("key", _WGPU_LIMITS)

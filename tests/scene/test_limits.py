@@ -283,7 +283,7 @@ def test_textures_uploaded_in_small_chunks_render_the_same(tmp_path, monkeypatch
     # both backends stream texels through bounded chunks (a few rows, a flush or a submit
     # each): 4 KiB chunks cut every level of a 64x48 texture into bands and give the same
     # picture as one chunk; the control, the texture flipped, does not
-    import rfw.backends.gpu_scene as gpu_scene
+    import rfw.backends.wgpu.scene as wgpu_scene
     import vkext.scene as vk_scene
 
     pixels = np.random.default_rng(5).integers(0, 256, (48, 64, 3), np.uint8)
@@ -294,7 +294,7 @@ def test_textures_uploaded_in_small_chunks_render_the_same(tmp_path, monkeypatch
     for backend in ("wgpu", "vk"):
         whole = _render(tmp_path, scene, backend)
         with monkeypatch.context() as m:
-            m.setattr(gpu_scene, "TEXTURE_CHUNK", 4096)
+            m.setattr(wgpu_scene, "TEXTURE_CHUNK", 4096)
             m.setattr(vk_scene, "TEXTURE_CHUNK", 4096)
             chunked = _render(tmp_path, scene, backend)
         assert np.array_equal(whole, chunked), backend

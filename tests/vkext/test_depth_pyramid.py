@@ -53,7 +53,7 @@ def plan_and_pass():
 
 
 def run_wgpu(depth: np.ndarray) -> list[np.ndarray]:
-    from rfw.backends.wgpu_backend import Device, Executor
+    from rfw.backends.wgpu import Device, Executor
 
     plan, p, slots = plan_and_pass()
     device = Device()
@@ -144,7 +144,7 @@ def test_steps_are_entered_in_order_on_vk(vk_device):
 
 
 def test_steps_are_entered_in_order_on_wgpu():
-    from rfw.backends.wgpu_backend import Device, Executor
+    from rfw.backends.wgpu import Device, Executor
 
     plan, _, slots = plan_and_pass()
     ex = Executor(Device(), plan, {"hiz": skipping_pass()}, slots, None,

@@ -125,7 +125,7 @@ def test_each_backend_owns_its_passes_and_their_resources(vk_device):
 def test_one_backend_refuses_the_whole_mixed_plan(device, vk_device):
     # a single-backend executor given the full plan (rfw view compiles one) says so, rather
     # than running the vk passes on wgpu or failing on a bridge mid-frame
-    from rfw.backends.wgpu_backend import Executor
+    from rfw.backends.wgpu import Executor
 
     built = build(mixed("64x36", "shadow.resolution=256"))
     plan = compile(built.graph, backend="wgpu")

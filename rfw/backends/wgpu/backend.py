@@ -1,5 +1,5 @@
 """The ``wgpu`` backend as the frame driver sees it (registered in the ``rfw.backends``
-entry-point group): :mod:`rfw.backends.wgpu_backend`'s device and executor behind
+entry-point group): the device (:mod:`.device`) and executor (:mod:`.executor`) behind
 :class:`rfw.backend.Backend`."""
 
 from __future__ import annotations
@@ -8,13 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from ..backend import BackendBase
-from ..errors import RfwError
-from ..graph import CompiledGraph, compile
-from ..graph.graph import Graph
-from ..passes import Pass
-from .gpu_scene import GpuScene
-from .wgpu_backend import Device, Executor
+from ...backend import BackendBase
+from ...errors import RfwError
+from ...graph import CompiledGraph, compile
+from ...graph.graph import Graph
+from ...passes import Pass
+from .device import Device
+from .executor import Executor
+from .scene import GpuScene
 
 
 class WgpuBackend(BackendBase):

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 import wgpu
 
-from ..scene.model import Camera, Scene
-from ..scene.sides import with_back_faces
-from ..units import align_up
-from .scene_data import (
+from ...scene.model import Camera, Scene
+from ...scene.sides import with_back_faces
+from ...units import align_up
+from ..scene_data import (
     INSTANCE_BYTES,
     SCENE_GROUPS,
     check_instance_limits,
@@ -30,7 +30,7 @@ from .scene_data import (
     sun_camera_bytes,
     texture_views,
 )
-from .wgpu_calls import wait_idle
+from .calls import wait_idle
 
 # wgpu layout entries of rfw.spirv's descriptor kinds (the scene's groups use these four;
 # storage is read-only, the only kind a vertex shader may bind)
