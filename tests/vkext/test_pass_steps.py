@@ -145,17 +145,18 @@ def test_raycast_without_its_plan_is_a_hazard(vk_device, monkeypatch):
     validation of layers 1.3.239 sees no vkCmdTraceRaysKHR access (measured: the
     ray_pipeline method without the barriers gives 0 messages)."""
     import rfw
-    from vkext import VkDevice, raycast
+    from vkext import VkDevice
+    from vkext.raycast import caster
 
     method = "ray_query"
     if "VK_KHR_ray_query" not in vk_device.caps:
         pytest.skip("no VK_KHR_ray_query")
 
-    class Silent(raycast.PlanRecorder):
+    class Silent(caster.PlanRecorder):
         def _record(self, cmd, barriers):
             pass
 
-    monkeypatch.setattr(raycast, "PlanRecorder", Silent)
+    monkeypatch.setattr(caster, "PlanRecorder", Silent)
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "0")  # staged: the copies the plan orders
     device = VkDevice(validation=True, label="rfw-tests-raycast-plan")
     try:
