@@ -402,17 +402,17 @@ def _forced(rs, o, d, repeats, out, parts):
     ``vkext.raycast.batch_rays`` would choose: 1 (one submit, no overlap of the host's
     copies with the GPU's work) or ``OVERLAP_PARTS`` (the overlap of the old default, at
     least ``OVERLAP_MIN`` rays a batch), the same-run baselines for the default's choice."""
-    from vkext import raycast
+    from vkext.raycast import OVERLAP_MIN, caster
 
     def forced(n, batch, **_):
-        return n if parts == 1 else min(n, max(raycast.OVERLAP_MIN, -(-n // parts)))
+        return n if parts == 1 else min(n, max(OVERLAP_MIN, -(-n // parts)))
 
-    saved = raycast.batch_rays
-    raycast.batch_rays = forced
+    saved = caster.batch_rays  # what Raycaster.cast calls
+    caster.batch_rays = forced
     try:
         return _casts(rs, o, d, repeats, out=out)
     finally:
-        raycast.batch_rays = saved
+        caster.batch_rays = saved
 
 
 def ray_scene_casts(device, scene, o, d, ref_t, repeats, notes):

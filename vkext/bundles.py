@@ -34,7 +34,7 @@ from .blocks import BlockAllocator
 from .buffers import Buffer
 from .consts import const, ffi, new, vk
 from .device import VkDevice
-from .scene import DescriptorPool, update_descriptors
+from .objects import DescriptorPool, update_descriptors
 
 KEEP = 2
 
@@ -158,7 +158,7 @@ class SetCache:
             owners: Callable[[Any], list[Any]]) -> CachedSet:
         """The set of ``layout`` binding ``wanted`` (sorted by binding) to ``values``;
         ``payload(d, value)`` gives a descriptor's write payload (as
-        ``vkext.scene.update_descriptors`` takes it), ``owners(value)`` the objects that
+        ``vkext.objects.update_descriptors`` takes it), ``owners(value)`` the objects that
         keep its handles alive: their identities go into the key (and the set keeps them),
         so a handle the driver reuses after its object was destroyed never matches an old
         set. This frame's uniform values are written before it returns.

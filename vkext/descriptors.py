@@ -12,7 +12,7 @@ from rfw.units import align_up
 
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer
-from .scene import BufferRange, DescriptorPool
+from .objects import BufferRange, DescriptorPool
 
 
 class FrameDescriptors:

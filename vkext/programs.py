@@ -14,10 +14,11 @@ from rfw.passes import Pass
 from rfw.shaders import ShaderError
 from rfw.spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
 
-from .consts import const, ffi, vk
+from .consts import const, ffi, new, vk
 from .device import VkDevice
+from .objects import COMPARE, DescriptorSetLayout, VkObject
 from .sbt import ShaderBindingTable, check_recursion, create_ray_pipeline, shader_group_handles
-from .scene import COMPARE, DescriptorSetLayout, VkObject, VkScene, new
+from .scene import VkScene
 
 _STAGE_BITS = {"vert": "VK_SHADER_STAGE_VERTEX_BIT", "frag": "VK_SHADER_STAGE_FRAGMENT_BIT",
                "task": "VK_SHADER_STAGE_TASK_BIT_EXT", "mesh": "VK_SHADER_STAGE_MESH_BIT_EXT",

@@ -35,14 +35,8 @@ from rfw.graph import CompiledGraph
 from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, QueuePlan, Submission, Transfer
 from rfw.graph.sync import State
 
-from .commands import (
-    BufferBarrier,
-    ImageBarrier,
-    _buffer_barrier,
-    _image_barrier,
-    barrier,
-    stage_flags,
-)
+from .commands import BufferBarrier, ImageBarrier, barrier, stage_flags
+from .commands.barriers import _buffer_barrier, _image_barrier
 from .consts import const, ffi, lib, vk
 from .device import VkDevice
 from .memory import Buffer, Image

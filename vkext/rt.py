@@ -24,10 +24,10 @@ from typing import Any
 
 from .accel import AccelerationStructure
 from .buffers import Buffer
-from .consts import const, ffi, lib, vk
+from .consts import const, ffi, lib, new, vk
 from .device import VkDevice
+from .objects import DESCRIPTOR_TYPES, VkObject
 from .programs import Program, Programs
-from .scene import DESCRIPTOR_TYPES, VkObject, new
 
 
 class _Pool(VkObject):

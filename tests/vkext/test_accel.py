@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import vkext.commands as commands_module
+import vkext.commands.barriers as barriers_module
 from rfw.config import apply_overrides, load_config
 from rfw.graph import AccelStructure, GraphBuilder, GraphError, Step, compile
 from rfw.render import render
@@ -169,9 +169,9 @@ def _unordered_builds(events) -> list[tuple]:
 
 def _record_builds(vk_device, monkeypatch) -> list:
     """Events of the recorded stream, in order: ("barrier", src, dst) for each memory
-    barrier that goes through commands.barrier, ("build", type, count) for each build."""
+    barrier that goes through commands.barriers.barrier, ("build", type, count) for each build."""
     events = []
-    real_barrier = commands_module.barrier
+    real_barrier = barriers_module.barrier
     real_build = vk_device.fn.vkCmdBuildAccelerationStructuresKHR
 
     def barrier(cmd, image_barriers=(), buffer_barriers=(), memory_barriers=()):
@@ -182,7 +182,7 @@ def _record_builds(vk_device, monkeypatch) -> list:
         events.append(("build", int(infos[0].type), count))
         return real_build(cmd, count, infos, ranges)
 
-    monkeypatch.setattr(commands_module, "barrier", barrier)
+    monkeypatch.setattr(barriers_module, "barrier", barrier)
     monkeypatch.setattr(vk_device.fn, "vkCmdBuildAccelerationStructuresKHR", build)
     return events
 

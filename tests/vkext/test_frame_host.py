@@ -12,7 +12,9 @@ from rfw.config import apply_overrides, build, load_config
 from rfw.frame import open_frame
 from rfw.graph.sync import State
 from vkext import commands
+from vkext.commands import barriers
 from vkext.consts import vk
+from vkext.images import Image
 
 from ..conftest import tiny_scene
 
@@ -70,10 +72,10 @@ def test_gpu_ms_are_the_pools_results(vk_device):
 
 def test_a_barrier_recorded_again_reuses_its_structs(vk_device, monkeypatch):
     made = []
-    real = commands._dependency
-    monkeypatch.setattr(commands, "_dependency", lambda *a: made.append(a) or real(*a))
-    commands._DEPENDENCIES.clear()
-    img = commands.Image(vk_device, 4, 4, "rgba8unorm", {"sampled", "storage"}, label="cache")
+    real = barriers._dependency
+    monkeypatch.setattr(barriers, "_dependency", lambda *a: made.append(a) or real(*a))
+    barriers._DEPENDENCIES.clear()
+    img = Image(vk_device, 4, 4, "rgba8unorm", {"sampled", "storage"}, label="cache")
     img.allocate()
     general = State("GENERAL", frozenset({"COMPUTE_SHADER"}), frozenset({"SHADER_WRITE"}))
     read = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER"}),

@@ -29,7 +29,8 @@ SIZE = "96x54"
 
 # where barrier() may be called: the primitives, the executor's frame and poison fills, and
 # the async compute batches' frame barrier (vkext.queues)
-ALLOWED = {"vkext/commands.py", "vkext/executor.py", "vkext/poison.py", "vkext/queues.py"}
+ALLOWED = {"vkext/commands/barriers.py", "vkext/commands/transfers.py", "vkext/executor.py",
+           "vkext/poison.py", "vkext/queues.py"}
 
 
 def _config():
@@ -57,7 +58,7 @@ def test_no_barrier_call_outside_the_primitives():
             found[rel] = lines
     assert found == {}
     # the primitives do call it: the scan sees calls where they are
-    assert barrier_calls((ROOT / "vkext/commands.py").read_text())
+    assert barrier_calls((ROOT / "vkext/commands/barriers.py").read_text())
 
 
 def test_the_scan_finds_a_hand_barrier():
@@ -144,17 +145,18 @@ def test_raycast_without_its_plan_is_a_hazard(vk_device, monkeypatch):
     validation of layers 1.3.239 sees no vkCmdTraceRaysKHR access (measured: the
     ray_pipeline method without the barriers gives 0 messages)."""
     import rfw
-    from vkext import VkDevice, raycast
+    from vkext import VkDevice
+    from vkext.raycast import caster
 
     method = "ray_query"
     if "VK_KHR_ray_query" not in vk_device.caps:
         pytest.skip("no VK_KHR_ray_query")
 
-    class Silent(raycast.PlanRecorder):
+    class Silent(caster.PlanRecorder):
         def _record(self, cmd, barriers):
             pass
 
-    monkeypatch.setattr(raycast, "PlanRecorder", Silent)
+    monkeypatch.setattr(caster, "PlanRecorder", Silent)
     monkeypatch.setenv("RFW_RAYCAST_MAPPED", "0")  # staged: the copies the plan orders
     device = VkDevice(validation=True, label="rfw-tests-raycast-plan")
     try:

@@ -289,7 +289,7 @@ def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from vkext import raycast as rc
+    from vkext.raycast import copies as rc
 
     mesh = MESHES["noisy_sphere"]
     v = mesh.vertices.astype(np.float32)
@@ -330,7 +330,7 @@ def test_split_copies_give_the_same_hits(vk_device, monkeypatch):
 def test_parallel_copy_needs_no_pool_thread(monkeypatch):
     """The calling thread takes parts too, so a copy ends even if no pool thread ever
     starts (a late one finds nothing left): here the pool runs nothing at all."""
-    from vkext import raycast as rc
+    from vkext.raycast import copies as rc
 
     class Idle:
         def submit(self, fn, *args):
@@ -350,7 +350,7 @@ def test_parallel_copy_needs_no_pool_thread(monkeypatch):
 def test_parallel_copy_finds_nan_in_the_checked_job(monkeypatch, split):
     """``check`` names the job whose copy is scanned for NaN (whole or in parts); a NaN in
     another job is not its business (negative control)."""
-    from vkext import raycast as rc
+    from vkext.raycast import copies as rc
 
     if split:
         monkeypatch.setattr(rc, "COPY_THREADS", 3)
@@ -581,7 +581,7 @@ def test_mapped_batches_copy_nothing(vk_device, monkeypatch, placement):
     """Mapped hits are not copied out (the trace writes the host's memory), mapped rays
     have no device buffer to be copied into; staged hits are copied out once per batch
     (the control that the count sees them)."""
-    from vkext import raycast as rc
+    from vkext.raycast import caster as rc
 
     copies = []
     copy_to_host = rc.copy_to_host
