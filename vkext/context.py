@@ -23,10 +23,10 @@ from rfw.shaders import ShaderError, program_files
 from rfw.spirv import DescriptorInfo, check_bindings
 
 from .commands import image_layout, record_barriers
-from .consts import const, ffi, lib
+from .consts import const, ffi, lib, new
 from .memory import Buffer, Image, ImageView
+from .objects import BufferRange, Sampler, update_descriptors
 from .programs import Program
-from .scene import BufferRange, Sampler, new, update_descriptors
 
 _COLOR_ATTACHMENT_LAYOUTS = {"COLOR_ATTACHMENT_OPTIMAL", "GENERAL", "ATTACHMENT_OPTIMAL"}
 # a pass's program is looked up from memory between looks at its sources (hot reload):

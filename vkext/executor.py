@@ -1,4 +1,4 @@
-"""Run a compiled frame graph on raw Vulkan, as ``rfw.backends.wgpu_backend`` runs it on wgpu.
+"""Run a compiled frame graph on raw Vulkan, as ``rfw.backends.wgpu.executor`` runs it on wgpu.
 
 Transient images and buffers live in the plan's aliased heaps (``plan_heaps``); persistent,
 external and history ones come from a :class:`BlockAllocator`. A frame is one command buffer:
@@ -69,9 +69,10 @@ from .descriptors import FrameDescriptors, UniformRing
 from .device import VkDevice
 from .fitting import check_passes, shader_paths
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, plan_heaps
+from .objects import Sampler, make_sampler
 from .programs import Programs
 from .queues import async_queues
-from .scene import Sampler, VkScene, make_sampler
+from .scene import VkScene
 
 TIMESTAMP_STAGE = "ALL_COMMANDS"
 

@@ -44,7 +44,6 @@ from .consts import (
     const,
     ffi,
     lib,
-    new,  # noqa: F401 (unused here: vkext.context imports it from this module)
 )
 from .device import VkDevice
 from .memory import BlockAllocator, Buffer, Image, ImageView, image_view, staging_buffer
@@ -52,7 +51,6 @@ from .objects import (
     BufferRange,
     DescriptorPool,
     DescriptorSetLayout,
-    Sampler,  # noqa: F401 (unused here: vkext.executor and vkext.context import it from here)
     make_sampler,
     update_descriptors,
 )
