@@ -21,6 +21,22 @@ class SlotContext:
     def has(self, slot: str) -> bool:
         return slot in self.slots
 
+    # replay (rfw.exec.replay): a backend that keeps recorded commands overrides these
+    def can_replay(self) -> bool:
+        """Whether the executor may build the pass's replay key: never by default."""
+        return False
+
+    def slot_objects(self) -> list[object]:
+        """The objects behind the pass's slots, for its replay key."""
+        return []
+
+    def replayed(self, key: tuple) -> bool:
+        """Execute again what was recorded for ``key``: nothing kept by default."""
+        return False
+
+    def finish(self) -> None:
+        """After ``record``: nothing to close by default."""
+
 
 class FrameExecutor:
     """Runs a compiled graph frame by frame; a frame can also be driven pass by pass

@@ -35,10 +35,13 @@ def test_pass_timings_follow_the_plan_order():
     assert t["gbuffer"] == PassTiming("gbuffer") and t["gbuffer"].gpu_ms == []
 
 
-def test_both_backends_use_the_shared_definitions():
+def test_both_executors_are_the_core_with_primitives():
     import vkext.executor as vk
     from rfw.backends.wgpu import executor as wg
+    from rfw.exec.core import ExecutorCore
 
-    for module in (wg, vk):
-        assert module.pass_timings is pass_timings and module.Samplers is Samplers
-        assert not hasattr(module, "PassTiming") or module.PassTiming is PassTiming
+    assert issubclass(vk.VkExecutor, ExecutorCore) and issubclass(wg.Executor, ExecutorCore)
+    for cls in (vk.VkExecutor, wg.Executor):  # the frame protocol is the core's, unchanged
+        for name in ("keep_in_flight", "run", "drain", "begin_frame", "record", "flush",
+                     "end_frame", "frame", "sampler", "destroy"):
+            assert name not in vars(cls), f"{cls.__name__} overrides {name}"

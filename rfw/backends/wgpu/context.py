@@ -75,11 +75,6 @@ class PassContext(SlotContext):
     _step = -1  # the declared step (Pass.steps) the pass is in
     _bundles = 0  # scene draws recorded by this pass so far in this frame
 
-    def replay(self, *key: Any) -> bool:
-        """Always False: WebGPU replays render bundles only, and scene draws use them
-        (``draw_scene``); a pass's other commands are recorded every frame."""
-        return False
-
     def step(self, index: int) -> None:
         """Enter step ``index`` of the pass's declared steps: wgpu orders a pass's work
         itself, so nothing is recorded; the order is checked as on Vulkan."""

@@ -6,23 +6,19 @@ lifetimes share one texture instead; everything else follows the compiled plan.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 import wgpu
 
-from ...errors import naming
-from ...exec.samplers import Samplers
-from ...exec.timing import pass_timings
-from ...frame import InFlight, frames_in_flight, run_frames
+from ...exec.core import ExecutorCore
 from ...graph import CompiledGraph
 from ...graph.compile import IMPLIED_CAPS
 from ...graph.formats import format_info
+from ...options import RunOptions, check_options
 from ...passes import Pass, Settings
 from ...shaders import ShaderError
 from ...units import align_up
-from ..base import FrameExecutor
 from .calls import FrameCalls
 from .context import PassContext
 from .device import Device
@@ -51,22 +47,17 @@ def _identity(resource: Any) -> Any:
     return id(resource)
 
 
-class Executor(FrameExecutor):
+class Executor(ExecutorCore):
     """Owns the textures of one compiled graph on one device and records its frames."""
 
     def __init__(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: Any = None,
-                 readback: tuple[str, ...] = (), present: tuple[str, ...] = ()):
+                 readback: tuple[str, ...] = (), present: tuple[str, ...] = (), *,
+                 options: RunOptions | None = None):
         self.device = device
-        self.plan = plan
-        self.passes = passes
-        self.slots = slots
-        self.scene = scene
-        self.readback = tuple(readback)
+        self._init_core(plan, passes, slots, scene, readback, check_options(options))
         self.present = tuple(present)  # outputs a window samples to show them
         self.shaders = ShaderCache(device)
-        self.frame_index = 0
-        self.timings = pass_timings(plan.order)
         # a bridge's side on this backend (rfw.frame): the host copies, nothing is recorded
         self._bridges = tuple(name for name in plan.order if name not in passes and
                               name.startswith("bridge.") and all(
@@ -80,7 +71,6 @@ class Executor(FrameExecutor):
         self._textures: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
         self._uniforms: dict[tuple[str, str], Any] = {}
-        self._samplers = Samplers(self._make_sampler)
         # per call site (pass, n-th dispatch or scene draw): the last call and what it found
         self.call_sites: dict[tuple, tuple] = {}
         # bind groups by layout and bound objects: [group, what it holds, frame last used]
@@ -95,11 +85,10 @@ class Executor(FrameExecutor):
         self._query_set = None  # the frame's slot's
         self.calls = FrameCalls(device.device)
         self.stamps: Stamps | None = None
-        self.in_flight = InFlight([])
-        self.keep_in_flight(frames_in_flight())
+        self._made: list[Any] = []  # buffers passes made in setup
+        self.keep_in_flight(self.options.in_flight())
         check_caps(passes, device.caps)
-        for p in passes.values():
-            p.setup(self)
+        self._setup_passes(frozenset(device.caps))
 
     # resources ----------------------------------------------------------------------------
     def _allocate(self) -> None:
@@ -149,14 +138,6 @@ class Executor(FrameExecutor):
     def format_of(self, value: Any) -> str | None:
         tex = getattr(value, "texture", None)
         return getattr(tex, "format", None) if tex is not None else None
-
-    def scene_bindings(self) -> dict[str, Any]:
-        return self.scene.bindings() if self.scene is not None else {}
-
-    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
-                compare: str | None = None) -> Any:
-        """A sampler made once per (filter, address, compare) and kept by the executor."""
-        return self._samplers.get(filter, address, compare)
 
     def _make_sampler(self, filter: str, address: str, compare: str | None) -> Any:
         return self.device.device.create_sampler(
@@ -245,22 +226,16 @@ class Executor(FrameExecutor):
         return {"query_set": self._query_set, "beginning_of_pass_write_index": k,
                 "end_of_pass_write_index": k + 1}
 
-    def keep_in_flight(self, frames: int) -> None:
-        """Keep up to ``frames`` frames in flight (:func:`rfw.frame.frames_in_flight`): one
-        :class:`FrameSlot` each. Frames in flight now are finished first."""
-        frames = frames_in_flight(frames)
-        self.drain()
-        for slot in self.in_flight.slots:
-            slot.destroy()
+    def _slots_made(self, frames: int) -> None:
+        # the frames' timestamps, read back in batches (Stamps): one place per frame
         if self.stamps is not None:
             self.stamps.destroy()
             self.stamps = None
-        self.in_flight = InFlight([self._slot(k) for k in range(frames)])
         if self._timestamp_enabled:
             self.stamps = Stamps(self.device.device, 8 * self.in_flight.slots[0].query_set.count,
                                  max(STAMP_BATCH, frames))
 
-    def _slot(self, k: int) -> FrameSlot:
+    def _make_slot(self, k: int) -> FrameSlot:
         dev = self.device.device
         if not self._timestamp_enabled:
             return FrameSlot(None, None, None, self.calls)
@@ -273,85 +248,78 @@ class Executor(FrameExecutor):
                               wgpu.BufferUsage.COPY_DST, label=f"rfw:timestamps{k}:read"),
             self.calls)
 
-    def run(self, frames: int = 1) -> None:
-        """``frames`` frames; returns once they are done (the last one drains)."""
-        run_frames(self, frames)
+    def _destroy_slot(self, slot: FrameSlot) -> None:
+        slot.destroy()
 
-    def drain(self) -> None:
-        """Wait for every frame in flight; their timings are appended, oldest first."""
-        self.in_flight.drain()
+    def _drained(self) -> None:
         if self.stamps is not None and self.stamps.unread:
             self.stamps.read()
 
-    # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
-    def begin_frame(self) -> None:
-        """Start a frame; ``record`` passes into it, ``flush`` to run what was recorded and
-        wait for it, ``end_frame`` to submit the rest without waiting. The frame takes the
-        next slot once the frame that used it last is finished. Host writes need no drain
-        here: WebGPU orders ``queue.write_buffer`` before the next submit and keeps what a
-        submitted frame uses alive."""
-        slot = self._frame_slot = self.in_flight.slot(self.frame_index)
+    # the frame's primitives (rfw.exec.core) ----------------------------------------------
+    def _open(self, slot: FrameSlot) -> None:
+        """Host writes need no drain before a frame: WebGPU orders ``queue.write_buffer``
+        before the next submit and keeps what a submitted frame uses alive."""
         self._query_set = slot.query_set
         self._encoder: Any = None
         self._next_query = 0
         self._query_owner: list[str] = []
-        self._cpu: dict[str, float] = {}
-        self._gpu: dict[str, float] | None = None
-        self._recorded: list[str] = []
-        self._segment = 0
 
-    def record(self, name: str) -> None:
-        """Record pass ``name`` into the frame's open command encoder (made on first use).
+    def _swap(self, a: str, b: str) -> None:
+        # history: the textures behind two resources trade places, with their views
+        if a in self.owner and b in self.owner:
+            self.owner[a], self.owner[b] = self.owner[b], self.owner[a]
+            views = {k: v for k, v in self._views.items() if k.split("@mip")[0] in (a, b)}
+            for k in views:
+                del self._views[k]
+            for k, v in views.items():
+                base, _, mip = k.partition("@mip")
+                other = b if base == a else a
+                self._views[other + ("@mip" + mip if mip else "")] = v
 
-        A bridge's side of the plan (``rfw.frame``: the copy goes through the host between
-        flushes, and WebGPU tracks the usage itself) records nothing."""
-        if name in self._bridges:
-            return
-        p = self.passes[name]
+    def _bridge(self, name: str) -> None:
+        """A bridge's side of the plan (``rfw.frame``: the copy goes through the host
+        between flushes, and WebGPU tracks the usage itself) records nothing."""
+        if name not in self._bridges:
+            raise KeyError(name)
+
+    def _context(self, name: str, p: Pass) -> PassContext:
+        """The pass's context over the frame's open command encoder (made on first use).
+        No debug group around the pass: each compute and render pass it begins carries its
+        name as label already, and a group costs two native calls per pass a frame."""
         if self._encoder is None:
             self._encoder = self.calls.encoder()
-        encoder = self._encoder
-        ctx = PassContext(self, p, encoder, self.slots[name])
-        # no debug group around the pass: each compute and render pass it begins carries
-        # its name as label already, and a group costs two native calls per pass a frame
-        t = time.perf_counter()
-        with naming(f"pass '{name}'"):
-            p.record(ctx)
-        self._cpu[name] = self._cpu.get(name, 0.0) + (time.perf_counter() - t) * 1e3
-        self._recorded.append(name)
+        return PassContext(self, p, self._encoder, self.slots[name])
 
-    def flush(self) -> None:
-        """Submit what was recorded since the last flush, wait for it and collect its
-        timestamps (a bridge then copies what it wrote). Nothing recorded: nothing happens."""
-        slot, owners = self._frame_slot, self._query_owner
-        if not self._submit(slot, last=False):
-            return
-        slot.wait()
-        if owners:
-            slot.readback.map_sync("READ_NOSYNC")
-            try:
-                raw = np.frombuffer(slot.readback.read_mapped(0, 16 * len(owners)), np.uint64)
-            finally:
-                slot.readback.unmap()
-            self._gpu = self._add_timestamps(raw, owners, self._gpu)
-
-    def end_frame(self) -> None:
-        """Submit what is left without waiting: the frame's timings are appended when it
-        is finished (its slot comes round again, or a drain). One frame in flight waits
-        here (the last frame of ``run`` drains after: ``frame(drain=True)``), as every frame did before frames in flight."""
-        slot, owners = self._frame_slot, self._query_owner
-        self._submit(slot, last=True)
+    def _submit(self, slot: FrameSlot, *, last: bool) -> Any:
+        """Submit the open encoder (``_send``) and return how to finish it: wait for it,
+        then read its timestamps (a flush's from the slot's readback at once, the frame's
+        last submit's from :class:`Stamps`, once its batch is read)."""
+        owners = self._query_owner
+        if not last:
+            if not self._send(slot, last=False):
+                return None
+            return lambda append: self._finish_flush(slot, owners, append)
+        frame = self.frame_index
+        self._send(slot, last=True)
         # bind groups unused last frame and this one name objects no pass binds any more
         if len(self._bind_groups) > 64:
             self._bind_groups = {k: v for k, v in self._bind_groups.items()
                                  if v[2] >= self.frame_index - 1}
-        frame = (self.frame_index, owners, self._cpu, self._gpu, self._recorded)
-        self.in_flight.submitted(slot, lambda: self._finish(slot, *frame))
-        self.frame_index += 1
-        if len(self.in_flight) == 1:
-            self.drain()
+        return lambda append: self._finish(slot, frame, owners, append)
 
-    def _submit(self, slot: FrameSlot, *, last: bool) -> bool:
+    def _finish_flush(self, slot: FrameSlot, owners: list[str], append: Any) -> None:
+        slot.wait()
+        if not owners:
+            append(None)
+            return
+        slot.readback.map_sync("READ_NOSYNC")
+        try:
+            raw = np.frombuffer(slot.readback.read_mapped(0, 16 * len(owners)), np.uint64)
+        finally:
+            slot.readback.unmap()
+        append(self._add_timestamps(raw, owners))
+
+    def _send(self, slot: FrameSlot, *, last: bool) -> bool:
         """Submit the open encoder with its queries resolved and copied to where they are
         read (the frame's place in :class:`Stamps` for its ``last`` submit, else the
         slot's own readback, read at once): False if none is open."""
@@ -359,7 +327,6 @@ class Executor(FrameExecutor):
         if encoder is None:
             return False
         self._encoder = None
-        self._segment += 1
         n = self._next_query
         if n:
             encoder.resolve_query_set(slot.query_set, 0, n, slot.resolve, 0)
@@ -373,29 +340,23 @@ class Executor(FrameExecutor):
         self._query_owner = []
         return True
 
-    def _finish(self, slot: FrameSlot, frame: int, owners: list[str], cpu: dict[str, float],
-                gpu: dict[str, float] | None, recorded: list[str]) -> None:
-        """Wait for a submitted frame, then append its timings of the passes recorded (once
+    def _finish(self, slot: FrameSlot, frame: int, owners: list[str], append: Any) -> None:
+        """Wait for a submitted frame, then hand its GPU ms per pass to ``append`` (once
         its timestamps are read, if its last submit had any)."""
         slot.wait()
 
-        def append(raw: np.ndarray | None) -> None:
-            times = self._add_timestamps(raw, owners, gpu) if owners else gpu
-            for name in dict.fromkeys(recorded):
-                self.timings[name].cpu_ms.append(cpu[name])
-                if times is not None:
-                    self.timings[name].gpu_ms.append(times.get(name, 0.0))
+        def times(raw: np.ndarray | None) -> None:
+            append(self._add_timestamps(raw, owners) if owners else None)
 
         if self.stamps is not None:  # every frame: a batch is read after its last frame
-            self.stamps.finished(frame, 16 * len(owners), append)
+            self.stamps.finished(frame, 16 * len(owners), times)
         else:
-            append(None)
+            times(None)
 
-    def _add_timestamps(self, raw: np.ndarray, owners: list[str],
-                        gpu: dict[str, float] | None) -> dict[str, float]:
-        """Pass ``owners[k]``'s begin and end stamps (``raw[2k]``, ``raw[2k + 1]``) added
-        to the frame's GPU ms per pass."""
-        gpu = {} if gpu is None else gpu
+    def _add_timestamps(self, raw: np.ndarray, owners: list[str]) -> dict[str, float]:
+        """GPU ms per pass: pass ``owners[k]``'s begin and end stamps are ``raw[2k]`` and
+        ``raw[2k + 1]`` (a pass with several GPU passes adds them up)."""
+        gpu: dict[str, float] = {}
         period = self.device.timestamp_period * 1e-6
         for k, name in enumerate(owners):
             begin, end = int(raw[2 * k]), int(raw[2 * k + 1])
@@ -427,18 +388,20 @@ class Executor(FrameExecutor):
         arr = np.frombuffer(data, dtype=dtype)
         return arr.reshape(r.height, r.width, -1)
 
-    def destroy(self) -> None:
-        """Destroy what the executor made; frames in flight are finished first (or
-        dropped, if that fails)."""
-        failed = None
-        try:
-            self.drain()
-        except Exception as e:  # destroy everything still, then say what went wrong
-            failed = e
-        self.in_flight.forget()
-        for slot in self.in_flight.slots:
-            slot.destroy()
-        self.in_flight.slots.clear()
+    def _make_buffer(self, label: str, data: np.ndarray, usage: tuple[str, ...]) -> Any:
+        """A buffer holding ``data`` (a pass's setup tables), destroyed with the executor."""
+        flags = 0
+        for u in usage:
+            flags |= {"storage": wgpu.BufferUsage.STORAGE, "uniform": wgpu.BufferUsage.UNIFORM,
+                      "vertex": wgpu.BufferUsage.VERTEX, "index": wgpu.BufferUsage.INDEX,
+                      "indirect": wgpu.BufferUsage.INDIRECT}[u]
+        buf = self.device.device.create_buffer_with_data(data=data.tobytes(), usage=flags,
+                                                         label=label)
+        self._made.append(buf)
+        return buf
+
+    def _release(self) -> None:
+        """What the executor made, after every frame is finished (ExecutorCore.destroy)."""
         if self.stamps is not None:
             self.stamps.destroy()
             self.stamps = None
@@ -446,18 +409,14 @@ class Executor(FrameExecutor):
         for t in self._textures.values():
             t.destroy()
         self._textures.clear()
-        for b in self._buffers.values():
+        for b in (*self._buffers.values(), *self._uniforms.values(), *self._made):
             b.destroy()
         self._buffers.clear()
+        self._made.clear()
         self._views.clear()
         self._bundles.clear()
         self._bind_groups.clear()
-        for b in self._uniforms.values():
-            b.destroy()
         self._uniforms.clear()
         self._written.clear()
         self._packs.clear()
-        self._samplers.clear()
         self._query_set = None
-        if failed is not None:
-            raise failed
