@@ -7,9 +7,9 @@ Each repeat renders every config twice on vk, ``async_compute=on`` and ``off``, 
 that rotates per repeat, in this one process on one device. With two queues passes overlap,
 so the per-pass GPU times no longer add up to the frame's: the frame's GPU time here is the
 span from a timestamp written before the frame's first graphics batch to one after its last
-(which waits for the compute queue), ``vkext.queues.AsyncQueues.frame_gpu_ms``. With
-``RFW_VK_FRAME_SPAN=1`` (set here) the one-queue frame goes through the same runner as one
-batch, so both are measured the same way. Also reported: the sum of per-pass GPU medians,
+(which waits for the compute queue), ``vkext.queues.AsyncQueues.frame_gpu_ms``. With the
+run option ``frame_span`` (on here, ``RFW_VK_FRAME_SPAN``) the one-queue frame goes through
+the same runner as one batch, so both are measured the same way. Also reported: the sum of per-pass GPU medians,
 and the wall time per frame over the timed frames (frames in flight as the executor keeps
 them), each as a median and as the ratio on/off.
 
@@ -32,10 +32,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-os.environ["RFW_VK_FRAME_SPAN"] = "1"  # before vkext reads it
 
 from rfw.config import apply_overrides, build, load_config  # noqa: E402
 from rfw.frame import load_scene_for, open_frame  # noqa: E402
+from rfw.options import RunOptions  # noqa: E402
 
 
 def _median(values: list[float]) -> float | None:
@@ -43,10 +43,10 @@ def _median(values: list[float]) -> float | None:
 
 
 def run_once(config: str, mode: str, size: str, frames: int, warmup: int,
-             scene: object) -> dict:
+             scene: object, options: RunOptions) -> dict:
     cfg = apply_overrides(load_config(ROOT / "configs" / f"{config}.toml"),
                           [f"size={size}", f"async_compute={mode}"])
-    frame = open_frame(build(cfg), "vk", scene=scene)
+    frame = open_frame(build(cfg), "vk", scene=scene, options=options)
     try:
         ex = frame.executors["vk"]
         frame.run(warmup)
@@ -78,13 +78,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/bench_async.json")
     args = ap.parse_args(argv)
     configs = [c for c in args.configs.split(",") if c]
+    # this script is an edge: the environment's options (RFW_VK_ASYNC_QUEUE, RFW_GPU, ...),
+    # the frame span measured on one queue too
+    options = RunOptions.from_env(frame_span=True)
     rows = []
     for config in configs:
         scene = load_scene_for(load_config(ROOT / "configs" / f"{config}.toml"))
         for k in range(args.repeat):
             modes = ["on", "off"] if k % 2 == 0 else ["off", "on"]
             for mode in modes:
-                r = run_once(config, mode, args.size, args.frames, args.warmup, scene)
+                r = run_once(config, mode, args.size, args.frames, args.warmup, scene,
+                             options)
                 r["repeat"] = k
                 rows.append(r)
                 print(f"{config} async_compute={mode} ({r['mode']}, async: "

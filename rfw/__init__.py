@@ -2,7 +2,8 @@
 
 The Python API (:mod:`rfw.api`, docs/python-api.md): ``rfw.load``/``rfw.make_config`` make a
 config, ``rfw.override`` applies ``--set`` strings, ``rfw.run`` renders once and
-``rfw.Session`` keeps devices and scenes across renders; results are ``rfw.Result``.
+``rfw.Session`` keeps devices and scenes across renders; results are ``rfw.Result``;
+``rfw.RunOptions`` say how frames run (frames, validation, vk's switches: :mod:`rfw.options`).
 Every public function and class checks its arguments: a bad one is an ``rfw.RfwError``
 naming it (``rfw.RfwTypeError``, also a TypeError, for a wrong type).
 """
@@ -11,6 +12,7 @@ from . import signals as _signals
 
 _signals.early()  # the rfw command: a signal while it still imports ends it in one line too
 from .errors import RfwError, RfwTypeError, RfwValueError  # noqa: E402
+from .options import RunOptions  # noqa: E402
 from .passes import ComputePass, Pass, RenderPass, Settings, SettingsError, Tex2D  # noqa: E402
 from .registry import available, get_pass, register_pass  # noqa: E402
 
@@ -20,9 +22,9 @@ __version__ = "0.1.0"
 _API = ("Config", "PassEntry", "Result", "Session", "load", "make_config", "override", "run")
 
 __all__ = ["ComputePass", "Config", "Pass", "PassEntry", "RayScene", "RenderPass", "Result",
-           "RfwError", "RfwTypeError", "RfwValueError", "Session", "Settings", "SettingsError",
-           "Tex2D", "available", "get_pass", "load", "make_config", "override", "raycast",
-           "register_pass", "run"]
+           "RfwError", "RfwTypeError", "RfwValueError", "RunOptions", "Session", "Settings",
+           "SettingsError", "Tex2D", "available", "get_pass", "load", "make_config",
+           "override", "raycast", "register_pass", "run"]
 
 
 def __getattr__(name: str):

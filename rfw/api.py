@@ -46,6 +46,7 @@ from .errors import (
     type_name,
 )
 from .frame import Result, load_scene_for
+from .options import RunOptions, check_options
 from .render import backend_for, render
 
 ConfigLike = Config | str | Path
@@ -151,14 +152,20 @@ class Session:
 
     ``backend`` is the default for :meth:`render` (``None``: as ``rfw run`` picks it);
     ``validation`` makes devices with the API's validation layer (vk), and a result's
-    ``timings["validation"]`` then counts the device's messages so far. Close the session
+    ``timings["validation"]`` then counts the device's messages so far. ``options``
+    (:class:`rfw.options.RunOptions`; default: read from the environment once, here) say
+    how every render of the session runs and which devices it makes. Close the session
     (or use it in ``with``) to destroy its devices."""
 
-    def __init__(self, backend: str | None = None, *, validation: bool = False):
+    def __init__(self, backend: str | None = None, *, validation: bool = False,
+                 options: RunOptions | None = None):
         if backend is not None:  # an unknown name: one line naming the installed ones
             get_backend(_backend_arg(backend, "rfw.Session"))
         self.backend = backend
-        self.validation = check_bool(validation, "validation", element="rfw.Session")
+        asked = check_bool(validation, "validation", element="rfw.Session") or None
+        self.options = RunOptions.from_env(validation=asked) if options is None else \
+            check_options(options).replace(validation=asked)
+        self.validation = self.options.validation
         self.devices: dict[str, Any] = {}
         self.scenes: dict[str, Any] = {}
         self.devices_made = 0
@@ -170,8 +177,7 @@ class Session:
         self._check_open()
         backend = _backend_arg(backend, "Session.device")
         if backend not in self.devices:
-            self.devices[backend] = get_backend(backend).make_device(
-                validation=self.validation)
+            self.devices[backend] = get_backend(backend).make_device(options=self.options)
             self.devices_made += 1
         return self.devices[backend]
 
@@ -206,8 +212,8 @@ class Session:
         for b in sorted(needed):  # every backend the run mixes in: its device
             get_backend(b, file=cfg.source, element=None)
         devices = [self.device(b) for b in sorted(needed)]
-        return render(cfg, scene=self.scene(cfg), frames=frames, warmup=warmup,
-                      devices=devices, backend=name, validation=self.validation)
+        return render(cfg, scene=self.scene(cfg), devices=devices, backend=name,
+                      options=self.options.replace(frames=frames, warmup=warmup))
 
     def close(self) -> None:
         """Destroy the devices this session made (scenes are host data: just dropped)."""
@@ -232,11 +238,12 @@ class Session:
 def run(config: ConfigLike, *sets: str | Mapping[str, Any], frames: int | None = None,
         backend: str | None = None, scene: str | None = None,
         size: tuple[int, int] | None = None, warmup: int = 1,
-        validation: bool = False) -> Result:
+        validation: bool = False, options: RunOptions | None = None) -> Result:
     """One render in a :class:`Session` of its own (its device destroyed after): the
-    Python face of ``rfw run``. ``result.save(folder)`` writes what ``rfw run`` writes."""
+    Python face of ``rfw run``; ``options`` as :class:`Session` takes them.
+    ``result.save(folder)`` writes what ``rfw run`` writes."""
     cfg = _config_arg(config, "rfw.run")
-    with Session(backend, validation=validation) as s:
+    with Session(backend, validation=validation, options=options) as s:
         return s.render(cfg, *sets, frames=frames, scene=scene, size=size, warmup=warmup)
 
 

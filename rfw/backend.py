@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from .errors import RfwError, did_you_mean
+from .options import DEFAULT, RunOptions
 from .plugins import entry_points
 
 if TYPE_CHECKING:
@@ -39,8 +40,9 @@ class Backend(Protocol):
     auto_variants: bool  # auto variants resolve for this device's caps (else: their last option)
     host_writes_depth: bool  # a bridge can upload a depth image (else it arrives as r32float)
 
-    def make_device(self, *, validation: bool = False, label: str | None = None) -> Any:
-        """A new device; ``validation``: with the API's validation layer, where it has one."""
+    def make_device(self, *, label: str | None = None, options: RunOptions = DEFAULT) -> Any:
+        """A new device as ``options`` ask: ``validation`` (the API's validation layer, where
+        it has one), ``gpu`` (which of the machine's devices), ``async_queue``."""
 
     def owns(self, device: Any) -> bool:
         """Whether ``device`` is one of this backend's (a run may be handed any backend's)."""
@@ -54,10 +56,11 @@ class Backend(Protocol):
     def timestamps(self, device: Any) -> bool:
         """Whether per-pass GPU times come from timestamp queries on this device."""
 
-    def fit(self, graph: Graph, device: Any, *, alias: bool = True,
-            readback: bool = True) -> tuple[CompiledGraph, Any]:
+    def fit(self, graph: Graph, device: Any, *, readback: bool = True,
+            options: RunOptions = DEFAULT) -> tuple[CompiledGraph, Any]:
         """Compile ``graph`` for the device and check the plan fits it (image limits, exact
-        memory sizes); returns the plan and what ``executor`` needs of the fitting."""
+        memory sizes; ``options.alias``: transients share memory, ``options.order_seed``);
+        returns the plan and what ``executor`` needs of the fitting."""
 
     def check(self, plan: CompiledGraph, passes: dict[str, Pass]) -> None:
         """Refuse passes the backend cannot run, before anything is uploaded."""
@@ -68,9 +71,10 @@ class Backend(Protocol):
 
     def executor(self, device: Any, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
-                 alias: bool, fitted: Any) -> FrameExecutor:
+                 fitted: Any, options: RunOptions = DEFAULT) -> FrameExecutor:
         """The executor of ``plan`` (``begin_frame``/``record``/``flush``/``end_frame``,
-        ``read``, ``timings``, ``destroy``)."""
+        ``read``, ``timings``, ``destroy``), running as ``options`` say (frames in flight,
+        aliasing, the backend's own switches)."""
 
     def read_bridge(self, executor: Any, bridge: str, resource: str) -> np.ndarray:
         """A resource read back to the host at bridge pass ``bridge`` (its source side)."""
@@ -124,14 +128,13 @@ _loaded: dict[str, Backend] = {}
 GPU_ENV = "RFW_GPU"  # which GPU of the machine a backend opens (rfw bench --executor ray)
 
 
-def gpu_choice() -> int | None:
-    """``RFW_GPU``: the index of the device to open among the machine's GPUs (or, with
-    none, its CPU devices), in the driver's order; None when unset. A Ray task of
-    ``rfw bench --executor ray`` sets it to the GPU Ray gave it, so each task opens its own.
-    Anything but a whole number from 0 is a one-line error naming it."""
-    from . import env
-
-    return env.get(GPU_ENV)
+def gpu_choice(options: RunOptions | None = None) -> int | None:
+    """``options.gpu``: the index of the device to open among the machine's GPUs (or, with
+    none, its CPU devices), in the driver's order; None: the driver's default. A Ray task of
+    ``rfw bench --executor ray`` sets ``RFW_GPU`` to the GPU Ray gave it, so each task opens
+    its own. Without ``options`` (a device made outside a run: the wgpu ``Device()``) the
+    environment's, read as the edge reads it (:meth:`RunOptions.from_env`)."""
+    return (RunOptions.from_env() if options is None else options).gpu
 
 
 def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:
@@ -194,11 +197,12 @@ def reload() -> None:
 
 class Devices:
     """The devices of one run, one per backend: a given device serves the backend that owns
-    it, the others are made on first use (with ``validation``) and destroyed by ``close``."""
+    it, the others are made on first use (as ``options`` ask: validation, GPU, queues) and
+    destroyed by ``close``."""
 
-    def __init__(self, given: Iterable[Any] = (), *, validation: bool = False):
+    def __init__(self, given: Iterable[Any] = (), *, options: RunOptions = DEFAULT):
         self.given = [d for d in given if d is not None]
-        self.validation = validation
+        self.options = options
         self.devices: dict[str, Any] = {}
         self.made: list[tuple[Backend, Any]] = []
 
@@ -206,7 +210,7 @@ class Devices:
         if backend.name not in self.devices:
             device = next((d for d in self.given if backend.owns(d)), None)
             if device is None:
-                device = backend.make_device(validation=self.validation)
+                device = backend.make_device(options=self.options)
                 self.made.append((backend, device))
             self.devices[backend.name] = device
         return self.devices[backend.name]

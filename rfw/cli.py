@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import shlex
 import sys
 import typing
@@ -135,13 +134,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.out:
         raise RfwError("the output folder must not be empty", element="--out")
     cfg, backend = _run_config(args)
+    options = run_options(args, frames=args.frames)
     folder = OutputFolder(args.out)
     _check_run_targets(folder, cfg)  # all before the folder is touched
     with folder:
-        with _fuzzing(args):
-            result = render(cfg, frames=args.frames, backend=backend,
-                            validation=args.validate, alias=not args.no_alias,
-                            each_frame=_frame_images(args, cfg, folder.staging))
+        result = render(cfg, backend=backend, options=options,
+                        each_frame=_frame_images(args, cfg, folder.staging))
         formats = {r.name: r.format for r in result.executor.plan.resources}
         staged = write_outputs(result, folder.staging, formats, exr=args.exr)
         written = [folder.out / p.relative_to(folder.staging) for p in staged]
@@ -237,22 +235,18 @@ def _frame_images(args: argparse.Namespace, cfg: typing.Any, out: Path) -> typin
     return frame_writer(out, args.save_every, args.frames or cfg.frames, exr=args.exr)
 
 
-@contextlib.contextmanager
-def _fuzzing(args: argparse.Namespace) -> typing.Iterator[None]:
-    # --order-seed and --poison reach vkext.poison as its environment switches (rfw imports
-    # nothing from vkext), for this run only
-    given = {"RFW_ORDER_SEED": None if args.order_seed is None else str(args.order_seed),
-             "RFW_POISON": "1" if args.poison else None}
-    saved = {k: os.environ.get(k) for k, v in given.items() if v is not None}
-    os.environ.update({k: v for k, v in given.items() if v is not None})
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+def run_options(args: argparse.Namespace, **given: typing.Any) -> typing.Any:
+    """The command's :class:`rfw.options.RunOptions`, built once here: ``given`` and the
+    flags on the command line, then the environment's ``RFW_*`` variables, then the
+    defaults. A flag not given is None, so the environment's value stands."""
+    from .options import RunOptions
+
+    def flag(name: str) -> bool | None:  # store_true: absent is "not given", not False
+        return True if getattr(args, name, False) else None
+
+    return RunOptions.from_env(
+        validation=flag("validate"), alias=False if getattr(args, "no_alias", False) else None,
+        order_seed=getattr(args, "order_seed", None), poison=flag("poison"), **given)
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -267,7 +261,7 @@ def cmd_view(args: argparse.Namespace) -> int:
          scene=args.scene, fetch=args.fetch, frames=args.frames,
          script=[k for k in (args.keys or "").split(",") if k], overlay=not args.no_overlay,
          screenshot=Path(args.screenshot) if args.screenshot else None,
-         backend=args.backend, validation=args.validate)
+         backend=args.backend, options=run_options(args))
     return 0
 
 

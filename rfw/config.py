@@ -32,11 +32,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from . import env
 from .errors import RfwError, check_identifier, check_number
 from .graph import Graph, GraphBuilder, GraphError
 from .graph.errors import did_you_mean
 from .graph.resources import SizeRule
+from .options import MAX_FRAMES_IN_FLIGHT
 from .passes import SCENE_NEEDS, Pass
 from .registry import get_pass
 
@@ -46,9 +46,6 @@ _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar", "gltf", "path")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
 MAX_SIZE = 16384  # pixels per side: beyond any device's 2D image limit we know of
-# frames submitted and not waited for (rfw.frame.frames_in_flight): one bound for the
-# config key, --set and RFW_FRAMES_IN_FLIGHT
-MAX_FRAMES_IN_FLIGHT = env.MAX_FRAMES_IN_FLIGHT
 
 
 @dataclass
@@ -76,7 +73,7 @@ class Config:
     base: list[PassEntry] = field(default_factory=list)  # the passes as the file declares
     explicit: list[tuple[str, Any]] = field(default_factory=list)  # --set pass.key=value
     async_compute: str = "auto"  # compute beside raster on a second queue (rfw.graph.queues)
-    frames_in_flight: int | None = None  # None: RFW_FRAMES_IN_FLIGHT, else 2 (rfw.frame)
+    frames_in_flight: int | None = None  # None: RunOptions.default_in_flight (rfw.options)
 
     def entry(self, name: str) -> PassEntry:
         for p in self.passes:

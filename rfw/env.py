@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import RfwError
+from .options import ASYNC_QUEUES, MAX_FRAMES_IN_FLIGHT, MAX_SEED
 
 TRUE, FALSE = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
 _INTEGER = re.compile(r"[+-]?[0-9]+")  # ascii digits only: int() takes '٣' and '1_0'
@@ -99,8 +100,6 @@ def word(name: str, pattern: str, expected: str) -> str | None:
     return raw
 
 
-MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for (rfw.config uses it too)
-MAX_SEED = 2**32 - 1  # vkext.poison's order seeds
 VIEW_FORMATS = ("bgra8unorm", "rgba8unorm", "bgra8unorm-srgb", "rgba8unorm-srgb")
 RAYCAST_PLACEMENTS = ("0", "1", "rays", "hits", "host", "auto")
 
@@ -120,8 +119,7 @@ READERS: dict[str, Callable[[], Any]] = {
     "RFW_VK_BUNDLES": lambda: flag("RFW_VK_BUNDLES", True),
     "RFW_VK_FRAME_REPLAY": lambda: flag("RFW_VK_FRAME_REPLAY", True),
     "RFW_VK_FRAME_SPAN": lambda: flag("RFW_VK_FRAME_SPAN"),
-    "RFW_VK_ASYNC_QUEUE": lambda: choice("RFW_VK_ASYNC_QUEUE", ("family", "graphics"),
-                                         "family"),
+    "RFW_VK_ASYNC_QUEUE": lambda: choice("RFW_VK_ASYNC_QUEUE", ASYNC_QUEUES, "family"),
     "RFW_RAYCAST_MAPPED": lambda: choice("RFW_RAYCAST_MAPPED", RAYCAST_PLACEMENTS, "auto"),
 }
 

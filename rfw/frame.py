@@ -7,7 +7,7 @@ backend, or the per-backend parts of a mixed plan, :func:`rfw.mixed.split`), ``s
 uploads the scene and makes the executors, and the :class:`Frame` runs them.
 
 **Frames in flight.** An executor submits a frame and returns without waiting for it: up to
-``frames_in_flight()`` frames (default 2, ``RFW_FRAMES_IN_FLIGHT=1`` waits for each, as
+``RunOptions.in_flight()`` frames (:mod:`rfw.options`; default 2, 1 waits for each, as
 before) run on the GPU while the next ones record. Each has a slot (:class:`InFlight`) with
 its own command buffer, fence, timestamp queries and readback; a frame waits only for the
 frame that last used its slot, and that frame's timings are appended then. Everything that
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .backend import Backend, Devices, get_backend
-from .config import MAX_FRAMES_IN_FLIGHT, Built, Config, pass_class
+from .config import Built, Config, pass_class
 from .errors import (
     RfwError,
     RfwTypeError,
@@ -41,22 +41,18 @@ from .errors import (
 )
 from .graph import CompiledGraph
 from .mixed import MixedPlan, split
-
-FRAMES_IN_FLIGHT_ENV = "RFW_FRAMES_IN_FLIGHT"
-DEFAULT_FRAMES_IN_FLIGHT = 2
+from .options import DEFAULT, DEFAULT_FRAMES_IN_FLIGHT, MAX_FRAMES_IN_FLIGHT, RunOptions
 
 
 def frames_in_flight(value: Any = None) -> int:
-    """How many frames an executor keeps in flight: ``value`` when given, else the
-    environment's ``RFW_FRAMES_IN_FLIGHT``, else 2. 1 waits for every frame before the next
-    one records (the same-run baseline); a bad value is one line naming where it came from."""
-    if value is not None:
-        return check_number(value, "frames_in_flight", kind=int, lo=1,
-                            hi=MAX_FRAMES_IN_FLIGHT, element="frames_in_flight")
-    from . import env
-
-    chosen = env.get(FRAMES_IN_FLIGHT_ENV)
-    return DEFAULT_FRAMES_IN_FLIGHT if chosen is None else chosen
+    """How many frames an executor keeps in flight: ``value`` checked (1 to 8), else 2. 1
+    waits for every frame before the next one records (the same-run baseline). A run's
+    setting is its :class:`rfw.options.RunOptions` (``in_flight``), which the frame driver
+    hands the executors (:func:`start`)."""
+    if value is None:
+        return DEFAULT_FRAMES_IN_FLIGHT
+    return check_number(value, "frames_in_flight", kind=int, lo=1, hi=MAX_FRAMES_IN_FLIGHT,
+                        element="frames_in_flight")
 
 
 class InFlight:
@@ -463,20 +459,22 @@ class Side:
     outputs: tuple[str, ...]  # graph outputs it holds
 
 
-def prepare(built: Built, backend: str, devices: Devices, *, alias: bool = True,
+def prepare(built: Built, backend: str, devices: Devices, *, options: RunOptions = DEFAULT,
             mix: bool = True) -> tuple[MixedPlan, dict[str, Side]]:
     """Split ``built`` (``split``), then compile each backend's part for its device (fitted
-    to its memory requirements) and check that backend can run its passes. ``mix=False``:
-    the whole graph on ``backend`` (a frame of one side, no bridges)."""
+    to its memory requirements, with ``options``: aliasing, vk's order seed) and check that
+    backend can run its passes. ``mix=False``: the whole graph on ``backend`` (a frame of one
+    side, no bridges)."""
     if not mix:
-        return _whole(built, backend, devices, alias=alias)
+        return _whole(built, backend, devices, options)
     mixed = split(built, backend)
     sides: dict[str, Side] = {}
     for s in mixed.sides:
         be = get_backend(s, file=built.graph.source, element=None)
         device = devices.get(be)
         outputs = tuple(o for o in mixed.plan.outputs if mixed.owner.get(o) == s)
-        plan, fitted = be.fit(mixed.graphs[s], device, alias=alias, readback=bool(outputs))
+        plan, fitted = be.fit(mixed.graphs[s], device, readback=bool(outputs),
+                              options=options)
         mixed.check(s, plan)
         passes = {n: built.passes[n] for n in plan.order if n in built.passes}
         sides[s] = Side(be, device, plan, fitted, passes, outputs)
@@ -485,11 +483,11 @@ def prepare(built: Built, backend: str, devices: Devices, *, alias: bool = True,
     return mixed, sides
 
 
-def _whole(built: Built, backend: str, devices: Devices, *,
-           alias: bool) -> tuple[MixedPlan, dict[str, Side]]:
+def _whole(built: Built, backend: str, devices: Devices,
+           options: RunOptions) -> tuple[MixedPlan, dict[str, Side]]:
     be = get_backend(backend, file=built.graph.source)
     device = devices.get(be)
-    plan, fitted = be.fit(built.graph, device, alias=alias, readback=True)
+    plan, fitted = be.fit(built.graph, device, readback=True, options=options)
     be.check(plan, built.passes)  # e.g. a missing GLSL source fails before any upload
     whole = MixedPlan(plan, backend, dict.fromkeys(plan.order, backend), {},
                       {backend: built.graph}, built.slots,
@@ -498,11 +496,12 @@ def _whole(built: Built, backend: str, devices: Devices, *,
 
 
 def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera: Any = None,
-          size: tuple[int, int] | None = None, alias: bool = True,
+          size: tuple[int, int] | None = None, options: RunOptions = DEFAULT,
           uploads: dict[str, Any] | None = None) -> Frame:
-    """Upload ``scene`` to each backend used and make its executor; the frame owns both.
-    ``uploads`` maps a backend to a scene already uploaded there (e.g. ``rfw view``'s, kept
-    across changes of config): used as it is, and left to the caller to destroy."""
+    """Upload ``scene`` to each backend used and make its executor (with ``options``: frames
+    in flight, vk's caches and fuzzing); the frame owns both. ``uploads`` maps a backend to a
+    scene already uploaded there (e.g. ``rfw view``'s, kept across changes of config): used
+    as it is, and left to the caller to destroy."""
     frame = Frame(mixed, {}, {s: side.backend for s, side in sides.items()})
     try:
         for s, side in sides.items():
@@ -516,7 +515,8 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
                 frame.scenes.append(uploaded)
             frame.executors[s] = side.backend.executor(
                 side.device, side.plan, side.passes, mixed.slots, uploaded,
-                readback=side.outputs, alias=alias, fitted=side.fitted)
+                readback=side.outputs, fitted=side.fitted, options=options)
+        frame.keep_in_flight(options.in_flight())  # each executor, whether it took options or not
     except BaseException:
         frame.destroy()
         raise
@@ -526,16 +526,17 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
 
 
 def open_frame(built: Built, backend: str = "wgpu", *, devices: Any = (), scene: Any = None,
-               camera: Any = None, size: tuple[int, int] | None = None, alias: bool = True,
-               validation: bool = False) -> Frame:
+               camera: Any = None, size: tuple[int, int] | None = None,
+               options: RunOptions = DEFAULT) -> Frame:
     """``prepare`` and ``start`` in one: a frame of ``built`` ready to run. ``devices`` is
     a :class:`rfw.backend.Devices` or devices to use; a backend with passes and none of them
-    gets a device made here (with ``validation``) that the frame's ``destroy()`` releases."""
+    gets a device made here (with ``options``: its validation layer, GPU, queues) that the
+    frame's ``destroy()`` releases."""
     own = not isinstance(devices, Devices)
-    devs = Devices(devices, validation=validation) if own else devices
+    devs = Devices(devices, options=options) if own else devices
     try:
-        mixed, sides = prepare(built, backend, devs, alias=alias)
-        frame = start(mixed, sides, scene=scene, camera=camera, size=size, alias=alias)
+        mixed, sides = prepare(built, backend, devs, options=options)
+        frame = start(mixed, sides, scene=scene, camera=camera, size=size, options=options)
     except BaseException:
         if own:
             devs.close()

@@ -1,16 +1,19 @@
 """How a run runs, read once at the edge and passed down: :class:`RunOptions`.
 
-The CLI, the Python API (:func:`rfw.render.render`, :func:`rfw.api.run`) and the bench
-worker build one ``RunOptions`` from their arguments, the config and the environment
-(``RunOptions.from_env``: the ``RFW_*`` variables of :mod:`rfw.env`, each checked there), and
-hand it to the frame driver, which hands it to the backends and their executors. Nothing
-below the edge reads the environment for these: a test (tests/core/test_architecture.py)
-checks that no module but :mod:`rfw.env` touches ``os.environ`` for an ``RFW_*`` name and
-that only the edge modules import :mod:`rfw.env`.
+The CLI, the Python API (:func:`rfw.render.render`, :func:`rfw.api.run`,
+:class:`rfw.api.Session`, the default device of ``rfw.raycast``) and the bench worker build
+one ``RunOptions`` from their arguments and the environment (``RunOptions.from_env``: the
+``RFW_*`` variables of :mod:`rfw.env`, each checked there), and hand it to the frame driver,
+which hands it to the backends, their devices and executors. A config's own keys
+(``frames``, ``frames_in_flight``) stand between the two: :meth:`RunOptions.in_flight`. Nothing
+below the edge reads the environment for these: tests/core/test_options.py checks that no
+module but :mod:`rfw.env` touches ``os.environ`` for an ``RFW_*`` name, which modules read
+:mod:`rfw.env`, and which call ``from_env``.
 
 Where files live (``RFW_CACHE*``), whether scenes may be fetched (``RFW_FETCH``), a window's
-format (``RFW_VIEW_FORMAT``) and the commit a report names (``RFW_COMMIT``) are not options of
-a run: they say where the process keeps things, and their readers are listed in the test.
+format (``RFW_VIEW_FORMAT``), the commit a report names (``RFW_COMMIT``) and where ray streams
+live (``RFW_RAYCAST_MAPPED``) are not options of a run: they say where the process keeps
+things, and their readers are listed in the test.
 """
 
 from __future__ import annotations
@@ -19,7 +22,14 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import RfwTypeError, check_bool, check_number, did_you_mean, type_name
+from .errors import (
+    RfwTypeError,
+    RfwValueError,
+    check_bool,
+    check_number,
+    did_you_mean,
+    type_name,
+)
 
 MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for
 DEFAULT_FRAMES_IN_FLIGHT = 2
@@ -28,7 +38,7 @@ ASYNC_QUEUES = ("family", "graphics")
 
 # field -> the environment variable it falls back to (rfw.env reads and checks it)
 ENVIRONMENT = {
-    "frames_in_flight": "RFW_FRAMES_IN_FLIGHT",
+    "default_in_flight": "RFW_FRAMES_IN_FLIGHT",
     "order_seed": "RFW_ORDER_SEED",
     "poison": "RFW_POISON",
     "bundles": "RFW_VK_BUNDLES",
@@ -45,7 +55,9 @@ class RunOptions:
 
     ``frames``: timed frames (None: the config's); ``warmup``: untimed frames before them;
     ``frames_in_flight``: frames on the GPU while the next records (None: the config's,
-    else 2; 1 waits for each); ``validation``: the API's validation layer on a device the run
+    else ``default_in_flight``; 1 waits for each); ``default_in_flight``: where neither the
+    run nor the config says (``RFW_FRAMES_IN_FLIGHT``, below a config's key as
+    docs/environment.md has it; 2); ``validation``: the API's validation layer on a device the run
     makes; ``alias``: transients share memory where the backend places it (vk);
     ``order_seed`` / ``poison``: schedule fuzzing (vk: a seeded legal reordering, poisoned
     transients); ``bundles`` / ``frame_replay``: vk's record-once caches (off: the
@@ -56,6 +68,7 @@ class RunOptions:
     frames: int | None = None
     warmup: int = 1
     frames_in_flight: int | None = None
+    default_in_flight: int = DEFAULT_FRAMES_IN_FLIGHT
     validation: bool = False
     alias: bool = True
     order_seed: int | None = None
@@ -76,11 +89,13 @@ class RunOptions:
                 lo = 0 if name in ("order_seed", "gpu") else 1
                 check_number(value, name, kind=int, lo=lo, hi=hi, element=where)
         check_number(self.warmup, "warmup", kind=int, lo=0, element=where)
+        check_number(self.default_in_flight, "default_in_flight", kind=int, lo=1,
+                     hi=MAX_FRAMES_IN_FLIGHT, element=where)
         for name in ("validation", "alias", "poison", "bundles", "frame_replay",
                      "frame_span"):
             check_bool(getattr(self, name), name, element=where)
         if self.async_queue not in ASYNC_QUEUES:
-            raise RfwTypeError(f"'async_queue' must be one of {', '.join(ASYNC_QUEUES)}, "
+            raise RfwValueError(f"'async_queue' must be one of {', '.join(ASYNC_QUEUES)}, "
                                f"not {self.async_queue!r}", element=where)
 
     @classmethod
@@ -108,11 +123,11 @@ class RunOptions:
         return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
 
     def in_flight(self, config_value: int | None = None) -> int:
-        """Frames in flight: this run's, else the config's, else 2."""
+        """Frames in flight: this run's, else the config's, else ``default_in_flight``."""
         for value in (self.frames_in_flight, config_value):
             if value is not None:
                 return value
-        return DEFAULT_FRAMES_IN_FLIGHT
+        return self.default_in_flight
 
 
 DEFAULT = RunOptions()

@@ -26,6 +26,7 @@ import numpy as np
 
 from .backend import Backend, get_backend, installed
 from .errors import RfwError, RfwTypeError, RfwValueError, check_type, type_name
+from .options import RunOptions
 from .scene.model import Instance, Mesh, Scene
 
 _default_device: Any = None
@@ -130,7 +131,9 @@ def _device(backend: Backend) -> Any:
     global _default_device
     with _default_lock:
         if _default_device is None or not getattr(_default_device, "alive", True):
-            _default_device = backend.make_device(label="rfw.raycast")
+            # an edge, as rfw.render is: the device RFW_GPU (and the rest) asks for
+            _default_device = backend.make_device(label="rfw.raycast",
+                                                  options=RunOptions.from_env())
             atexit.register(backend.destroy_device, _default_device)
         return _default_device
 

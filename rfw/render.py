@@ -23,22 +23,26 @@ from .frame import (
     prepare,
     start,
 )
-from .frame import (
-    frames_in_flight as in_flight_setting,
-)
+from .options import RunOptions, check_options
 
 # timings.json's fields a backend adds, in this order after the ones every run has
 EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
 
 
-def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup: int = 1,
-           device: Any = None, devices: Iterable[Any] = (), backend: str = "wgpu",
-           validation: bool = False, alias: bool = True,
+def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
+           warmup: int | None = None, device: Any = None, devices: Iterable[Any] = (),
+           backend: str = "wgpu", validation: bool | None = None, alias: bool | None = None,
            frames_in_flight: int | None = None,
-           each_frame: Callable[[int, Frame], None] | None = None) -> Result:
+           each_frame: Callable[[int, Frame], None] | None = None,
+           options: RunOptions | None = None) -> Result:
     """Build, compile and run ``cfg`` on ``backend`` (a name in the ``rfw.backends``
     entry-point group: ``wgpu``, ``vk`` or an installed one); returns images and timings
     (GPU ms from timestamps): the one frame driver of every backend.
+
+    ``options`` (:class:`rfw.options.RunOptions`) say how the frames run; without them they
+    are read from the environment here (``RunOptions.from_env``: render is an edge, as the
+    CLI is). ``frames``, ``warmup``, ``validation``, ``alias`` and ``frames_in_flight``,
+    when given, replace those of the options. Below this nothing reads the environment.
 
     ``device`` (and ``devices``) may be any backend's: each serves the backend that owns it,
     and a backend the run needs without one gets a device made here, with the validation
@@ -54,7 +58,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
 
     ``frames_in_flight`` frames run on the GPU while the next ones record (default: the
     config's ``frames_in_flight``, else ``RFW_FRAMES_IN_FLIGHT``, else 2; 1 waits for every
-    frame: :mod:`rfw.frame`). Images
+    frame: :mod:`rfw.frame`, ``RunOptions.in_flight``). Images
     and timing samples are the same either way: the frames are drained before anything is
     read, and the last timed frame's drain is part of its wall time.
 
@@ -66,9 +70,15 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
     if frames is not None:
         check_number(frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
     # a bad value fails before any device work
-    in_flight = in_flight_setting(cfg.frames_in_flight if frames_in_flight is None
-                                  else frames_in_flight)
-    devs = Devices((device, *devices), validation=validation)
+    given = {"frames": frames, "warmup": warmup, "validation": validation, "alias": alias,
+             "frames_in_flight": frames_in_flight}
+    options = RunOptions.from_env(**given) if options is None else \
+        check_options(options).replace(**given)
+    if options.frames is not None:
+        check_number(options.frames, "frames", kind=int, lo=1, hi=MAX_FRAMES, file=cfg.source)
+    in_flight = options.in_flight(cfg.frames_in_flight)
+    options = options.replace(frames_in_flight=in_flight)  # what the executors keep
+    devs = Devices((device, *devices), options=options)
     frame = None
     try:
         techniques: dict[str, str] = {}
@@ -83,18 +93,19 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         # passes with nothing to do on this scene (points_lines without strokes) left out
         if for_scene(cfg, scene) is not cfg:
             built = build(cfg, scene)
-        mixed, sides = prepare(built, backend, devs, alias=alias, mix=mix)
+        mixed, sides = prepare(built, backend, devs, options=options, mix=mix)
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
-        frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size, alias=alias)
-        frame.keep_in_flight(in_flight)
-        n = frames or cfg.frames
+        frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size,
+                      options=options)
+        n = options.frames or cfg.frames
         if path is None and each_frame is None:
-            frame.run(warmup)
+            frame.run(options.warmup)
             frame.clear_timings()
             frame.run(n)
         else:  # a camera per frame: rfw.camera_path drives the frames
-            cameras = run_path(frame, path, warmup=warmup, frames=n, each_frame=each_frame)
+            cameras = run_path(frame, path, warmup=options.warmup, frames=n,
+                               each_frame=each_frame)
         frame.drain()  # run() has; said again for what reads results below
         images = {name: frame.read(name) for name in frame.plan.outputs}
         extras = {k: v for s in sides.values()  # e.g. what the frame allocated
@@ -105,7 +116,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None, warmup:
         devs.close()  # leak reports arrive here, so count messages after it
     for s in sides.values():
         extras.update(s.backend.report(frame.executors[s.backend.name], s.device,
-                                       validation=validation))
+                                       validation=options.validation))
     extras["techniques"] = techniques or None
     timings = _mixed_record(frame, sides) if mix else _record(frame, sides[backend])
     timings.update(frame_record(cfg, n, scene, frame.default_light, timings.pop("passes"),

@@ -41,13 +41,13 @@ from .config import Config, apply_overrides, build, resolve_auto
 from .errors import RfwError
 from .frame import (
     camera_for,
-    frames_in_flight,
     load_scene_for,
     pinned_elsewhere,
     prepare,
     start,
 )
 from .graph import compile
+from .options import DEFAULT, RunOptions
 from .overlay import Overlay
 from .render import backend_for
 
@@ -84,7 +84,7 @@ class Viewer:
     def __init__(self, cfg: Config, *, scene: Any = None, script: list[str] = (),
                  frames: int | None = None, report_every: int = 60, canvas: Any = None,
                  overlay: bool = True, screenshot: Path | None = None,
-                 backend: str | None = None, validation: bool = False):
+                 backend: str | None = None, options: RunOptions = DEFAULT):
         from rendercanvas.glfw import RenderCanvas, loop
 
         from .backends.wgpu import Device
@@ -106,8 +106,9 @@ class Viewer:
         # the window's device: it presents, and runs the wgpu part of a frame; another
         # backend's device is made on first use (with its validation layer: --validate)
         self.device = Device()
-        self.devices = Devices((self.device,), validation=validation)
-        self.validation = validation
+        self.options = options  # validation, frames in flight, vk's switches (rfw.options)
+        self.devices = Devices((self.device,), options=options)
+        self.validation = options.validation
         self.uploads: dict[str, Any] = {}  # backend -> the scene uploaded there, kept
         self.context = self.canvas.get_wgpu_context()
         self.format = present_format(self.context.get_preferred_format(self.device.adapter))
@@ -170,13 +171,15 @@ class Viewer:
             resolved, techniques = resolve_auto(cfg, run.caps(self.devices.get(run)))
         mix = pinned_elsewhere(resolved, self.backend)
         built = build(resolved, self.scene)
-        mixed, sides = prepare(built, self.backend, self.devices, mix=mix)
+        # frames in flight: the run's, else this config's (as rfw run does)
+        options = self.options.replace(
+            frames_in_flight=self.options.in_flight(cfg.frames_in_flight))
+        mixed, sides = prepare(built, self.backend, self.devices, options=options, mix=mix)
         for name, side in sides.items():  # the scene goes up once per backend, not per change
             if name not in self.uploads:
                 self.uploads[name] = side.backend.scene(side.device, self.scene, self.camera,
                                                         cfg.size)
-        frame = start(mixed, sides, uploads=self.uploads)
-        frame.keep_in_flight(frames_in_flight(cfg.frames_in_flight))  # as rfw run does
+        frame = start(mixed, sides, options=options, uploads=self.uploads)
         output = mixed.plan.outputs[0]
         old = self.frame
         if old is not None:
@@ -563,7 +566,7 @@ def check_screenshot(path: Path | None) -> None:
 def view(config: Path, sets: list[str], *, scene: str | None = None,
          frames: int | None = None, script: list[str] = (), overlay: bool = True,
          screenshot: Path | None = None, backend: str | None = None,
-         validation: bool = False, fetch: bool = False) -> Viewer:
+         options: RunOptions = DEFAULT, fetch: bool = False) -> Viewer:
     from .config import load_config
     from .scene.names import config_scene
 
@@ -579,7 +582,7 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
     compile(build(cfg).graph)  # config and scene errors first, with or without a display
     backend = backend or backend_for(cfg)
     get_backend(backend, file=cfg.source)  # an unknown name: one line naming the installed
-    if validation and backend == "wgpu" and not pinned_elsewhere(cfg, backend):
+    if options.validation and backend == "wgpu" and not pinned_elsewhere(cfg, backend):
         raise RfwError("--validate needs a Vulkan part of the frame: --backend vk, or a "
                        "pass pinned to vk", file=cfg.source, element="--validate")
     loaded = load_scene_for(cfg)
@@ -588,7 +591,7 @@ def view(config: Path, sets: list[str], *, scene: str | None = None,
         raise RfwError("no display for a window (set DISPLAY, or run under xvfb-run -a); "
                        "'rfw run' renders headless", element="rfw view")
     v = Viewer(cfg, scene=loaded, frames=frames, script=script, overlay=overlay,
-               screenshot=screenshot, backend=backend, validation=validation)
+               screenshot=screenshot, backend=backend, options=options)
     start = time.perf_counter()
     v.run()
     v.say(f"closed after {v.frame_count} frames in {time.perf_counter() - start:.1f} s")

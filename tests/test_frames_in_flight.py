@@ -20,6 +20,7 @@ from rfw.backends.base import FrameExecutor
 from rfw.config import apply_overrides, load_config
 from rfw.errors import RfwError
 from rfw.frame import InFlight, frames_in_flight
+from rfw.options import RunOptions
 from rfw.render import render
 
 from .conftest import tiny_scene
@@ -99,18 +100,23 @@ def test_the_last_timed_frame_drains_inside_its_frame_call(backend, monkeypatch)
 
 
 def test_frames_in_flight_setting(monkeypatch):
+    # the environment is read at the edge, into RunOptions (rfw.options)
     monkeypatch.delenv("RFW_FRAMES_IN_FLIGHT", raising=False)
-    assert frames_in_flight() == 2
+    assert RunOptions.from_env().in_flight() == 2 == frames_in_flight()
     monkeypatch.setenv("RFW_FRAMES_IN_FLIGHT", " 3 ")
-    assert frames_in_flight() == 3
-    assert frames_in_flight(1) == 1  # an explicit value wins
+    assert RunOptions.from_env().in_flight() == 3
+    assert frames_in_flight() == 2  # below the edge nothing reads it
+    assert RunOptions.from_env(frames_in_flight=1).in_flight() == 1  # an explicit value wins
+    assert frames_in_flight(1) == 1
     for bad in ("0", "9", "two", "1.5", "-1"):
         monkeypatch.setenv("RFW_FRAMES_IN_FLIGHT", bad)
         with pytest.raises(RfwError, match="RFW_FRAMES_IN_FLIGHT"):
-            frames_in_flight()
+            RunOptions.from_env()
     for bad in (0, 9, 2.0, True, "2"):
         with pytest.raises(RfwError, match="frames_in_flight"):
             frames_in_flight(bad)
+        with pytest.raises(RfwError, match="frames_in_flight"):
+            RunOptions(frames_in_flight=bad)
 
 
 def test_the_config_key_wins_over_the_environment(monkeypatch):

@@ -17,6 +17,7 @@ from rfw.config import Config
 from rfw.frame import Result
 from rfw.graph import CompiledGraph
 from rfw.graph.graph import Graph
+from rfw.options import DEFAULT, RunOptions
 from rfw.passes import Pass
 from rfw.render import render
 from rfw.scene.model import Scene
@@ -34,8 +35,10 @@ class VkBackend(BackendBase):
     auto_variants = True  # ray queries, ray pipelines and mesh shaders are per device
     host_writes_depth = True
 
-    def make_device(self, *, validation: bool = False, label: str | None = None) -> VkDevice:
-        return VkDevice(validation=validation, **({"label": label} if label else {}))
+    def make_device(self, *, label: str | None = None,
+                    options: RunOptions = DEFAULT) -> VkDevice:
+        return VkDevice(validation=options.validation, gpu=options.gpu,
+                        async_queue=options.async_queue, **({"label": label} if label else {}))
 
     def owns(self, device: Any) -> bool:
         return isinstance(device, VkDevice)
@@ -49,10 +52,11 @@ class VkBackend(BackendBase):
     def timestamps(self, device: VkDevice) -> bool:
         return "timestamp" in device.caps
 
-    def fit(self, graph: Graph, device: VkDevice, *, alias: bool = True,
-            readback: bool = True) -> tuple[CompiledGraph, Any]:
+    def fit(self, graph: Graph, device: VkDevice, *, readback: bool = True,
+            options: RunOptions = DEFAULT) -> tuple[CompiledGraph, Any]:
         # the plan's transients placed with the driver's exact sizes and alignments
-        return fit_graph(graph, device, alias=alias, readback=readback)
+        return fit_graph(graph, device, alias=options.alias, readback=readback,
+                         order_seed=options.order_seed)
 
     def check(self, plan: CompiledGraph, passes: dict[str, Pass]) -> None:
         check_passes(plan, passes)
@@ -69,9 +73,9 @@ class VkBackend(BackendBase):
 
     def executor(self, device: VkDevice, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
-                 alias: bool, fitted: Any) -> VkExecutor:
-        return VkExecutor(device, plan, passes, slots, scene, readback=readback, alias=alias,
-                          memory_info=fitted)
+                 fitted: Any, options: RunOptions = DEFAULT) -> VkExecutor:
+        return VkExecutor(device, plan, passes, slots, scene, readback=readback,
+                          alias=options.alias, memory_info=fitted, options=options)
 
     def read_bridge(self, executor: VkExecutor, bridge: str, resource: str) -> np.ndarray:
         state = executor.state_in(bridge, resource)  # the plan's transfer-src state there
@@ -118,11 +122,13 @@ class VkBackend(BackendBase):
 
 
 def render_vk(cfg: Config, *, scene: Any = None, frames: int | None = None,
-              device: VkDevice | None = None, validation: bool = False, alias: bool = True,
-              warmup: int = 1) -> Result:
+              device: VkDevice | None = None, validation: bool | None = None,
+              alias: bool | None = None, warmup: int | None = None,
+              options: RunOptions | None = None) -> Result:
     """``rfw.render.render`` on raw Vulkan: images of the graph outputs and timings.json's
     fields, plus ``memory`` (transient bytes allocated against the plan's numbers),
     ``techniques`` (what auto variants chose for the device) and, where the frame has
-    them, ``culling`` and ``accel``. A config that pins passes to wgpu runs mixed."""
+    them, ``culling`` and ``accel``. A config that pins passes to wgpu runs mixed.
+    ``options`` and the keywords as ``render`` takes them."""
     return render(cfg, scene=scene, frames=frames, warmup=warmup, device=device,
-                  backend="vk", validation=validation, alias=alias)
+                  backend="vk", validation=validation, alias=alias, options=options)

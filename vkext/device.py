@@ -14,8 +14,7 @@ from collections import Counter
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
-from rfw import env
-from rfw.backend import gpu_choice, pick_gpu
+from rfw.backend import pick_gpu
 from rfw.errors import RfwError
 
 from .consts import IMPORT_ERROR, VALUE_RETURNING, call_api, const, ffi, lib, vk
@@ -245,21 +244,6 @@ if ffi is not None:
         return 0  # VK_FALSE: do not abort the call
 
 
-ASYNC_QUEUE_ENV = "RFW_VK_ASYNC_QUEUE"  # which second queue async compute uses
-
-
-def async_queue_preference() -> str:
-    """``RFW_VK_ASYNC_QUEUE``: ``family`` (default) or ``graphics`` (see
-    :func:`compute_queue_choice`); anything else is a one-line error naming it.
-
-    Measured on an NVIDIA H200 (driver 580.159.04; ``benchmarks/bench_async.py``,
-    deferred_ssao_shadows at 1280x720, SSAO beside the shadow map): the frame's GPU span
-    with async compute on, over off, was 0.988x on the compute-only family and 1.203x on a
-    second queue of the graphics family (which shares the graphics engine: no overlap,
-    only the semaphores' cost)."""
-    return env.get(ASYNC_QUEUE_ENV)
-
-
 def compute_queue_choice(families: list[tuple[int, int, int]], graphics: int,
                          prefer: str = "family") -> tuple[int, int] | None:
     """The second queue for async compute (``rfw.graph.queues``), as (family, index), from
@@ -271,7 +255,13 @@ def compute_queue_choice(families: list[tuple[int, int, int]], graphics: int,
     second queue first (no ownership transfers: the scene's buffers, made exclusive, are
     read by both queues), else a compute-only family.
     A compute-only family counts where its timestamps work where the graphics family's
-    do (the passes on it are timed). None where there is neither."""
+    do (the passes on it are timed). None where there is neither.
+
+    ``prefer`` is the run option ``async_queue`` (``RFW_VK_ASYNC_QUEUE``). Measured on an
+    NVIDIA H200 (driver 580.159.04; ``benchmarks/bench_async.py``, deferred_ssao_shadows at
+    1280x720, SSAO beside the shadow map): the frame's GPU span with async compute on, over
+    off, was 0.988x on the compute-only family and 1.203x on a second queue of the graphics
+    family (which shares the graphics engine: no overlap, only the semaphores' cost)."""
     def second() -> tuple[int, int] | None:
         return (graphics, 1) if families[graphics][1] > 1 else None
 
@@ -303,16 +293,24 @@ class VkDevice:
         Further device extensions to enable when present (no features are enabled for them).
     debug_utils
         Enable ``VK_EXT_debug_utils`` (labels, object names); default: with validation.
+    gpu
+        The device's index among the machine's GPUs (or, with none, its CPU devices), in
+        the driver's order (the run option ``gpu``, ``RFW_GPU``); None: as ``prefer`` picks.
+    async_queue
+        Which second queue async compute takes: ``family`` or ``graphics``
+        (:func:`compute_queue_choice`; the run option, ``RFW_VK_ASYNC_QUEUE``).
     """
 
     def __init__(self, validation: bool = False, sync_validation: bool = True,
                  prefer: str | None = None, *, extensions: tuple[str, ...] = (),
-                 debug_utils: bool | None = None, label: str = "rfw"):
+                 debug_utils: bool | None = None, label: str = "rfw",
+                 gpu: int | None = None, async_queue: str = "family"):
         if vk is None:
             raise VkUnavailableError(f"the Vulkan loader could not be loaded ({IMPORT_ERROR}); "
                                      "install a Vulkan driver (e.g. Mesa lavapipe) and loader")
         self.messages: list[Message] = []
         self.label = label
+        self.gpu, self.async_queue = gpu, async_queue
         self.instance = self.device = self.messenger = None
         self._children: dict[int, Any] = {}  # id -> object with destroy(), creation order
         self._sink = ffi.new_handle(self.messages)
@@ -439,10 +437,9 @@ class VkDevice:
             raise VkUnavailableError("no Vulkan 1.3 device with a graphics+compute queue; found: "
                                      + (", ".join(seen) or "no devices"))
         pick = min(candidates, key=lambda c: (c[0], c[1]))
-        index = gpu_choice()
-        if index is not None:  # RFW_GPU: that GPU, in the driver's order
+        if self.gpu is not None:  # that GPU, in the driver's order
             pick = pick_gpu([("cpu" if c[0] == 3 else "gpu", c) for c in
-                             sorted(candidates, key=lambda c: c[1])], index, ", ".join(seen))
+                             sorted(candidates, key=lambda c: c[1])], self.gpu, ", ".join(seen))
         _, _, self.physical_device, self.name, self.queue_family = pick
 
     @staticmethod
@@ -461,7 +458,7 @@ class VkDevice:
         families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
         pick = compute_queue_choice([(f.queueFlags, f.queueCount, f.timestampValidBits)
                                      for f in families], self.queue_family,
-                                    async_queue_preference())
+                                    self.async_queue)
         self.compute_family, self.compute_index = pick or (None, None)
 
     def _queue_infos(self) -> tuple[Any, int]:

@@ -180,7 +180,7 @@ class VkExecutor(ExecutorCore):
                  memory_info: dict[str, Any] | None = None,
                  options: RunOptions | None = None):
         options = check_options(options)
-        plan, self.poison = poison.prepare(plan)  # schedule fuzzing: poisoned transients
+        plan, self.poison = poison.prepare(plan, options)  # fuzzing: poisoned transients
         self.device = device
         self._init_core(plan, passes, slots, scene, readback, options)
         self.alias = alias
@@ -225,7 +225,7 @@ class VkExecutor(ExecutorCore):
         self._pin_begin = "timestamp" in device.caps and device.driver_name == "llvmpipe"
         self._host_reset = "host_query_reset" in device.caps
         # whole-frame replay: a frame that would record what its slot's command buffer holds
-        # submits it again (so it is not one-time-submit); RFW_VK_FRAME_REPLAY=0 records
+        # submits it again (so it is not one-time-submit); frame_replay=False records
         # every frame, the baseline a benchmark measures against in the same run
         self.frame_replay = options.frame_replay
         self.primaries = 0  # primary command buffers begun (what tests count)
@@ -237,7 +237,8 @@ class VkExecutor(ExecutorCore):
         self._inputs: tuple | None = None  # what the last frame recorded from (see begin_frame)
         self._frame_barriers = {p: [_chained(b) for b in bs] for p, bs in self._barriers.items()}
         # async compute: the plan's submissions on two queues (vkext.queues); None: one
-        self.queues = async_queues(device, plan, (self._barriers, self._frame_barriers))
+        self.queues = async_queues(device, plan, (self._barriers, self._frame_barriers),
+                                   span=options.frame_span)
         if self.queues is not None and scene is not None:  # the cameras' copy: its own batch
             self.queues.prologue = lambda cmd, slot: scene.copy_camera(cmd, slot.camera)
         try:

@@ -12,7 +12,6 @@ from rfw.graph.graph import Graph
 from rfw.passes import Pass
 from rfw.shaders import ShaderError, program_files
 
-from . import poison
 from .device import VkDevice
 from .memory import memory_options, requirements
 
@@ -20,9 +19,10 @@ from .memory import memory_options, requirements
 # compiling for a device
 
 
-def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
-             readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
-    """Compile ``graph`` for the vk backend with placement rules that fit ``device``.
+def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bool = True,
+             order_seed: int | None = None) -> tuple[CompiledGraph, dict[str, Any]]:
+    """Compile ``graph`` for the vk backend with placement rules that fit ``device`` (and,
+    with ``order_seed``, passes in another valid order: :mod:`vkext.poison`).
 
     The compiler's default placement (texel bytes, 64 KiB image / 256 B buffer alignment) is
     checked against the driver's real requirements (``vkext.memory.memory_options``: its
@@ -37,15 +37,15 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True,
                               "backend runs every pass on Vulkan (frames that mix backends "
                               "run through rfw.render.render)",
                               file=graph.source)
-    return fit_graph(graph, device, alias=alias, readback=readback)
+    return fit_graph(graph, device, alias=alias, readback=readback, order_seed=order_seed)
 
 
-def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
-              readback: bool = True) -> tuple[CompiledGraph, dict[str, Any]]:
+def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bool = True,
+              order_seed: int | None = None) -> tuple[CompiledGraph, dict[str, Any]]:
     """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
     bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
     base = MemoryOptions(alias=alias)
-    order_seed = _order_seed(graph)
+    order_seed = _order_seed(graph, order_seed)
     # the device's capabilities: a pass needing a feature it lacks is refused here, by name
     plan = compile(graph, caps=device.caps, backend="vk", memory=base,
                    order_seed=order_seed)
@@ -71,15 +71,15 @@ def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True,
     return plan, info
 
 
-def _order_seed(graph: Graph) -> int | None:
-    """The schedule-fuzzing order seed (``vkext.poison``) for a frame all on Vulkan; a
+def _order_seed(graph: Graph, seed: int | None) -> int | None:
+    """The schedule-fuzzing order ``seed`` (``vkext.poison``) for a frame all on Vulkan; a
     mixed frame's part (pins elsewhere, or bridges, as rfw.mixed cuts it) keeps its order:
     its driver records it in the full plan's."""
     if any(p.enabled and (p.backend not in (None, "vk")
                           or (p.type == "transfer" and p.name.startswith("bridge.")))
            for p in graph.passes):
         return None
-    return poison.mode().order_seed
+    return seed
 
 
 def plan_fits(plan: CompiledGraph, device: VkDevice, *, readback: bool = True) -> bool:

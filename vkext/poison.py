@@ -16,35 +16,29 @@ synchronization validation silent: every pass writes what it produces before any
 it. A pass that reads a transient before it is written, or a memory plan that lets two live
 resources share bytes, shows up as NaN or magenta in the image.
 
-Switch them on for a block with :func:`fuzzing`, or for a process with ``RFW_ORDER_SEED=N``
-and ``RFW_POISON=1`` (``rfw run --order-seed N --poison`` sets these). The vk executor asks
-:func:`prepare` for a :class:`Poisoner` and lets it record the fills; ``fit_graph`` asks
-:func:`mode` for the seed.
+Both are run options (:class:`rfw.options.RunOptions` ``order_seed`` and ``poison``; the
+edge reads ``rfw run --order-seed N --poison``, else ``RFW_ORDER_SEED=N`` and
+``RFW_POISON=1``). The vk backend hands the seed to the compiler (``fit_graph``) and the
+executor asks :func:`prepare` for a :class:`Poisoner` and lets it record the fills.
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
-from contextvars import ContextVar
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import replace
 from functools import reduce
 from typing import Any
 
-from rfw import env
-from rfw.errors import check_number
 from rfw.graph import CompiledGraph
 from rfw.graph.formats import format_info
 from rfw.graph.plan import Barrier
 from rfw.graph.sync import NONE, State
+from rfw.options import RunOptions
 
 from .commands import BufferBarrier, ImageBarrier, barrier, image_layout
 from .consts import const, ffi, lib
 from .memory import Buffer, Image
-
-SEED_ENV, POISON_ENV = "RFW_ORDER_SEED", "RFW_POISON"
-MAX_SEED = env.MAX_SEED
 
 # the patterns: loud, and never what a pass that writes its output leaves behind
 NAN = float("nan")
@@ -61,46 +55,11 @@ FILLED_BUFFER = replace(FILLED_IMAGE, layout=None)
 STATS: Counter[str] = Counter()
 
 
-@dataclass(frozen=True)
-class Fuzz:
-    """The test mode in force: ``order_seed`` (None: the compiler's own order) and
-    ``poison``."""
-
-    order_seed: int | None = None
-    poison: bool = False
-
-
-_MODE: ContextVar[Fuzz | None] = ContextVar("rfw_fuzz", default=None)
-
-
-@contextmanager
-def fuzzing(*, order_seed: int | None = None, poison: bool = True) -> Iterator[Fuzz]:
-    """Compile vk plans with ``order_seed`` and poison their transients inside the block."""
-    if order_seed is not None:
-        _check_seed(order_seed, "order_seed")
-    token = _MODE.set(Fuzz(order_seed, bool(poison)))
-    try:
-        yield _MODE.get()
-    finally:
-        _MODE.reset(token)
-
-
-def mode() -> Fuzz:
-    """The mode of the enclosing :func:`fuzzing` block, else of the environment."""
-    m = _MODE.get()
-    if m is not None:
-        return m
-    return Fuzz(env.get(SEED_ENV), env.get(POISON_ENV))
-
-
-def _check_seed(value: Any, key: str) -> int:
-    return check_number(value, key, kind=int, lo=0, hi=MAX_SEED)
-
-
-def prepare(plan: CompiledGraph) -> tuple[CompiledGraph, Poisoner | None]:
-    """In poison mode: the plan with transfer-destination usage on its transients (a fill
-    needs it) and a :class:`Poisoner` for it; otherwise the plan unchanged and None."""
-    if not mode().poison:
+def prepare(plan: CompiledGraph,
+            options: RunOptions) -> tuple[CompiledGraph, Poisoner | None]:
+    """With ``options.poison``: the plan with transfer-destination usage on its transients
+    (a fill needs it) and a :class:`Poisoner` for it; otherwise the plan unchanged and None."""
+    if not options.poison:
         return plan, None
     resources = tuple(replace(r, usages=r.usages | {"transfer_dst"}) if r.transient else r
                       for r in plan.resources)

@@ -29,7 +29,6 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from rfw import env
 from rfw.errors import RfwError
 from rfw.graph import CompiledGraph
 from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, QueuePlan, Submission, Transfer
@@ -41,7 +40,6 @@ from .consts import const, ffi, lib, vk
 from .device import VkDevice
 from .memory import Buffer, Image
 
-SPAN_ENV = "RFW_VK_FRAME_SPAN"
 # the prologue's batch: first on the graphics queue, waiting for nothing (its commands order
 # themselves after what ran before on the queue), signalling the frame's graphics base
 PROLOGUE = Submission(-1, GRAPHICS, (), 0)
@@ -83,16 +81,17 @@ def on_compute_family(state: State) -> State:
 
 
 def async_queues(device: VkDevice, plan: CompiledGraph,
-                 barriers: tuple[dict[str, list], ...] = ()) -> AsyncQueues | None:
+                 barriers: tuple[dict[str, list], ...] = (), *,
+                 span: bool = False) -> AsyncQueues | None:
     """The runner of ``plan``'s submissions, or None when the plan has one queue (unless
-    ``RFW_VK_FRAME_SPAN=1``: then a one-queue frame is one batch through the runner too, and
-    its GPU span is measured the same way, the baseline ``benchmarks/bench_async.py``
-    compares against). The
+    ``span``, the run option ``frame_span`` (``RFW_VK_FRAME_SPAN=1``): then a one-queue frame
+    is one batch through the runner too, and its GPU span is measured the same way, the
+    baseline ``benchmarks/bench_async.py`` compares against). The
     barriers an ownership acquire replaces are taken out of each ``barriers`` dict (pass ->
     its barriers, the executor's), and those of a pass on another family than the graphics
     one are put as its queue can record them (:meth:`AsyncQueues.barriers_for`)."""
     q = plan.queues
-    if q is None or (COMPUTE not in q.queues and not env.get(SPAN_ENV)):
+    if q is None or (COMPUTE not in q.queues and not span):
         return None
     runner = AsyncQueues(device, q)
     for table in barriers:

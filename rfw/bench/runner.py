@@ -178,8 +178,8 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
     # a timeout past MAX_TIMEOUT overflows the wait of subprocess.run
     timeout = check_number(timeout, "--timeout", kind=float, lo=1e-3, hi=MAX_TIMEOUT,
                            element="--timeout")
-    from ..frame import frames_in_flight
-    frames_in_flight()  # a bad RFW_FRAMES_IN_FLIGHT: refused once here, not by every run
+    from ..options import RunOptions
+    RunOptions.from_env()  # a bad RFW_* run option: refused once here, not by every run
     if peer_frames is not None:
         peer_frames = check_number(peer_frames, "--peer-frames", kind=int, lo=1, hi=MAX_FRAMES,
                                    element="--peer-frames")

@@ -76,8 +76,9 @@ def _samples(executor: Any) -> dict[str, dict[str, list[float]]]:
 
 
 def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int] | None,
-        frames: int, warmup: int, backend: str) -> tuple[dict[str, Any], Any]:
-    """Render once; returns the record and the first output as 8-bit RGBA."""
+        backend: str, options: Any) -> tuple[dict[str, Any], Any]:
+    """Render once as ``options`` (:class:`rfw.options.RunOptions`, ``frames`` and
+    ``warmup`` given) say; returns the record and the first output as 8-bit RGBA."""
     from ..backends.base import FrameExecutor
     from ..config import apply_overrides, load_config
     from ..frame import Frame
@@ -90,13 +91,14 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     if size:
         sets.append(f"size={size[0]}x{size[1]}")
     cfg = apply_overrides(cfg, sets)
+    frames, warmup = options.frames, options.warmup
     clock = FrameClock()
     clock.patch(FrameExecutor)  # one backend: the executor's own frames
     clock.patch(Frame)  # mixed: the frame that walks every side (their own frame() idle)
     try:
         with watching_shaders() as shader_sources:
             t0 = time.perf_counter()
-            result = render(cfg, frames=frames, warmup=warmup, backend=backend)
+            result = render(cfg, backend=backend, options=options)
             total_s = time.perf_counter() - t0
     finally:
         clock.restore()
@@ -140,7 +142,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
                             "unaliased_bytes": plan.unaliased_bytes, "alias": None,
                             "source": "plan"}
     if "camera_path" in timings and timings.get("culling"):
-        record["culling_frames"] = culling_along_path(cfg, frames=frames, backend=backend)
+        record["culling_frames"] = culling_along_path(cfg, backend=backend, options=options)
     formats = {r.name: r.format for r in plan.resources}
     first = next(iter(result.images))
     record["output"] = first
@@ -167,7 +169,7 @@ def _with_camera_writes(wall_ms: list[float], timings: dict[str, Any]) -> list[f
     return [w + c["write_ms"] for w, c in zip(wall_ms, cams, strict=True)]
 
 
-def culling_along_path(cfg: Any, *, frames: int, backend: str) -> list[Any]:
+def culling_along_path(cfg: Any, *, backend: str, options: Any) -> list[Any]:
     """The culling counters of each frame of ``cfg``'s camera path, from an untimed replay
     of the path (reading them back waits for each frame, which the timed run must not)."""
     from ..backend import get_backend
@@ -180,7 +182,7 @@ def culling_along_path(cfg: Any, *, frames: int, backend: str) -> list[Any]:
         frame.drain()
         counters.append(be.collect(frame.executors[backend]).get("culling"))
 
-    render(cfg, frames=frames, warmup=1, backend=backend, each_frame=read)
+    render(cfg, backend=backend, each_frame=read, options=options.replace(warmup=1))
     return counters
 
 
@@ -198,8 +200,12 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     try:
+        from ..options import RunOptions
+
+        # this process is its own edge: its options from its arguments and environment
+        options = RunOptions.from_env(frames=args.frames, warmup=max(1, args.warmup))
         record, rgba = run(args.config, args.set, scene=args.scene, size=args.size,
-                           frames=args.frames, warmup=max(1, args.warmup), backend=args.backend)
+                           backend=args.backend, options=options)
     except Exception as e:
         message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         _write_json(out / "record.json", {"error": f"{type(e).__name__}: {message}",

@@ -27,9 +27,9 @@ ROOT = Path(__file__).resolve().parents[2]
 SIZE = "96x54"
 
 
-def _render(device, scene, switch, frames=3):
+def _render(device, scene, switch, frames=3, options=None):
     cfg = apply_overrides(load_config(SSAO), [f"size={SIZE}", f"async_compute={switch}"])
-    return render_vk(cfg, scene=scene, device=device, frames=frames)
+    return render_vk(cfg, scene=scene, device=device, frames=frames, options=options)
 
 
 def test_async_on_and_off_give_the_same_image(vk_device, courtyard):
@@ -160,11 +160,11 @@ def test_async_in_other_orders_with_poison_gives_the_same_image(vk_device, court
     """Schedule fuzzing (vkext.poison) with the async plan: another valid order, every
     transient poisoned where its lifetime starts, the same image and no validation message
     (the stretched lifetimes keep what the two queues hold apart in every order)."""
-    from vkext.poison import fuzzing
+    from rfw.options import RunOptions
 
     base = _render(vk_device, courtyard, "off", frames=1)
-    with fuzzing(order_seed=seed, poison=True):
-        r = _render(vk_device, courtyard, "on", frames=2)
+    r = _render(vk_device, courtyard, "on", frames=2,
+                options=RunOptions(order_seed=seed, poison=True))
     assert r.timings["validation"]["messages"] == 0, r.timings["validation"]
     assert r.executor.plan.queues.async_passes() == ("ssao",)
     for name, img in r.images.items():

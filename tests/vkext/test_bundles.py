@@ -1,6 +1,6 @@
 """Scene draws recorded once and replayed (vkext.bundles): after the first frame a frame
 records no Python per draw, settings still reach the GPU, and a changed pipeline state
-records again. Every image equals the one recorded inline each frame (RFW_VK_BUNDLES=0),
+records again. Every image equals the one recorded inline each frame (bundles=False),
 bit for bit; validation on, zero messages.
 """
 

@@ -2,7 +2,7 @@
 buffer already holds submits that buffer again (``VkExecutor`` frame replay).
 
 Counted, not timed: primary command buffers begun. N frames over two slots begin one per
-slot; a changed setting begins one again (negative control), and ``RFW_VK_FRAME_REPLAY=0``
+slot; a changed setting begins one again (negative control), and ``frame_replay=False``
 begins one every frame (negative control). Images equal those of frames recorded each
 frame, bit for bit, and every frame keeps its timing samples."""
 

@@ -3,7 +3,7 @@
 Counted, not timed: the dispatches, scene draws and mesh-task draws a frame records. After the
 first frame a pass whose settings, resources, scene (and key) are unchanged records nothing;
 a changed setting or culling camera records that pass again (negative controls), and every
-image equals the one recorded inline each frame (``RFW_VK_BUNDLES=0``), bit for bit. Under
+image equals the one recorded inline each frame (``bundles=False``), bit for bit. Under
 synchronization validation passes record every frame (the layer misses hazards between
 bundles), so these runs turn the executor's view of it off: the layer still runs, and a
 correct plan gives it nothing to report.

@@ -42,6 +42,7 @@ from rfw.graph import Attachment, CompiledGraph, GraphBuilder, Texture, compile
 from rfw.graph.graph import Graph
 from rfw.graph.sync import State
 from rfw.graph.synthetic import synthetic_graph
+from rfw.options import RunOptions
 from rfw.render import render
 from vkext import poison
 from vkext.executor import VkExecutor
@@ -125,17 +126,16 @@ class Fuzzer:
 
     def plan(self, seed: int | None) -> CompiledGraph:
         """The vk plan fitted to the device, in the order ``seed`` gives."""
-        with poison.fuzzing(order_seed=seed, poison=False):
-            return fit_plan(self.built.graph, self.device, alias=self.alias)[0]
+        return fit_plan(self.built.graph, self.device, alias=self.alias, order_seed=seed)[0]
 
     def run(self, plan: CompiledGraph, *, poisoned: bool = True,
             frames: int = 2) -> dict[str, np.ndarray]:
         """The outputs after ``frames`` frames of ``plan``."""
         ex = None
         try:
-            with poison.fuzzing(poison=poisoned):
-                ex = VkExecutor(self.device, plan, self.built.passes, self.built.slots,
-                                self.scene, readback=tuple(plan.outputs), alias=self.alias)
+            ex = VkExecutor(self.device, plan, self.built.passes, self.built.slots, self.scene,
+                            readback=tuple(plan.outputs), alias=self.alias,
+                            options=RunOptions(poison=poisoned))
             ex.run(frames)
             return {name: ex.read(name) for name in plan.outputs}
         finally:
@@ -237,14 +237,13 @@ def test_every_order_poisoned_gives_the_default_image(sync_checked, case, tmp_pa
 def _mixed_poisoned(cfg: Any, device: Any, wgpu_device: Any, scene: Any) -> None:
     # a frame that mixes backends keeps its one order (its driver records the vk part in
     # the full plan's order), through the one frame driver; its vk transients are poisoned
-    def run() -> Any:
+    def run(options: RunOptions) -> Any:
         return render(cfg, backend="vk", device=device, devices=(wgpu_device,), scene=scene,
-                      frames=1)
+                      frames=1, options=options)
 
-    reference = run()
+    reference = run(RunOptions())
     before = poison.STATS["fills"]
-    with poison.fuzzing(order_seed=7, poison=True):
-        fuzzed = run()
+    fuzzed = run(RunOptions(order_seed=7, poison=True))
     assert poison.STATS["fills"] > before
     assert fuzzed.executor.plan.order == reference.executor.plan.order
     assert not _differing(fuzzed.images, reference.images)
@@ -425,18 +424,20 @@ def test_patterns_are_loud():
     assert poison.pattern("depth32float") == (0.5, 0xA5)  # neither 0 nor 1: no clear value
 
 
-def test_mode_from_environment(monkeypatch):
-    monkeypatch.setenv(poison.SEED_ENV, "12")
-    monkeypatch.setenv(poison.POISON_ENV, "1")
-    assert poison.mode() == poison.Fuzz(12, True)
-    with poison.fuzzing(order_seed=None, poison=False):  # a block wins over the environment
-        assert poison.mode() == poison.Fuzz(None, False)
-    for name, value in ((poison.SEED_ENV, "x"), (poison.SEED_ENV, "-1"),
-                        (poison.POISON_ENV, "maybe")):
+def test_the_switches_from_the_environment(monkeypatch):
+    # the edge reads them into RunOptions (rfw.options); given values win over them
+    seed, poisoned = "RFW_ORDER_SEED", "RFW_POISON"
+    monkeypatch.setenv(seed, "12")
+    monkeypatch.setenv(poisoned, "1")
+    options = RunOptions.from_env()
+    assert (options.order_seed, options.poison) == (12, True)
+    options = RunOptions.from_env(order_seed=3, poison=False)
+    assert (options.order_seed, options.poison) == (3, False)
+    for name, value in ((seed, "x"), (seed, "-1"), (poisoned, "maybe")):
         monkeypatch.setenv(name, value)
         with pytest.raises(RfwError, match=name):
-            poison.mode()
-        monkeypatch.setenv(poison.SEED_ENV, "12")
-        monkeypatch.setenv(poison.POISON_ENV, "1")
-    with pytest.raises(RfwError, match="order_seed"), poison.fuzzing(order_seed=2**32):
-        pass
+            RunOptions.from_env()
+        monkeypatch.setenv(seed, "12")
+        monkeypatch.setenv(poisoned, "1")
+    with pytest.raises(RfwError, match="order_seed"):
+        RunOptions(order_seed=2**32)

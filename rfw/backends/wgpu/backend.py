@@ -12,6 +12,7 @@ from ...backend import BackendBase
 from ...errors import RfwError
 from ...graph import CompiledGraph, compile
 from ...graph.graph import Graph
+from ...options import DEFAULT, RunOptions
 from ...passes import Pass
 from .device import Device
 from .executor import Executor
@@ -23,7 +24,8 @@ class WgpuBackend(BackendBase):
     auto_variants = False  # without Vulkan's capabilities, auto stands for its last option
     host_writes_depth = False  # WebGPU refuses write_texture and copies into depth textures
 
-    def make_device(self, *, validation: bool = False, label: str | None = None) -> Device:
+    def make_device(self, *, label: str | None = None,
+                    options: RunOptions = DEFAULT) -> Device:
         return Device()
 
     def owns(self, device: Any) -> bool:
@@ -38,8 +40,8 @@ class WgpuBackend(BackendBase):
     def timestamps(self, device: Device) -> bool:
         return "timestamp-query" in device.features
 
-    def fit(self, graph: Graph, device: Device, *, alias: bool = True,
-            readback: bool = True) -> tuple[CompiledGraph, Any]:
+    def fit(self, graph: Graph, device: Device, *, readback: bool = True,
+            options: RunOptions = DEFAULT) -> tuple[CompiledGraph, Any]:
         plan = compile(graph)
         check_extents(plan, device.device.limits.get("max-texture-dimension-2d"), graph.source)
         return plan, None
@@ -51,7 +53,7 @@ class WgpuBackend(BackendBase):
 
     def executor(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
-                 alias: bool, fitted: Any) -> Executor:
+                 fitted: Any, options: RunOptions = DEFAULT) -> Executor:
         return Executor(device, plan, passes, slots, scene, readback=readback)
 
     def read_bridge(self, executor: Executor, bridge: str, resource: str) -> np.ndarray:

@@ -69,7 +69,7 @@ class PaintExecutor(FrameExecutor):
 class PaintBackend(BackendBase):
     name = "paint"
 
-    def make_device(self, *, validation=False, label=None):
+    def make_device(self, *, label=None, options=None):
         _log("make_device")
         return {"paint": True}
 
@@ -82,14 +82,14 @@ class PaintBackend(BackendBase):
     def caps(self, device):
         return frozenset()
 
-    def fit(self, graph, device, *, alias=True, readback=True):
+    def fit(self, graph, device, *, readback=True, options=None):
         _log("fit")
         return compile(graph), None
 
     def scene(self, device, scene, camera, size):
         return Canvas()
 
-    def executor(self, device, plan, passes, slots, scene, *, readback, alias, fitted):
+    def executor(self, device, plan, passes, slots, scene, *, readback, fitted, options):
         _log("executor")
         return PaintExecutor(plan, passes)
 
