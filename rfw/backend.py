@@ -18,7 +18,7 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from .errors import RfwError, did_you_mean
-from .options import DEFAULT, RunOptions
+from .options import DEFAULT, ENVIRONMENT, RunOptions
 from .plugins import entry_points
 
 if TYPE_CHECKING:
@@ -125,16 +125,7 @@ MEMBERS = ("name", "auto_variants", "host_writes_depth", "make_device", "owns", 
 _loaded: dict[str, Backend] = {}
 
 
-GPU_ENV = "RFW_GPU"  # which GPU of the machine a backend opens (rfw bench --executor ray)
-
-
-def gpu_choice(options: RunOptions | None = None) -> int | None:
-    """``options.gpu``: the index of the device to open among the machine's GPUs (or, with
-    none, its CPU devices), in the driver's order; None: the driver's default. A Ray task of
-    ``rfw bench --executor ray`` sets ``RFW_GPU`` to the GPU Ray gave it, so each task opens
-    its own. Without ``options`` (a device made outside a run: the wgpu ``Device()``) the
-    environment's, read as the edge reads it (:meth:`RunOptions.from_env`)."""
-    return (RunOptions.from_env() if options is None else options).gpu
+GPU_ENV = ENVIRONMENT["gpu"]  # which GPU of the machine a backend opens (RunOptions.gpu)
 
 
 def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:

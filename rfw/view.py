@@ -105,7 +105,7 @@ class Viewer:
                                              update_mode="continuous")
         # the window's device: it presents, and runs the wgpu part of a frame; another
         # backend's device is made on first use (with its validation layer: --validate)
-        self.device = Device()
+        self.device = Device(gpu=options.gpu)
         self.options = options  # validation, frames in flight, vk's switches (rfw.options)
         self.devices = Devices((self.device,), options=options)
         self.validation = options.validation

@@ -1,4 +1,4 @@
-"""RFW_GPU (rfw.backend.gpu_choice): which of the machine's devices a backend opens, as a Ray
+"""RFW_GPU (RunOptions.gpu): which of the machine's devices a backend opens, as a Ray
 task of ``rfw bench --executor ray`` sets it to the GPU Ray gave it. Index 0 renders what the
 default does on both backends, and an index past the machine's devices (99; lavapipe has one
 CPU device, an H200 machine one GPU or more) is refused in one line; the choice among

@@ -208,14 +208,13 @@ ENV_READERS = {
     "rfw/scene/names.py": "RFW_FETCH", "rfw/scene/fetch/cache.py": "RFW_CACHE",
     "rfw/spirv.py": "RFW_CACHE_SPIRV", "rfw/meshlets.py": "RFW_CACHE_MESHLETS",
     "rfw/view.py": "RFW_VIEW_FORMAT", "rfw/bench/runner.py": "RFW_COMMIT",
-    "vkext/raycast.py": "RFW_RAYCAST_MAPPED",
+    "vkext/raycast/placement.py": "RFW_RAYCAST_MAPPED",
 }
 # the edges: where a run starts and its options are built
 EDGES = {
     "rfw/cli.py", "rfw/render.py", "rfw/api.py", "rfw/bench/worker.py",
     "rfw/bench/runner.py",  # refuses a bad variable once, before its workers start
     "rfw/raycasting.py",  # rfw.raycast's own device
-    "rfw/backend.py",  # gpu_choice() without options: the wgpu Device, until it takes them
 }
 # modules that touch os.environ for something that is not rfw's
 OTHER_ENVIRONMENT = {

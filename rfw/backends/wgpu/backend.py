@@ -26,7 +26,7 @@ class WgpuBackend(BackendBase):
 
     def make_device(self, *, label: str | None = None,
                     options: RunOptions = DEFAULT) -> Device:
-        return Device()
+        return Device(gpu=options.gpu)
 
     def owns(self, device: Any) -> bool:
         return isinstance(device, Device)
@@ -54,7 +54,7 @@ class WgpuBackend(BackendBase):
     def executor(self, device: Device, plan: CompiledGraph, passes: dict[str, Pass],
                  slots: dict[str, dict[str, str]], scene: Any, *, readback: tuple[str, ...],
                  fitted: Any, options: RunOptions = DEFAULT) -> Executor:
-        return Executor(device, plan, passes, slots, scene, readback=readback)
+        return Executor(device, plan, passes, slots, scene, readback=readback, options=options)
 
     def read_bridge(self, executor: Executor, bridge: str, resource: str) -> np.ndarray:
         if executor.plan.resource(resource).kind == "buffer":

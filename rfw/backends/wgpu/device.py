@@ -7,7 +7,7 @@ from typing import Any
 
 import wgpu
 
-from ...backend import gpu_choice, pick_gpu
+from ...backend import pick_gpu
 
 # wgpu features rfw asks for when the adapter has them
 WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-renderable",
@@ -17,11 +17,13 @@ WANTED_FEATURES = ("timestamp-query", "float32-filterable", "rg11b10ufloat-rende
 class Device:
     """A wgpu adapter and device with what rfw needs to know about them."""
 
-    def __init__(self, *, power_preference: str = "high-performance"):
-        index = gpu_choice()
+    def __init__(self, *, gpu: int | None = None, power_preference: str = "high-performance"):
+        """``gpu``: the device index among the machine's GPUs (``RunOptions.gpu``); None:
+        the driver's default adapter."""
+        index = gpu
         if index is None:
             self.adapter = wgpu.gpu.request_adapter_sync(power_preference=power_preference)
-        else:  # RFW_GPU: that GPU among the Vulkan adapters, in the driver's order
+        else:  # that GPU among the Vulkan adapters, in the driver's order
             adapters = [a for a in wgpu.gpu.enumerate_adapters_sync()
                         if a.info.get("backend_type") == "Vulkan"]
             self.adapter = pick_gpu(
