@@ -57,7 +57,21 @@ class SettingsError(GraphError):
     """An unknown or ill-typed setting; names the pass and suggests the closest key."""
 
 
-_SCALARS = {float: "f32", int: "i32", bool: "u32"}
+# the GLSL type of the uniform block member that reads a packed field, and its struct format
+# (floats f32, ints i32, bools u32, tuples of 2-4 floats vec2-vec4)
+_GLSL = {float: "float", int: "int", bool: "uint"}
+_FORMATS = {"float": "<f", "int": "<i", "uint": "<I", "vec2": "<2f", "vec3": "<3f",
+            "vec4": "<4f"}
+
+
+class PackedField(typing.NamedTuple):
+    """Where ``Settings.pack()`` writes one field: its name, byte offset and the GLSL type
+    of the uniform block member that reads it (a bool is a ``uint``, or a GLSL ``bool``,
+    which SPIR-V keeps as one)."""
+
+    name: str
+    offset: int
+    type: str
 
 
 class Range(typing.NamedTuple):
@@ -130,19 +144,37 @@ class Settings:
     def replace(self, **values: Any) -> Settings:
         return type(self)(**{**self.as_dict(), **values})
 
-    def pack(self) -> bytes:
-        """The GPU-visible settings as a WGSL uniform struct (WGSL alignment rules)."""
-        out = bytearray()
-        for name, (kind, _) in self.fields().items():
-            value = getattr(self, name)
-            if kind in _SCALARS:
-                fmt = {"f32": "f", "i32": "i", "u32": "I"}[_SCALARS[kind]]
-                _pad(out, 4)
-                out += struct.pack("<" + fmt, int(value) if fmt != "f" else float(value))
+    @classmethod
+    def layout(cls) -> tuple[PackedField, ...]:
+        """The fields ``pack()`` writes, in declaration order, each at its offset by the
+        alignment rules WGSL and GLSL's std140 share (scalars 4, vec2 8, vec3 and vec4 16):
+        what a shader's settings block is checked against (``rfw.settings_layout``)."""
+        out, end = [], 0
+        for name, (kind, _) in cls.fields().items():
+            if kind in _GLSL:
+                glsl, align = _GLSL[kind], 4
             elif _is_vec(kind):
                 n = len(typing.get_args(kind))
-                _pad(out, 8 if n == 2 else 16)
-                out += struct.pack(f"<{n}f", *value)
+                glsl, align = f"vec{n}", 8 if n == 2 else 16
+            else:
+                continue  # host-side only (strings and the like)
+            end += -end % align
+            out.append(PackedField(name, end, glsl))
+            end += struct.calcsize(_FORMATS[glsl])
+        return tuple(out)
+
+    def pack(self) -> bytes:
+        """The GPU-visible settings as a WGSL uniform struct (``layout()``), padded to whole
+        16 bytes."""
+        out = bytearray()
+        for f in self.layout():
+            value = getattr(self, f.name)
+            out += b"\0" * (f.offset - len(out))
+            if f.type.startswith("vec"):
+                out += struct.pack(_FORMATS[f.type], *value)
+            else:
+                out += struct.pack(_FORMATS[f.type], float(value) if f.type == "float"
+                                   else int(value))
         _pad(out, 16)
         return bytes(out or b"\0" * 16)
 

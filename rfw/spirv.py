@@ -510,6 +510,87 @@ def _reflect(words: list[int]) -> Reflection:
     return refl
 
 
+@dataclass(frozen=True)
+class BlockMember:
+    """One member of a uniform block as the SPIR-V lays it out: its name, byte offset and
+    GLSL type (``float``, ``int``, ``uint`` (a GLSL ``bool`` too: SPIR-V blocks hold bools
+    as uints), ``vec3``, ``ivec2``, ``mat4``, ``float[4]``, ``struct Light``, ...)."""
+
+    name: str
+    offset: int
+    type: str
+
+
+def uniform_blocks(code: bytes) -> dict[str, tuple[BlockMember, ...]]:
+    """The members of every uniform block in ``code``, by binding name as ``reflect()``
+    names the binding (the variable's name, else the block's), in declaration order."""
+    check_module(code)
+    words = struct.unpack(f"<{len(code) // 4}I", code)
+    names: dict[int, str] = {}
+    members: dict[tuple[int, int], str] = {}
+    offsets: dict[tuple[int, int], int] = {}
+    buffer_blocks: set[int] = set()  # uniform-class blocks that are storage buffers (old GLSL)
+    types: dict[int, tuple] = {}
+    constants: dict[int, int] = {}
+    variables: list[tuple[int, int]] = []  # (pointer type, variable) of Uniform class
+    i = 5
+    while i < len(words):
+        count, op = words[i] >> 16, words[i] & 0xFFFF
+        args = words[i + 1:i + count]
+        if op == _OP_NAME:
+            names[args[0]] = _string(list(args[1:]))
+        elif op == _OP_MEMBER_NAME:
+            members[args[0], args[1]] = _string(list(args[2:]))
+        elif op == _OP_MEMBER_DECORATE and args[2] == _DEC_OFFSET:
+            offsets[args[0], args[1]] = args[3]
+        elif op == _OP_DECORATE and args[1] == _DEC_BUFFER_BLOCK:
+            buffer_blocks.add(args[0])
+        elif op in (_OP_TYPE_INT, _OP_TYPE_FLOAT, _OP_TYPE_VECTOR, _OP_TYPE_MATRIX,
+                    _OP_TYPE_ARRAY, _OP_TYPE_RUNTIME_ARRAY, _OP_TYPE_STRUCT, _OP_TYPE_POINTER):
+            types[args[0]] = (op, *args[1:])
+        elif op == _OP_CONSTANT and len(args) >= 3:
+            constants[args[1]] = args[2]
+        elif op == _OP_VARIABLE and args[2] == _SC_UNIFORM:
+            variables.append((args[0], args[1]))
+        i += count
+
+    def glsl(t: int) -> str:
+        op, *rest = types.get(t, (0,))
+        if op == _OP_TYPE_FLOAT:
+            return {32: "float", 64: "double"}.get(rest[0], f"float{rest[0]}_t")
+        if op == _OP_TYPE_INT:
+            return {(32, 1): "int", (32, 0): "uint"}.get(
+                (rest[0], rest[1]), f"{'u' * (not rest[1])}int{rest[0]}_t")
+        if op == _OP_TYPE_VECTOR:
+            prefix = {"float": "", "double": "d", "int": "i", "uint": "u"}.get(
+                glsl(rest[0]), glsl(rest[0]) + "_")
+            return f"{prefix}vec{rest[1]}"
+        if op == _OP_TYPE_MATRIX:
+            rows = int(glsl(rest[0])[-1])
+            return f"mat{rest[1]}" if rows == rest[1] else f"mat{rest[1]}x{rows}"
+        if op == _OP_TYPE_ARRAY:
+            return f"{glsl(rest[0])}[{constants.get(rest[1], '?')}]"
+        if op == _OP_TYPE_RUNTIME_ARRAY:
+            return f"{glsl(rest[0])}[]"
+        if op == _OP_TYPE_STRUCT:
+            return f"struct {names[t]}" if names.get(t) else "struct"
+        return "?"
+
+    out: dict[str, tuple[BlockMember, ...]] = {}
+    for ptr, var in variables:
+        block = types.get(ptr, (0, 0, 0))[2]
+        while types.get(block, (0,))[0] == _OP_TYPE_ARRAY:  # an array of blocks
+            block = types[block][1]
+        if types.get(block, (0,))[0] != _OP_TYPE_STRUCT or block in buffer_blocks:
+            continue
+        name = names.get(var) or names.get(block)
+        if name:
+            out[name] = tuple(BlockMember(members.get((block, k), f"member{k}"),
+                                          offsets.get((block, k), -1), glsl(m))
+                              for k, m in enumerate(types[block][1:]))
+    return out
+
+
 class _Flow:
     """Where loaded images and samplers come from (variables, through loads, copies and
     function parameters), to find those a Dref instruction samples."""

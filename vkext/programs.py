@@ -12,7 +12,7 @@ from typing import Any
 from rfw.backends.scene_data import SCENE_GROUPS
 from rfw.passes import Pass
 from rfw.shaders import ShaderError
-from rfw.spirv import DescriptorInfo, ShaderCompileError, compile_glsl, reflect
+from rfw.spirv import DescriptorInfo, ShaderCompileError, Spirv, compile_glsl, reflect
 
 from .consts import const, ffi, new, vk
 from .device import VkDevice
@@ -92,6 +92,7 @@ class Program:
     local_size: tuple[int, int, int]
     pipelines: dict[Any, Pipeline] = field(default_factory=dict)
     device: VkDevice | None = None
+    spirvs: tuple[Spirv, ...] = ()  # its files compiled (rfw.settings_layout reads them)
 
     @property
     def name(self) -> str:
@@ -252,7 +253,7 @@ class Programs:
         layout = self._own(PipelineLayout(dev, vk.vkCreatePipelineLayout(dev.device, info, None),
                                           f"{paths[0].name}:layout"))
         return Program(tuple(paths), kind, modules, descriptors, layouts, frozenset(scene_sets),
-                       layout, stage_flags, push, local, device=dev)
+                       layout, stage_flags, push, local, device=dev, spirvs=tuple(spirvs))
 
     def compute_pipeline(self, prog: Program) -> Pipeline:
         pipe = prog.pipelines.get("compute")

@@ -14,8 +14,8 @@ layout(set = 0, binding = 0) uniform texture2D t_source;
 layout(set = 0, binding = 1, rgba8) uniform writeonly image2D o_view;
 // debug_view.Params as Settings.pack() writes it: range is a vec2, 8-aligned in both layouts
 layout(set = 0, binding = 2, std140) uniform Params {
-    layout(offset = 0) int channel;
-    layout(offset = 8) vec2 range;
+    int channel;
+    vec2 range;
 } u_params;
 
 vec4 load_source(ivec2 p) {

@@ -14,8 +14,8 @@ layout(set = 0, binding = 4) uniform texture2D t_depth;  // WGSL texture_depth_2
 layout(set = 0, binding = 5, rgba16f) uniform writeonly image2D o_hdr;
 // deferred_lighting.Params as Settings.pack() writes it: 8 bytes used, 16 uploaded
 layout(set = 0, binding = 6, std140) uniform Params {
-    layout(offset = 0) float shadow_bias;
-    layout(offset = 4) float ambient;
+    float shadow_bias;
+    float ambient;
 } u_params;
 #ifdef HAS_SHADOW
 layout(set = 0, binding = 7) uniform texture2D t_shadow;  // WGSL texture_depth_2d

@@ -4,7 +4,7 @@
 #include "mesh.glsl"
 
 layout(set = 0, binding = 0, std140) uniform Params {
-    layout(offset = 0) float ambient;
+    float ambient;
 } u_params;
 
 layout(location = 0) out float o_light;

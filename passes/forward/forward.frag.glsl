@@ -6,9 +6,9 @@
 // forward.Params as Settings.pack() writes it; prepass is the host's switch, declared so the
 // block matches the WGSL struct
 layout(set = 0, binding = 0, std140) uniform Params {
-    layout(offset = 0) float shadow_bias;
-    layout(offset = 4) float ambient;
-    layout(offset = 8) uint prepass;
+    float shadow_bias;
+    float ambient;
+    uint prepass;
 } u_params;
 #ifdef HAS_SHADOW
 layout(set = 0, binding = 1) uniform texture2D t_shadow;  // WGSL texture_depth_2d

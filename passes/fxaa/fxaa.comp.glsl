@@ -11,10 +11,10 @@ layout(set = 0, binding = 1) uniform sampler s_linear;
 layout(set = 0, binding = 2, rgba8) uniform writeonly image2D o_color;
 // fxaa.Params as Settings.pack() writes it: four scalars, the same offsets in std140
 layout(set = 0, binding = 3, std140) uniform Params {
-    layout(offset = 0) float edge_threshold;
-    layout(offset = 4) float edge_threshold_min;
-    layout(offset = 8) float subpixel;
-    layout(offset = 12) int search_steps;
+    float edge_threshold;
+    float edge_threshold_min;
+    float subpixel;
+    int search_steps;
 } u_params;
 
 const float STEPS[12] = float[12](1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 2.0, 2.0, 2.0, 2.0, 4.0, 8.0);

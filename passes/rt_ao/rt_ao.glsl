@@ -8,11 +8,11 @@ layout(set = 0, binding = 2) uniform accelerationStructureEXT tlas;
 layout(set = 0, binding = 3, rgba16f) uniform writeonly image2D o_ao;
 // rt_ao.Params as Settings.pack() writes it (the method string is host-side)
 layout(set = 0, binding = 4, std140) uniform Params {
-    layout(offset = 0) int max_recursion;
-    layout(offset = 4) float radius;
-    layout(offset = 8) int samples;
-    layout(offset = 12) float normal_bias;
-    layout(offset = 16) float t_min;
+    int max_recursion;
+    float radius;
+    int samples;
+    float normal_bias;
+    float t_min;
 } u_params;
 
 bool occluded(vec3 origin, float tmin, vec3 direction, float tmax);

@@ -8,10 +8,10 @@ layout(set = 0, binding = 2) uniform accelerationStructureEXT tlas;
 layout(set = 0, binding = 3, r32ui) uniform writeonly uimage2D o_visibility;
 // rt_shadows.Params as Settings.pack() writes it (the method string is host-side)
 layout(set = 0, binding = 4, std140) uniform Params {
-    layout(offset = 0) int max_recursion;
-    layout(offset = 4) float normal_bias;
-    layout(offset = 8) float t_min;
-    layout(offset = 12) uint point_lights;
+    int max_recursion;
+    float normal_bias;
+    float t_min;
+    uint point_lights;
 } u_params;
 
 bool occluded(vec3 origin, float tmin, vec3 direction, float tmax);

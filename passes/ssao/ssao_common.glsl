@@ -9,13 +9,13 @@
 layout(set = 0, binding = 0) uniform texture2D t_depth;
 // ssao.Params as Settings.pack() writes it: 28 bytes of scalars, the same offsets in std140
 layout(set = 0, binding = 3, std140) uniform Params {
-    layout(offset = 0) float radius;
-    layout(offset = 4) int samples;
-    layout(offset = 8) float intensity;
-    layout(offset = 12) float power;
-    layout(offset = 16) float bias;
-    layout(offset = 20) int blur_radius;
-    layout(offset = 24) float blur_depth;
+    float radius;
+    int samples;
+    float intensity;
+    float power;
+    float bias;
+    int blur_radius;
+    float blur_depth;
 } u_params;
 
 float load_depth(ivec2 px) {

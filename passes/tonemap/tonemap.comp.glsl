@@ -10,9 +10,9 @@ layout(set = 0, binding = 1, rgba8) uniform writeonly image2D o_ldr;
 // tonemap.Params as Settings.pack() writes it: sky is a vec3, 16-aligned in both layouts;
 // std140 ends the block at 28, WGSL rounds the struct to 32 (the uploaded size)
 layout(set = 0, binding = 2, std140) uniform Params {
-    layout(offset = 0) float exposure;
-    layout(offset = 4) int curve;
-    layout(offset = 16) vec3 sky;
+    float exposure;
+    int curve;
+    vec3 sky;
 } u_params;
 
 // Narkowicz's fit of the ACES reference rendering transform

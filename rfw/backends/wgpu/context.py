@@ -17,6 +17,7 @@ import numpy as np
 from ...context import check_topology, nothing_to_draw
 from ...graph.formats import format_info
 from ...passes import Pass, Settings
+from ...settings_layout import check_bound_settings
 from ...shaders import ShaderError, program_files
 from ...spirv import check_bindings
 from ..base import SlotContext
@@ -133,6 +134,7 @@ class PassContext(SlotContext):
                            missing=True)
             for b in wanted:
                 self._check_format(prog, b, values[b.name])
+                check_bound_settings(prog, b.name, values[b.name], self.pass_.name)
             # a uniform's bytes are written here, every frame, into the same buffer
             resources = [(b.binding, self.executor.as_resource(values[b.name], b, self.pass_))
                          for b in wanted]

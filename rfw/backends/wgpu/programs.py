@@ -62,6 +62,7 @@ class Program:
     workgroup: tuple[int, int, int] = (1, 1, 1)
     pipelines: dict[Any, Any] = field(default_factory=dict)
     key: tuple = ()  # its key in ShaderCache.programs
+    spirvs: tuple[Spirv, ...] = ()  # its GLSL files compiled (rfw.settings_layout reads them)
 
     @property
     def name(self) -> str:
@@ -153,7 +154,8 @@ class ShaderCache:
         dev = self.device.device
         return Program(tuple(paths), stages, bindings, layouts,
                        dev.create_pipeline_layout(bind_group_layouts=layouts,
-                                                  label=paths[0].name), workgroup)
+                                                  label=paths[0].name), workgroup,
+                       spirvs=tuple(spirvs))
 
     def _stages(self, paths: list[Path], spirvs: list[Spirv], who: str, where: str
                 ) -> tuple[dict[str, tuple[Any, str]], dict[str, tuple[DescriptorInfo, int, Path]],
