@@ -55,7 +55,7 @@ def check_bound_settings(program: Any, name: str, value: Any, pass_name: str) ->
     files in ``program.spirvs`` (none for WGSL, which is not checked)."""
     if not isinstance(value, Settings):
         return
-    done = program.__dict__.setdefault("_settings_checked", set())
+    done = program.settings_checked
     key = (name, type(value))
     if key in done:
         return

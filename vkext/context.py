@@ -19,6 +19,7 @@ from rfw.backends.base import SlotContext
 from rfw.context import check_topology, nothing_to_draw
 from rfw.graph.formats import format_info
 from rfw.passes import Pass, Settings
+from rfw.settings_layout import check_bound_settings
 from rfw.shaders import ShaderError, program_files
 from rfw.spirv import DescriptorInfo, check_bindings
 
@@ -320,6 +321,8 @@ class VkPassContext(SlotContext):
         if not all(d.name in values for d in wanted):
             check_bindings(self.pass_.name, prog.name, [d.name for d in wanted], values,
                            missing=True)
+        for d in wanted:  # a Settings value's block: checked once per program and type
+            check_bound_settings(prog, d.name, values[d.name], self.pass_.name)
         handle = self._scene_set(prog, s, values, wanted)
         if handle is not None:
             return handle

@@ -93,6 +93,8 @@ class Program:
     pipelines: dict[Any, Pipeline] = field(default_factory=dict)
     device: VkDevice | None = None
     spirvs: tuple[Spirv, ...] = ()  # its files compiled (rfw.settings_layout reads them)
+    # (uniform block, Settings type) pairs whose layout was checked against each other
+    settings_checked: set[tuple[str, type]] = field(default_factory=set)
 
     @property
     def name(self) -> str:

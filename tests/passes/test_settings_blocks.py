@@ -186,6 +186,7 @@ class _Program:
 
     def __init__(self, spirvs):
         self.spirvs = spirvs
+        self.settings_checked = set()
 
 
 def test_the_bound_check_runs_once_per_program_and_settings_type(monkeypatch):

@@ -63,6 +63,8 @@ class Program:
     pipelines: dict[Any, Any] = field(default_factory=dict)
     key: tuple = ()  # its key in ShaderCache.programs
     spirvs: tuple[Spirv, ...] = ()  # its GLSL files compiled (rfw.settings_layout reads them)
+    # (uniform block, Settings type) pairs whose layout was checked against each other
+    settings_checked: set[tuple[str, type]] = field(default_factory=set)
 
     @property
     def name(self) -> str:
