@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from rfw.authoring import MESH_SHADER
-from rfw.backends.base import SlotContext
 from rfw.context import check_topology, nothing_to_draw
+from rfw.exec.context import ContextCore
 from rfw.graph.formats import format_info
 from rfw.passes import Pass, Settings
 from rfw.settings_layout import check_bound_settings
@@ -66,21 +66,17 @@ def _check_storage_format(what: str, d: DescriptorInfo, view: ImageView, resourc
                       f"'{resource}' is {have.wgpu or have.name} ({have.vk})")
 
 
-class VkPassContext(SlotContext):
+class VkPassContext(ContextCore):
     """What ``Pass.record`` sees on Vulkan: ``rfw.context.PassContext`` and
     ``RayTracingContext``, plus mesh programs (``program("mesh")``, ``render_pass``)."""
 
     # executor: the vkext.executor.VkExecutor recording the frame (it imports this module)
     def __init__(self, executor: Any, pass_: Pass, cmd: Any, slots: dict[str, str]):
-        self.executor = executor
-        self.pass_ = pass_
+        super().__init__(executor, pass_, slots)
         self._cmd = cmd  # None: the frame is replayed whole (vkext.executor) until used
         self.executed: Any = None  # the pass bundle executed, if that is all it recorded
         self.direct = False  # whether it recorded into the frame's command buffer itself
-        self.slots = slots
-        self.scene = executor.scene
         self.device = executor.device
-        self.frame = executor.frame_index
         self._rendering: VkRenderPass | None = None
         self._bound: list[Any] = []  # cached sets bound by this record (bundles keep them)
         self._memo = _memo(executor)
@@ -206,10 +202,6 @@ class VkPassContext(SlotContext):
     def texture(self, slot: str) -> Image:
         return self.executor.image(self.resource(slot))
 
-    def extent(self, slot: str) -> tuple[int, int]:
-        r = self.executor.plan.resource(self.resource(slot))
-        return r.width, r.height
-
     def view(self, slot: str, *, mip: int | None = None) -> ImageBinding:
         """The slot's image view; ``mip``: a view of that one mip level only."""
         name = self.resource(slot)
@@ -221,12 +213,6 @@ class VkPassContext(SlotContext):
                             self.executor.view(name, sampled=True))
 
     storage = view
-
-    def mips(self, slot: str) -> int:
-        return self.executor.plan.resource(self.resource(slot)).mips
-
-    def buffer(self, slot: str) -> Buffer:
-        return self.executor.buffer(self.resource(slot))
 
     def accel(self, slot: str) -> Any:
         """The acceleration structures behind an ``AccelStructure`` slot (the
@@ -248,11 +234,6 @@ class VkPassContext(SlotContext):
         barriers order it against the frame's other builds and traces."""
         self.set_accel(slot, accel)
         accel.record_tlas(self.cmd, update=update)
-
-    def format(self, slot: str) -> str:
-        """The format's WebGPU name where it has one (as the wgpu backend answers)."""
-        name = self.executor.plan.resource(self.resource(slot)).format
-        return format_info(name).wgpu or name
 
     # recording ----------------------------------------------------------------------------
     def program(self, kind: str, *, shader: str | None = None,
@@ -286,8 +267,7 @@ class VkPassContext(SlotContext):
         return self.executor.programs.get(self.pass_, paths, defines or {}, kind)
 
     def _stage_paths(self, name: str | Path | None) -> list[Path]:
-        if not name:
-            raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
+        name = self.shader_name(name)
         if isinstance(name, Path):
             if not name.is_file():
                 raise ShaderError(f"pass '{self.pass_.name}': shader {name} not found")
@@ -614,13 +594,6 @@ class VkPassContext(SlotContext):
         if left_open:
             raise ShaderError(f"pass '{self.pass_.name}' left a render pass open (end() it, "
                               "or begin it in a with block)")
-
-    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
-                compare: str | None = None) -> Sampler:
-        """A sampler the executor makes once and keeps (``filter``: linear | nearest for
-        magnification, minification and mips; ``address``: clamp-to-edge | repeat |
-        mirror-repeat on every axis; ``compare``: a depth comparison)."""
-        return self.executor.sampler(filter=filter, address=address, compare=compare)
 
     def _begin_rendering(self, colors: list[tuple[str, Any]], depth: tuple[str, Any] | None,
                          depth_write: bool, extent: tuple[int, int], *,

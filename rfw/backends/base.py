@@ -1,41 +1,7 @@
-"""The backend interface both executors implement (wgpu here, raw Vulkan in vkext)."""
+"""The frame protocol every backend's executor implements (rfw.exec.core.ExecutorCore is
+rfw's own half of it; a plug-in backend may implement it directly)."""
 
 from __future__ import annotations
-
-from ..shaders import ShaderError
-
-
-class SlotContext:
-    """What both pass contexts share: a pass's resources reached by slot name."""
-
-    pass_: object
-    slots: dict[str, str]  # slot -> resource
-
-    def resource(self, slot: str) -> str:
-        try:
-            return self.slots[slot]
-        except KeyError:
-            raise ShaderError(f"pass '{self.pass_.name}' has no slot '{slot}' "  # type: ignore
-                              f"(slots: {', '.join(self.slots)})") from None
-
-    def has(self, slot: str) -> bool:
-        return slot in self.slots
-
-    # replay (rfw.exec.replay): a backend that keeps recorded commands overrides these
-    def can_replay(self) -> bool:
-        """Whether the executor may build the pass's replay key: never by default."""
-        return False
-
-    def slot_objects(self) -> list[object]:
-        """The objects behind the pass's slots, for its replay key."""
-        return []
-
-    def replayed(self, key: tuple) -> bool:
-        """Execute again what was recorded for ``key``: nothing kept by default."""
-        return False
-
-    def finish(self) -> None:
-        """After ``record``: nothing to close by default."""
 
 
 class FrameExecutor:

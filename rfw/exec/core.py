@@ -21,7 +21,7 @@ teardown. A backend subclasses it and supplies primitives only:
 * ``_release()``: destroy the backend's own objects (after every frame is finished).
 
 A pass context takes part in replay through ``can_replay()``, ``slot_objects()``,
-``replayed(key)`` and ``finish()`` (:class:`rfw.backends.base.SlotContext` gives the
+``replayed(key)`` and ``finish()`` (:class:`rfw.exec.context.ContextCore` gives the
 defaults of a backend that never replays).
 """
 

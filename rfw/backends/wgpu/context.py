@@ -15,15 +15,14 @@ from typing import Any
 import numpy as np
 
 from ...context import check_topology, nothing_to_draw
+from ...exec.context import ContextCore
 from ...graph.formats import format_info
 from ...passes import Pass, Settings
 from ...settings_layout import check_bound_settings
 from ...shaders import ShaderError, program_files
 from ...spirv import check_bindings
-from ..base import SlotContext
 from ..scene_data import SCENE_GROUPS
 from .programs import RECHECK_S, Binding, Program, _stamps
-from .resources import wgpu_format
 from .scene import VERTEX_BUFFERS
 
 
@@ -43,26 +42,18 @@ def _same_call(hit: tuple | None, call: tuple, bindings: dict[str, Any]) -> tupl
     return hit
 
 
-class PassContext(SlotContext):
+class PassContext(ContextCore):
     """What ``Pass.record`` sees: its resources by slot name and ways to record work."""
 
     # executor: the .executor.Executor recording the frame (it imports this module)
     def __init__(self, executor: Any, pass_: Pass, encoder: Any, slots: dict[str, str]):
-        self.executor = executor
-        self.pass_ = pass_
+        super().__init__(executor, pass_, slots)
         self.encoder = encoder
-        self.slots = slots  # slot -> resource
-        self.scene = executor.scene
         self.device = executor.device.device
-        self.frame = executor.frame_index
 
     # resources ----------------------------------------------------------------------------
     def texture(self, slot: str) -> Any:
         return self.executor.texture(self.resource(slot))
-
-    def extent(self, slot: str) -> tuple[int, int]:
-        r = self.executor.plan.resource(self.resource(slot))
-        return r.width, r.height
 
     def view(self, slot: str, *, mip: int | None = None) -> Any:
         """The slot's texture view; ``mip``: a view of that one mip level only."""
@@ -82,21 +73,6 @@ class PassContext(SlotContext):
         self.executor.plan.barriers_before_step(self.pass_.name, index, self._step)
         self._step = index
 
-    def mips(self, slot: str) -> int:
-        return self.executor.plan.resource(self.resource(slot)).mips
-
-    def buffer(self, slot: str) -> Any:
-        """The GPU buffer behind a buffer slot (bind it as ``{"buffer": ...}`` or directly)."""
-        return self.executor.buffer(self.resource(slot))
-
-    def format(self, slot: str) -> str:
-        return wgpu_format(self.executor.plan.resource(self.resource(slot)).format)
-
-    def sampler(self, *, filter: str = "linear", address: str = "clamp-to-edge",
-                compare: str | None = None) -> Any:
-        """A sampler made once per executor (rfw.context.PassContext.sampler)."""
-        return self.executor.sampler(filter=filter, address=address, compare=compare)
-
     # recording ----------------------------------------------------------------------------
     def _timestamps(self) -> dict | None:
         return self.executor.timestamp_writes(self.pass_.name)
@@ -106,9 +82,7 @@ class PassContext(SlotContext):
                 formats: dict[str, str] | None = None) -> Program:
         """The pass's program (``kind``: compute | render) of ``shader`` (default: the
         pass's), its files found by ``rfw.shaders.program_files``."""
-        name = shader or self.pass_.shader
-        if not name:
-            raise ShaderError(f"pass '{self.pass_.name}' records work but declares no shader")
+        name = self.shader_name(shader)
         defines, formats = defines or {}, formats or {}
 
         def make() -> Program:
