@@ -18,9 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from .errors import RfwError
-from .options import ASYNC_QUEUES, MAX_FRAMES_IN_FLIGHT, MAX_SEED
 
 TRUE, FALSE = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
+MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for (rfw.options)
+MAX_SEED = 2**32 - 1  # vkext.poison's order seeds
+ASYNC_QUEUES = ("family", "graphics")  # RunOptions.async_queue
 _INTEGER = re.compile(r"[+-]?[0-9]+")  # ascii digits only: int() takes '٣' and '1_0'
 
 

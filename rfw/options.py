@@ -22,6 +22,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from . import env
+from .env import ASYNC_QUEUES, MAX_FRAMES_IN_FLIGHT, MAX_SEED
 from .errors import (
     RfwTypeError,
     RfwValueError,
@@ -31,10 +33,8 @@ from .errors import (
     type_name,
 )
 
-MAX_FRAMES_IN_FLIGHT = 8  # frames submitted and not waited for
+# the bounds rfw.env checks the variables against are the options' own
 DEFAULT_FRAMES_IN_FLIGHT = 2
-MAX_SEED = 2**32 - 1  # vkext.poison's order seeds
-ASYNC_QUEUES = ("family", "graphics")
 
 # field -> the environment variable it falls back to (rfw.env reads and checks it)
 ENVIRONMENT = {
@@ -103,8 +103,6 @@ class RunOptions:
         """Options from ``given`` (None: not given) with the environment's ``RFW_*``
         variables (:data:`ENVIRONMENT`) for the fields not given, then the defaults.
         Only the edge calls this: the CLI, the API's entry points, a bench worker."""
-        from . import env
-
         names = {f.name for f in dataclasses.fields(cls)}
         for key in given:
             if key not in names:
