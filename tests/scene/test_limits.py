@@ -405,7 +405,7 @@ def test_images_converted_in_bands_are_the_whole_conversion(mode, monkeypatch):
     # copy, not two): 100-texel bands of a 53x37 image give Pillow's whole conversion
     from PIL import Image
 
-    import rfw.scene.gltf as gltf
+    import rfw.scene.gltf.textures as gltf
 
     rng = np.random.default_rng(2)
     im = Image.fromarray(rng.integers(0, 256, (37, 53, 3), np.uint8))

@@ -1,0 +1,31 @@
+"""glTF 2.0 (.gltf with external or embedded data, and .glb) to a ``Scene``.
+
+The JSON is decoded into pygltflib's document classes, every value type-checked; every
+index, offset, length and stride is validated before a read, so a malformed file raises a
+``SceneError`` naming the file and the element ("scene.gltf: accessors[3] (POSITION of
+meshes[0].primitives[1]): needs 4800 bytes, bufferViews[2] has 1200") rather than an
+IndexError or a read past a buffer. External files are only read from the scene's folder.
+
+What is read: the node hierarchy (TRS or matrix), the chosen scene, every triangle primitive
+(strips and fans become lists), indexed or not, any accessor component type (normalised or
+not, strided, sparse), POSITION / NORMAL / TANGENT / TEXCOORD_0, metallic-roughness
+materials with their five textures and samplers, perspective cameras and
+KHR_lights_punctual. Normals and tangents are computed where the file has none.
+
+Not read: skins and morph targets (meshes appear in their bind pose), animations,
+TEXCOORD_1 (textures using it are sampled with TEXCOORD_0 and a warning is issued), vertex
+colours. Orthographic cameras are approximated by a narrow perspective camera (warning).
+
+The parts, each a class over the one :class:`~.file.GltfFile` (the file, its decoded
+document, checked reads and errors naming the element) that makes what it reads once:
+:mod:`~.container` (GLB, JSON, version, extensions), :mod:`~.accessors` (buffers, views,
+accessors), :mod:`~.textures` (images, samplers), :mod:`~.materials`, :mod:`~.meshes`
+(primitives, strokes, the geometry limit), :mod:`~.nodes` (the hierarchy, instances,
+cameras, lights) and :mod:`~.loader`, which ties them together.
+"""
+
+from .container import SUPPORTED_EXTENSIONS
+from .file import SceneWarning
+from .loader import load_gltf, read_uri, split_glb
+
+__all__ = ["SUPPORTED_EXTENSIONS", "SceneWarning", "load_gltf", "read_uri", "split_glb"]
