@@ -129,8 +129,9 @@ GPU_ENV = ENVIRONMENT["gpu"]  # which GPU of the machine a backend opens (RunOpt
 
 
 def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:
-    """Device ``index`` of ``devices`` ((kind, device) in the driver's order; kind ``gpu``
-    or ``cpu``): counted among the GPUs, or among the CPU devices where there is no GPU."""
+    """Device ``index`` (the run option ``gpu``) of ``devices`` ((kind, device) in the
+    driver's order; kind ``gpu`` or ``cpu``): counted among the GPUs, or among the CPU
+    devices where there is no GPU."""
     kind = "gpu" if any(k == "gpu" for k, _ in devices) else "cpu"
     pool = [d for k, d in devices if k == kind]
     if index >= len(pool):

@@ -6,9 +6,10 @@ one ``RunOptions`` from their arguments and the environment (``RunOptions.from_e
 ``RFW_*`` variables of :mod:`rfw.env`, each checked there), and hand it to the frame driver,
 which hands it to the backends, their devices and executors. A config's own keys
 (``frames``, ``frames_in_flight``) stand between the two: :meth:`RunOptions.in_flight`. Nothing
-below the edge reads the environment for these: tests/core/test_options.py checks that no
-module but :mod:`rfw.env` touches ``os.environ`` for an ``RFW_*`` name, which modules read
-:mod:`rfw.env`, and which call ``from_env``.
+below the edge reads the environment for these: tests/core/test_architecture.py checks that
+only :mod:`rfw.env` touches ``os.environ`` for rfw and only this module names a run option's
+variable, tests/core/test_options.py which modules read :mod:`rfw.env` and which call
+``from_env``.
 
 Where files live (``RFW_CACHE*``), whether scenes may be fetched (``RFW_FETCH``), a window's
 format (``RFW_VIEW_FORMAT``), the commit a report names (``RFW_COMMIT``) and where ray streams
