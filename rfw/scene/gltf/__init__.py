@@ -8,13 +8,15 @@ IndexError or a read past a buffer. External files are only read from the scene'
 
 What is read: the node hierarchy (TRS or matrix), the chosen scene, every triangle primitive
 (strips and fans become lists), indexed or not, any accessor component type (normalised or
-not, strided, sparse), POSITION / NORMAL / TANGENT / TEXCOORD_0, metallic-roughness
+not, strided, sparse), POSITION / NORMAL / TANGENT, the TEXCOORD_0 or TEXCOORD_1 set a
+primitive's textures use (with KHR_texture_transform), a constant COLOR_0 (folded into the
+material; one that varies per vertex is drawn with its mean and a warning), metallic-roughness
 materials with their five textures and samplers, perspective cameras and
 KHR_lights_punctual. Normals and tangents are computed where the file has none.
 
-Not read: skins and morph targets (meshes appear in their bind pose), animations,
-TEXCOORD_1 (textures using it are sampled with TEXCOORD_0 and a warning is issued), vertex
-colours. Orthographic cameras are approximated by a narrow perspective camera (warning).
+Not read: skins and morph targets (meshes appear in their bind pose), animations, texture
+coordinate sets past TEXCOORD_1 (TEXCOORD_0 is used, with a warning). Orthographic cameras
+are approximated by a narrow perspective camera (warning).
 
 The parts, each a class over the one :class:`~.file.GltfFile` (the file, its decoded
 document, checked reads and errors naming the element) that makes what it reads once:
