@@ -21,6 +21,9 @@ off = { "shadow.enabled" = false }
 An option may instead list other options, best first (``auto = ["ray_query", "shadow_map"]``):
 a device resolves it to the first whose passes it can run (``resolve_auto``); until then it
 stands for its last option, the most portable one.
+
+One module of ~650 lines: the config's keys, their checks and the messages naming file and
+key are one schema, read top to bottom as the TOML is.
 """
 
 from __future__ import annotations

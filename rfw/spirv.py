@@ -12,6 +12,9 @@ Stages both backends run (comp, vert, frag) compile for Vulkan 1.1: naga (wgpu) 
 ``LocalSizeId`` and ``OpTerminateInvocation`` that a 1.3 target emits, and the one binary
 serves vk too. Mesh, task and ray-tracing stages (vk only) need SPIR-V 1.4 and compile for
 Vulkan 1.3.
+
+One module of ~630 lines on purpose: compiling, caching and reading the binary (descriptors,
+blocks, entry points) share one SPIR-V word parser and its cache keys.
 """
 
 from __future__ import annotations

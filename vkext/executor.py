@@ -21,6 +21,10 @@ in order, the bundle it executed when that buffer was recorded, over the same re
 records nothing: the buffer is submitted again. A pass that records anything else makes the
 frame record its buffer there and then (``catch_up``); ``RFW_VK_FRAME_REPLAY=0`` records
 every frame (the benchmarks' baseline).
+
+The frame protocol, the ring of frames in flight, timings, history and teardown are
+:class:`rfw.exec.core.ExecutorCore`'s; the ~730 lines here are Vulkan's primitives under it
+(memory in the plan's heaps, initial layouts, barriers, timestamps, whole-frame replay).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ walls. It is built to exercise a renderer: one column mesh is drawn 64 times and
 the galleries, the water is blended and the metals are metallic. Textures (tiles with grout,
 stone blocks, limestone, wood) and their normal and roughness maps are generated too.
 
-Units are metres, +Y is up, the court spans x, z in [-12, 12].
+Units are metres, +Y is up, the court spans x, z in [-12, 12]. The ~690 lines are the
+scene's geometry and texture recipes, one builder per part, kept together as one scene.
 """
 
 from __future__ import annotations
