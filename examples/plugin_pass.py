@@ -18,15 +18,15 @@ import numpy as np
 from _common import out_problem  # this folder is on the path: the script runs from it
 
 import rfw
-from rfw import ComputePass, Settings, Tex2D, register_pass
 from rfw.argtypes import size as wxh
-from rfw.passes import Range, Slot
+from rfw.authoring import ComputePass, Range, Settings, Slot, Tex2D, register_pass
 
 
 @register_pass("invert")
 class InvertPass(ComputePass):
     """Inverts a display color: mix(color, 1 - color, amount)."""
 
+    replay = "auto"  # its commands depend on its settings and images only
     shader = "invert.comp.glsl"  # resolved next to this file
     inputs: ClassVar[dict[str, Slot]] = {"color": Tex2D(desc="display color (rgba8unorm)")}
     outputs: ClassVar[dict[str, Slot]] = {

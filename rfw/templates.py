@@ -15,14 +15,16 @@ _COMPUTE_PY = '''"""{title}: TODO say what it computes (this docstring is the ca
 
 from typing import Annotated
 
-from rfw import ComputePass, Settings, Tex2D, register_pass
-from rfw.passes import Range, storage_format
+from rfw.authoring import ComputePass, Range, Settings, Tex2D, register_pass, storage_format
 
 
 @register_pass("{name}")
 class {cls}(ComputePass):
     """Scales the color of ``src`` by ``gain``: replace with your technique."""
 
+    # its commands depend on nothing but its settings, slot resources and scene: recorded
+    # once, then replayed where the backend can (say False if they depend on more)
+    replay = "auto"
     shader = "{name}.comp.glsl"  # resolved next to this file
     inputs = {{"src": Tex2D(desc="input color")}}
     # the input's size and format (sRGB: its linear twin, as storage images cannot be sRGB)
@@ -67,14 +69,14 @@ void main() {{
 
 _RASTER_PY = '''"""{title}: TODO say what it draws (this docstring is the catalogue entry)."""
 
-from rfw import RenderPass, Settings, register_pass
-from rfw.graph import Attachment, DepthAttachment
+from rfw.authoring import Attachment, DepthAttachment, RenderPass, Settings, register_pass
 
 
 @register_pass("{name}")
 class {cls}(RenderPass):
     """Draws the scene's base color times ``gain``: replace with your technique."""
 
+    replay = "auto"  # recorded once, then replayed while settings, slots and scene hold
     shader = "{name}"  # {name}.vert.glsl + {name}.frag.glsl, next to this file
     outputs = {{
         "color": Attachment("rgba16float", desc="shaded color"),
