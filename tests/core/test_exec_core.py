@@ -8,6 +8,7 @@ import pytest
 from rfw.exec.samplers import Samplers
 from rfw.exec.timing import PassTiming, pass_timings
 from rfw.shaders import ShaderError
+from tests.vkext.test_executor import ACCUMULATE_GLSL
 
 
 def test_samplers_are_made_once_per_key_and_checked_first():
@@ -50,18 +51,6 @@ def test_both_executors_are_the_core_with_primitives():
 
 # history ping-pong: the core swaps x and x@prev before every frame after the first, on
 # every backend (vk's test_executor checks the layouts of the same graph)
-ACCUMULATE = """#version 460
-#extension GL_EXT_samplerless_texture_functions : require
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(set = 0, binding = 0) uniform texture2D t_prev;
-layout(set = 0, binding = 1, rgba16f) uniform writeonly image2D o_out;
-layout(set = 0, binding = 2, std140) uniform Params { float step; } u_params;
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (any(greaterThanEqual(p, imageSize(o_out)))) return;
-    imageStore(o_out, p, texelFetch(t_prev, p, 0) + vec4(u_params.step));
-}
-"""
 
 
 def _accumulated(device, frames: int) -> np.ndarray:
@@ -73,7 +62,7 @@ def _accumulated(device, frames: int) -> np.ndarray:
         """out = the previous frame's out + step."""
 
         shader = "accumulate.comp.glsl"
-        shader_source = ACCUMULATE
+        shader_source = ACCUMULATE_GLSL  # vk's history test runs the same shader
 
         class Params(Settings):
             step: float = 0.125
