@@ -437,7 +437,7 @@ def _save_images(result: Any, folder: Path, stem: str) -> None:
 
     from rfw.render import to_png_array
 
-    formats = {r.name: r.format for r in result.executor.plan.resources}
+    formats = {r.name: r.format for r in result.frame.plan.resources}
     folder.mkdir(parents=True, exist_ok=True)
     for name, image in result.images.items():
         Image.fromarray(to_png_array(image, formats[name]), "RGBA").save(

@@ -140,7 +140,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     with folder:
         result = render(cfg, backend=backend, options=options,
                         each_frame=_frame_images(args, cfg, folder.staging))
-        formats = {r.name: r.format for r in result.executor.plan.resources}
+        formats = {r.name: r.format for r in result.frame.plan.resources}
         staged = write_outputs(result, folder.staging, formats, exr=args.exr)
         written = [folder.out / p.relative_to(folder.staging) for p in staged]
         folder.commit(last=["timings.json"], merge=[FRAMES_DIR], remove=_superseded(

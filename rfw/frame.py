@@ -2,9 +2,10 @@
 (:func:`rfw.render.render`) shares with the backends: the ``Result`` of a run, the scene and
 camera a config asks for, and the fields of ``timings.json`` every backend writes.
 
-``prepare`` fits each backend's part of the graph to its device (the whole graph on one
-backend, or the per-backend parts of a mixed plan, :func:`rfw.mixed.split`), ``start``
-uploads the scene and makes the executors, and the :class:`Frame` runs them.
+``prepare`` plans the frame (one :class:`rfw.mixed.FramePlan` for every run: one side for a
+frame on one backend, the per-backend sides and their bridges of a mixed one,
+:func:`rfw.mixed.split`) and fits each side's graph to its device, ``start`` uploads the
+scene and makes the executors, and the :class:`Frame` runs them.
 
 **Frames in flight.** An executor submits a frame and returns without waiting for it: up to
 ``RunOptions.in_flight()`` frames (:mod:`rfw.options`; default 2, 1 waits for each, as
@@ -23,7 +24,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,8 +41,11 @@ from .errors import (
     type_name,
 )
 from .graph import CompiledGraph
-from .mixed import MixedPlan, split
+from .mixed import FramePlan, split
 from .options import DEFAULT, DEFAULT_FRAMES_IN_FLIGHT, MAX_FRAMES_IN_FLIGHT, RunOptions
+
+if TYPE_CHECKING:
+    from .backends.base import FrameExecutor
 
 
 def frames_in_flight(value: Any = None) -> int:
@@ -117,19 +121,30 @@ def one_frame(executor: Any, *, last: bool) -> None:
 class Result:
     """What a render gives back: ``images`` (output -> (H, W, C) numpy array as read back:
     uint8 for 8-bit formats, float16/float32 for float ones), ``timings`` (what
-    ``timings.json`` holds) and the executor (destroyed; its ``plan`` stays readable).
+    ``timings.json`` holds) and the run's :class:`Frame` (destroyed; its ``plan``, its
+    frame plan and its executors' timings stay readable).
     In Jupyter a result shows its images and per-pass times."""
 
     config: Config
     images: dict[str, np.ndarray]  # output resource -> (H, W, C) array
     timings: dict[str, Any]  # what timings.json holds
-    executor: Any
+    frame: Frame
+
+    @property
+    def executor(self) -> FrameExecutor:
+        """The executor of a frame on one backend (its ``plan``, ``timings``, queues); a
+        frame that mixes backends has one per backend, in ``frame.executors``."""
+        if len(self.frame.executors) != 1:
+            raise RfwError(f"this run mixes backends ({', '.join(self.frame.executors)}): "
+                           "each has its executor in result.frame.executors",
+                           file=self.config.source, element="Result.executor")
+        (ex,) = self.frame.executors.values()
+        return ex
 
     @property
     def formats(self) -> dict[str, str]:
         """Each output's format (``rgba8unorm``, ``rgba16float``, ...)."""
-        return {r.name: r.format for r in self.executor.plan.resources
-                if r.name in self.images}
+        return {r.name: r.format for r in self.frame.plan.resources if r.name in self.images}
 
     @property
     def gpu_ms(self) -> dict[str, float | None]:
@@ -319,27 +334,28 @@ class Frame:
     """A run of one graph: drives one executor per backend through the full plan's order,
     bridges in between (a frame on one backend is its executor's own frames).
 
-    ``executors`` maps a backend's name to the executor built on that backend's sub-plan,
-    ``backends`` to its :class:`rfw.backend.Backend` (which copies through the host at
-    bridges), ``devices`` to the device each runs on."""
+    ``frame_plan`` is what each backend runs (:class:`rfw.mixed.FramePlan`), ``plan`` its
+    full compiled plan; ``executors`` maps a backend's name to the executor built on that
+    backend's sub-plan, ``backends`` to its :class:`rfw.backend.Backend` (which copies
+    through the host at bridges), ``devices`` to the device each runs on."""
 
-    def __init__(self, mixed: MixedPlan, executors: dict[str, Any],
+    def __init__(self, frame_plan: FramePlan, executors: dict[str, Any],
                  backends: dict[str, Backend] | None = None):
-        self.mixed = mixed
-        self.plan = mixed.plan
+        self.frame_plan = frame_plan
+        self.plan = frame_plan.plan
         self.executors = executors
         self.backends = backends if backends is not None else {}
         self.scenes: list[Any] = []  # each backend's upload of the scene, owned by the frame
         self.borrowed: list[Any] = []  # ... those of them the caller owns (start's uploads)
         self.devices: dict[str, Any] = {}
         self.frame_index = 0
-        self.bridge_timings = {n: BridgeTiming(n) for n in mixed.bridges}
+        self.bridge_timings = {n: BridgeTiming(n) for n in frame_plan.bridges}
         self.default_light = False
         self._devices: Devices | None = None  # devices open_frame made, closed by destroy
 
     def run(self, frames: int = 1) -> None:
         """``frames`` frames; returns once they are done (the last one drains)."""
-        if len(self.executors) == 1 and not self.mixed.bridges:
+        if self.frame_plan.single:
             for ex in self.executors.values():  # one side: the executor's own frames
                 ex.run(frames)
             self.frame_index += frames
@@ -349,7 +365,7 @@ class Frame:
     def step(self, *, last: bool) -> None:
         """One frame as :meth:`run` drives it, draining the frames in flight only if
         ``last`` (``rfw.camera_path``: a camera between frames)."""
-        if len(self.executors) == 1 and not self.mixed.bridges:
+        if self.frame_plan.single:
             (ex,) = self.executors.values()
             one_frame(ex, last=last)
             self.frame_index += 1
@@ -384,9 +400,9 @@ class Frame:
         for ex in exs.values():
             ex.begin_frame()
         for name in self.plan.order:
-            br = self.mixed.bridges.get(name)
+            br = self.frame_plan.bridges.get(name)
             if br is None:
-                exs[self.mixed.side[name]].record(name)
+                exs[self.frame_plan.side[name]].record(name)
                 continue
             src, dst = exs[br.src], exs[br.dst]
             src.record(name)  # vk: the plan's barriers to transfer src
@@ -418,14 +434,14 @@ class Frame:
         """An output (or any resource) from the backend that holds it, after every frame in
         flight is done."""
         self.drain()
-        return self.executors[self.mixed.owner[resource]].read(resource)
+        return self.executors[self.frame_plan.owner[resource]].read(resource)
 
     def pass_timings(self) -> list[dict[str, Any]]:
         """timings.json's ``passes``: every pass of the full order, bridges included."""
         out = []
         for name in self.plan.order:
-            side = self.mixed.side[name]
-            if name in self.mixed.bridges:
+            side = self.frame_plan.backend_of(name)
+            if name in self.frame_plan.bridges:
                 t = self.bridge_timings[name]
                 out.append({"name": name, "gpu_ms": None, "cpu_ms": median(t.cpu_ms),
                             "backend": side, "bytes": t.bytes})
@@ -460,49 +476,48 @@ class Side:
 
 
 def prepare(built: Built, backend: str, devices: Devices, *, options: RunOptions = DEFAULT,
-            mix: bool = True) -> tuple[MixedPlan, dict[str, Side]]:
-    """Split ``built`` (``split``), then compile each backend's part for its device (fitted
-    to its memory requirements, with ``options``: aliasing, vk's order seed) and check that
-    backend can run its passes. ``mix=False``: the whole graph on ``backend`` (a frame of one
-    side, no bridges)."""
+            mix: bool = True) -> tuple[FramePlan, dict[str, Side]]:
+    """The frame's plan (split, ``split``), each backend's part compiled once for its device
+    (fitted to its memory requirements, with ``options``: aliasing, vk's order seed), and
+    checked that backend can run its passes. ``mix=False``: the whole graph on ``backend``
+    (a frame of one side, no bridges: its plan is that side's)."""
     if not mix:
         return _whole(built, backend, devices, options)
-    mixed = split(built, backend)
+    frame_plan = split(built, backend)
     sides: dict[str, Side] = {}
-    for s in mixed.sides:
+    for s in frame_plan.sides:
         be = get_backend(s, file=built.graph.source, element=None)
         device = devices.get(be)
-        outputs = tuple(o for o in mixed.plan.outputs if mixed.owner.get(o) == s)
-        plan, fitted = be.fit(mixed.graphs[s], device, readback=bool(outputs),
+        outputs = tuple(o for o in frame_plan.plan.outputs if frame_plan.owner.get(o) == s)
+        plan, fitted = be.fit(frame_plan.graphs[s], device, readback=bool(outputs),
                               options=options)
-        mixed.check(s, plan)
+        frame_plan.check(s, plan)
         passes = {n: built.passes[n] for n in plan.order if n in built.passes}
         sides[s] = Side(be, device, plan, fitted, passes, outputs)
     for side in sides.values():  # e.g. a missing GLSL source fails before any upload
         side.backend.check(side.plan, side.passes)
-    return mixed, sides
+    return frame_plan, sides
 
 
 def _whole(built: Built, backend: str, devices: Devices,
-           options: RunOptions) -> tuple[MixedPlan, dict[str, Side]]:
+           options: RunOptions) -> tuple[FramePlan, dict[str, Side]]:
     be = get_backend(backend, file=built.graph.source)
     device = devices.get(be)
     plan, fitted = be.fit(built.graph, device, readback=True, options=options)
     be.check(plan, built.passes)  # e.g. a missing GLSL source fails before any upload
-    whole = MixedPlan(plan, backend, dict.fromkeys(plan.order, backend), {},
-                      {backend: built.graph}, built.slots,
-                      {r.name: backend for r in plan.resources})
+    whole = FramePlan.whole(plan, backend, built.graph, built.slots)
     return whole, {backend: Side(be, device, plan, fitted, built.passes, tuple(plan.outputs))}
 
 
-def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera: Any = None,
+def start(frame_plan: FramePlan, sides: dict[str, Side], *, scene: Any = None,
+          camera: Any = None,
           size: tuple[int, int] | None = None, options: RunOptions = DEFAULT,
           uploads: dict[str, Any] | None = None) -> Frame:
     """Upload ``scene`` to each backend used and make its executor (with ``options``: frames
     in flight, vk's caches and fuzzing); the frame owns both. ``uploads`` maps a backend to a
     scene already uploaded there (e.g. ``rfw view``'s, kept across changes of config): used
     as it is, and left to the caller to destroy."""
-    frame = Frame(mixed, {}, {s: side.backend for s, side in sides.items()})
+    frame = Frame(frame_plan, {}, {s: side.backend for s, side in sides.items()})
     try:
         for s, side in sides.items():
             uploaded = (uploads or {}).get(s)
@@ -511,10 +526,10 @@ def start(mixed: MixedPlan, sides: dict[str, Side], *, scene: Any = None, camera
                 frame.borrowed.append(uploaded)
             elif scene is not None:
                 uploaded = side.backend.scene(side.device, scene, camera,
-                                              size or mixed.plan.size)
+                                              size or frame_plan.plan.size)
                 frame.scenes.append(uploaded)
             frame.executors[s] = side.backend.executor(
-                side.device, side.plan, side.passes, mixed.slots, uploaded,
+                side.device, side.plan, side.passes, frame_plan.slots, uploaded,
                 readback=side.outputs, fitted=side.fitted, options=options)
         frame.keep_in_flight(options.in_flight())  # each executor, whether it took options or not
     except BaseException:
@@ -535,8 +550,9 @@ def open_frame(built: Built, backend: str = "wgpu", *, devices: Any = (), scene:
     own = not isinstance(devices, Devices)
     devs = Devices(devices, options=options) if own else devices
     try:
-        mixed, sides = prepare(built, backend, devs, options=options)
-        frame = start(mixed, sides, scene=scene, camera=camera, size=size, options=options)
+        frame_plan, sides = prepare(built, backend, devs, options=options)
+        frame = start(frame_plan, sides, scene=scene, camera=camera, size=size,
+                      options=options)
     except BaseException:
         if own:
             devs.close()

@@ -1,7 +1,12 @@
-"""Frames that mix backends: passes pinned to wgpu and to vk in one frame, joined by bridges.
+"""The plan of a frame (:class:`FramePlan`): its compiled plan and what each backend runs of
+it. A frame on one backend is one side and no bridges (``FramePlan.whole``); a frame that
+mixes backends (passes pinned to wgpu and to vk) is cut into sides joined by bridges
+(:func:`split`).
 
 ``compile(graph, backend=...)`` inserts a ``bridge.<resource>.<from>-<to>`` transfer pass
-wherever a resource crosses backends (``rfw.graph.bridges``). Here that plan runs:
+wherever a resource crosses backends (``rfw.graph.bridges``); each says what it copies in a
+typed :class:`Bridge` (source and destination backend, resource and copy), and each plan
+lists its bridge passes (``CompiledGraph.bridges``). Here that plan runs:
 
 * **Per-backend sub-plans.** Each backend compiles its own part of the bridged graph: its
   passes, plus each bridge cut in half (the source side keeps the read, as a side-effect pass
@@ -47,42 +52,56 @@ from .config import Built
 from .graph import CompiledGraph, compile
 from .graph.bridges import backend_of, insert_bridges
 from .graph.formats import format_info
-from .graph.graph import Graph
+from .graph.graph import Bridge, Graph
 from .graph.resources import Binding, SizeRule
 from .shaders import ShaderError
 
-
-@dataclass(frozen=True)
-class Bridge:
-    name: str  # bridge.<resource>.<src>-<dst>
-    src: str  # backend that made the resource
-    dst: str  # backend that reads the copy
-    resource: str  # the original, on src
-    copy: str  # <resource>@<dst>, on dst
+__all__ = ["Bridge", "FramePlan", "split"]
 
 
 @dataclass
-class MixedPlan:
-    """The full plan with bridges, and what each backend runs of it."""
+class FramePlan:
+    """The plan of one frame and what each backend runs of it (a frame on one backend: one
+    side, no bridges)."""
 
     plan: CompiledGraph  # the full plan: order, bridges, every resource
     backend: str  # the run's backend (for unpinned passes)
-    side: dict[str, str]  # pass -> backend (bridges: "src>dst")
-    bridges: dict[str, Bridge]
+    side: dict[str, str]  # pass -> the backend that records it (bridges: in bridges)
+    bridges: dict[str, Bridge]  # bridge pass -> what it copies, between which backends
     graphs: dict[str, Graph]  # backend -> its part of the bridged graph
     slots: dict[str, dict[str, str]]  # pass -> slot -> resource, consumers on the copies
     owner: dict[str, str]  # resource -> backend holding it
 
+    @classmethod
+    def whole(cls, plan: CompiledGraph, backend: str, graph: Graph,
+              slots: dict[str, dict[str, str]]) -> FramePlan:
+        """A frame all on ``backend``: ``plan`` (``graph`` compiled for its device) is the
+        one side's."""
+        return cls(plan, backend, dict.fromkeys(plan.order, backend), {}, {backend: graph},
+                   slots, {r.name: backend for r in plan.resources})
+
     @property
     def sides(self) -> tuple[str, ...]:
-        used = {s for s in self.side.values() if ">" not in s}
+        """The backends the frame runs on, built-ins first."""
+        used = set(self.side.values())
         for b in self.bridges.values():
             used |= {b.src, b.dst}
         return tuple(order(used))
 
+    @property
+    def single(self) -> bool:
+        """One side and no bridges: the frame is that backend's executor's own."""
+        return len(self.sides) == 1 and not self.bridges
+
+    def backend_of(self, name: str) -> str | None:
+        """The backend pass ``name`` runs on (a bridge: ``src>dst``, as timings.json says);
+        None for a pass the frame does not schedule."""
+        br = self.bridges.get(name)
+        return br.route if br is not None else self.side.get(name)
+
     def passes_of(self, backend: str) -> tuple[str, ...]:
         """The full order's passes that ``backend`` records (its bridge halves included)."""
-        return tuple(n for n in self.plan.order if self.side[n] == backend or (
+        return tuple(n for n in self.plan.order if self.side.get(n) == backend or (
             n in self.bridges and backend in (self.bridges[n].src, self.bridges[n].dst)))
 
     def check(self, backend: str, sub: CompiledGraph) -> None:
@@ -97,7 +116,7 @@ class MixedPlan:
                               f"{', '.join(want)} in that order")
 
 
-def split(built: Built, backend: str = "wgpu") -> MixedPlan:
+def split(built: Built, backend: str = "wgpu") -> FramePlan:
     """Compile ``built`` for ``backend`` with bridges and cut it into per-backend graphs."""
     graph = built.graph
     plan = compile(graph, backend=backend)
@@ -108,23 +127,25 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
     bridges: dict[str, Bridge] = {}
     known = installed()
     for name, p in decls.items():
+        if p.bridge is not None:
+            bridges[name] = p.bridge
+            continue
         b = backend_of(p, backend) or backend
         side[name] = b
-        if ">" in b:
-            src, dst = b.split(">")
-            bridges[name] = Bridge(name, src, dst, p.inputs[0].resource, p.outputs[0].resource)
-        elif b not in known:
+        if b not in known:
             raise ShaderError(f"pass '{name}' is pinned to unknown backend '{b}' "
                               f"(installed: {', '.join(known)})", file=graph.source)
     owner: dict[str, str] = {}
     for r in plan.resources:
-        if r.producer in side and ">" not in side[r.producer]:
+        if r.producer in side:
             owner[r.name] = side[r.producer]
         elif r.producer in bridges:
             owner[r.name] = bridges[r.producer].dst
         else:
             owner[r.name] = backend
     for name, p in decls.items():
+        if name in bridges:
+            continue
         for b in p.inputs:  # bridges carry this frame's values, not last frame's
             if b.spec.type == "history" and owner.get(b.resource, side[name]) != side[name]:
                 raise ShaderError(f"pass '{name}' ({side[name]}) reads the history of "
@@ -132,7 +153,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                                   "not carry history; pin both passes to one backend",
                                   file=graph.source)
     graphs = {}
-    for s in order(b for v in side.values() for b in v.split(">")):
+    for s in order({*side.values(), *(b for br in bridges.values() for b in (br.src, br.dst))}):
         passes = []
         for p in bridged.passes:
             if p.name not in decls:
@@ -140,7 +161,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
             if p.name in bridges:
                 br = bridges[p.name]
                 if br.src == s:  # the read: keep it scheduled though nothing reads its result
-                    passes.append(replace(p, outputs=(), side_effect=True, backend=None))
+                    passes.append(replace(p, outputs=(), side_effect=True))
                 elif br.dst == s:  # the write of the copy, sized as the full plan sized it
                     out = p.outputs[0]
                     r = plan.resource(out.resource)
@@ -154,8 +175,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
                             not get_backend(s, file=graph.source, element=None).host_writes_depth:
                         spec = _depth_as_float(spec, r.format, br, _readers(decls, side,
                                                                             br), graph.source)
-                    passes.append(replace(p, inputs=(), outputs=(replace(out, spec=spec),),
-                                          backend=None))
+                    passes.append(replace(p, inputs=(), outputs=(replace(out, spec=spec),)))
             elif side[p.name] == s:
                 passes.append(replace(p, outputs=tuple(_sized(b, plan) for b in p.outputs),
                                       backend=None))
@@ -171,7 +191,7 @@ def split(built: Built, backend: str = "wgpu") -> MixedPlan:
         # bridges rewire reads to copies; history slots keep their "@prev" resource
         rewired = {b.slot: b.resource for b in decls[name].inputs if b.spec.type != "history"}
         slots[name] = {slot: rewired.get(slot, res) for slot, res in mapping.items()}
-    return MixedPlan(plan, backend, side, bridges, graphs, slots, owner)
+    return FramePlan(plan, backend, side, bridges, graphs, slots, owner)
 
 
 # depth formats a bridge carries as r32float into a backend that cannot upload depth images
@@ -181,7 +201,7 @@ _DEPTH_AS_FLOAT = ("depth32float", "depth16unorm")
 
 def _readers(decls: dict[str, Any], side: dict[str, str], br: Bridge) -> list[tuple[str, Any]]:
     """(pass, slot spec) of every pass on the bridge's destination that reads its copy."""
-    return [(name, b.spec) for name, p in decls.items() if side[name] == br.dst
+    return [(name, b.spec) for name, p in decls.items() if side.get(name) == br.dst
             for b in p.inputs if b.resource == br.copy]
 
 

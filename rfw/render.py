@@ -93,10 +93,10 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
         # passes with nothing to do on this scene (points_lines without strokes) left out
         if for_scene(cfg, scene) is not cfg:
             built = build(cfg, scene)
-        mixed, sides = prepare(built, backend, devs, options=options, mix=mix)
+        frame_plan, sides = prepare(built, backend, devs, options=options, mix=mix)
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
-        frame = start(mixed, sides, scene=scene, camera=camera, size=cfg.size,
+        frame = start(frame_plan, sides, scene=scene, camera=camera, size=cfg.size,
                       options=options)
         n = options.frames or cfg.frames
         if path is None and each_frame is None:
@@ -129,7 +129,7 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
         timings["camera_path"] = {"kind": path.kind, "frames": cameras}
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
-    return Result(cfg, images, timings, frame if mix else frame.executors[backend])
+    return Result(cfg, images, timings, frame)
 
 
 def check_outputs(cfg: Config) -> None:
@@ -162,7 +162,7 @@ def _mixed_record(frame: Frame, sides: dict[str, Any]) -> dict[str, Any]:
 
 def _bridges(frame: Frame, passes: list[dict[str, Any]]) -> dict[str, Any]:
     # host copies are wall time, kept out of gpu_ms_total
-    bridges = [p for p in passes if p["name"] in frame.mixed.bridges]
+    bridges = [p for p in passes if p["name"] in frame.frame_plan.bridges]
     return {"bridge_ms_total": sum(p["cpu_ms"] or 0.0 for p in bridges),
             "bridges": [p["name"] for p in bridges]}
 

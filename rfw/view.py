@@ -174,13 +174,14 @@ class Viewer:
         # frames in flight: the run's, else this config's (as rfw run does)
         options = self.options.replace(
             frames_in_flight=self.options.in_flight(cfg.frames_in_flight))
-        mixed, sides = prepare(built, self.backend, self.devices, options=options, mix=mix)
+        frame_plan, sides = prepare(built, self.backend, self.devices, options=options,
+                                    mix=mix)
         for name, side in sides.items():  # the scene goes up once per backend, not per change
             if name not in self.uploads:
                 self.uploads[name] = side.backend.scene(side.device, self.scene, self.camera,
                                                         cfg.size)
-        frame = start(mixed, sides, options=options, uploads=self.uploads)
-        output = mixed.plan.outputs[0]
+        frame = start(frame_plan, sides, options=options, uploads=self.uploads)
+        output = frame_plan.plan.outputs[0]
         old = self.frame
         if old is not None:
             keep = old.executors.get("wgpu")
@@ -194,7 +195,7 @@ class Viewer:
             upload.camera = self.camera
             upload.set_viewport(self.cfg.size)
         self.output = output
-        self.output_format = mixed.plan.resource(output).format
+        self.output_format = frame_plan.plan.resource(output).format
         self.stats = {}
         self._warm = False  # the first frame compiles pipelines: its times are dropped
         shown = self._shown_texture()
@@ -203,8 +204,9 @@ class Viewer:
                 layout=self._blit.get_bind_group_layout(0),
                 entries=[{"binding": 0, "resource": shown.create_view()}])
         self._shown = shown
-        self.say(f"graph: {' -> '.join(mixed.plan.order)}"
-                 + (f" (off: {', '.join(mixed.plan.disabled)})" if mixed.plan.disabled else "")
+        plan = frame_plan.plan
+        self.say(f"graph: {' -> '.join(plan.order)}"
+                 + (f" (off: {', '.join(plan.disabled)})" if plan.disabled else "")
                  + ("" if self.backend == "wgpu" and not mix else
                     f" on {'+'.join(frame.executors)}"))
         if techniques:
@@ -230,7 +232,7 @@ class Viewer:
 
     def backend_of(self, name: str) -> str | None:
         """The backend pass ``name`` runs on now (None: off or culled)."""
-        return self.frame.mixed.side.get(name)
+        return self.frame.frame_plan.backend_of(name)
 
     def _shown_texture(self) -> Any:
         """The texture the window shows: a copy of the output on the window's device."""
@@ -469,7 +471,7 @@ class Viewer:
         """Copy the frame's output into the shown texture: on the GPU where the window's
         device rendered it, else read back (after the frame) and uploaded."""
         dev = self.device.device
-        owner = self.frame.mixed.owner[self.output]
+        owner = self.frame.frame_plan.owner[self.output]
         size = (self._shown.width, self._shown.height, 1)
         if owner == "wgpu":
             enc = dev.create_command_encoder(label="rfw:shown")

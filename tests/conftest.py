@@ -167,7 +167,7 @@ def renders(device, courtyard):
         if key not in cache:
             result = render(cfg, scene=courtyard if scene == "courtyard" else tiny_scene(),
                             device=device)
-            formats = {r.name: r.format for r in result.executor.plan.resources}
+            formats = {r.name: r.format for r in result.frame.plan.resources}
             cache[key] = {out: to_png_array(img, formats[out])
                           for out, img in result.images.items()}
         return cache[key]

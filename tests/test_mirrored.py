@@ -63,7 +63,7 @@ def image(config: str, scene: Scene, backend: str, sets: tuple[str, ...] = ()) -
     cfg = apply_overrides(load_config(ROOT / "configs" / f"{config}.toml"),
                           [f"size={SIZE}", *sets])
     result = render(cfg, scene=scene, backend=backend)
-    formats = {r.name: r.format for r in result.executor.plan.resources}
+    formats = {r.name: r.format for r in result.frame.plan.resources}
     ((name, img),) = result.images.items()
     return to_png_array(img, formats[name])[..., :3].astype(int)
 
@@ -177,7 +177,7 @@ def test_mirrored_courtyard_culls_the_same_meshlets():
     images, culling = [], []
     for scene in (default_scene(), mirrored(default_scene())):
         result = render(cfg, scene=scene, backend="vk")
-        formats = {r.name: r.format for r in result.executor.plan.resources}
+        formats = {r.name: r.format for r in result.frame.plan.resources}
         ((name, img),) = result.images.items()
         images.append(to_png_array(img, formats[name])[..., :3].astype(int))
         culling.append(result.timings["culling"])

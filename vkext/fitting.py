@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from rfw.graph import CompiledGraph
-from rfw.graph.compile import MemoryOptions, compile
+from rfw.graph.compile import MemoryOptions, compile, place
 from rfw.graph.graph import Graph
 from rfw.passes import Pass
 from rfw.shaders import ShaderError, program_files
@@ -42,8 +42,9 @@ def fit_plan(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bo
 
 def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: bool = True,
               order_seed: int | None = None) -> tuple[CompiledGraph, dict[str, Any]]:
-    """``fit_plan`` without the check for pins (a backend's part of a mixed frame, whose
-    bridge passes carry ``"vk>wgpu"``-style backends, compiles through here)."""
+    """``fit_plan`` without the check for pins (a backend's part of a mixed frame, with its
+    halves of bridges, compiles through here). The graph is compiled once; the device's
+    placement is :func:`rfw.graph.compile.place` on that plan."""
     base = MemoryOptions(alias=alias)
     order_seed = _order_seed(graph, order_seed)
     # the device's capabilities: a pass needing a feature it lacks is refused here, by name
@@ -52,8 +53,7 @@ def fit_graph(graph: Graph, device: VkDevice, *, alias: bool = True, readback: b
     opts = memory_options(plan, device, base=base, readback=readback)
     info: dict[str, Any] = {"recompiled": False, "image_alignment": base.image_alignment,
                             "buffer_alignment": base.buffer_alignment, "default_fits": True}
-    fitted = compile(graph, caps=device.caps, backend="vk", memory=opts,
-                     order_seed=order_seed)
+    fitted = place(plan, opts)
     placement = [(r.name, r.bytes, r.offset) for r in plan.resources if r.transient]
     if placement != [(r.name, r.bytes, r.offset) for r in fitted.resources if r.transient]:
         fits = plan_fits(plan, device, readback=readback)
@@ -75,8 +75,7 @@ def _order_seed(graph: Graph, seed: int | None) -> int | None:
     """The schedule-fuzzing order ``seed`` (``vkext.poison``) for a frame all on Vulkan; a
     mixed frame's part (pins elsewhere, or bridges, as rfw.mixed cuts it) keeps its order:
     its driver records it in the full plan's."""
-    if any(p.enabled and (p.backend not in (None, "vk")
-                          or (p.type == "transfer" and p.name.startswith("bridge.")))
+    if any(p.enabled and (p.backend not in (None, "vk") or p.bridge is not None)
            for p in graph.passes):
         return None
     return seed
@@ -118,19 +117,12 @@ def check_passes(plan: CompiledGraph, passes: dict[str, Pass]) -> None:
     for name in plan.order:
         p = passes.get(name)
         if p is None:
-            if is_bridge(plan, name) and len(plan.accesses[name]) > 1:
+            if name in plan.bridges and len(plan.accesses[name]) > 1:
                 raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
                                   "them, and runs through rfw.render.render (each backend gets its "
                                   "part of it)")
-            if is_bridge(plan, name):
+            if name in plan.bridges:
                 continue  # its barriers are recorded; rfw.frame copies through the host
             raise ShaderError(f"pass '{name}' has no pass instance")
         if p.shader:
             shader_paths(p)
-
-
-def is_bridge(plan: CompiledGraph, name: str) -> bool:
-    """Whether ``name`` is a bridge pass (``rfw.graph.bridges``): named ``bridge.*`` and
-    touching its resources only as a transfer source or destination."""
-    return name.startswith("bridge.") and all(
-        a.usages <= {"transfer_src", "transfer_dst"} for a in plan.accesses.get(name, ()))

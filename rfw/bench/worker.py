@@ -60,17 +60,15 @@ class FrameClock:
         return [(b - a) * 1e3 for a, b in self.ends[-n:]] if n else []
 
 
-def _samples(executor: Any) -> dict[str, dict[str, list[float]]]:
-    """Per-pass lists of per-frame ``gpu_ms`` and ``cpu_ms`` (mixed frames: both sides and
-    the bridges, which have CPU time only)."""
+def _samples(frame: Any) -> dict[str, dict[str, list[float]]]:
+    """Per-pass lists of per-frame ``gpu_ms`` and ``cpu_ms`` of a run's frame (every side's
+    executor, and the bridges, which have CPU time only)."""
     out: dict[str, dict[str, list[float]]] = {}
-    subs = getattr(executor, "executors", None)
-    sources = list(subs.values()) if isinstance(subs, dict) else [executor]
-    for ex in sources:
+    for ex in frame.executors.values():
         for name, t in ex.timings.items():
             if t.gpu_ms or t.cpu_ms:
                 out[name] = {"gpu_ms": list(t.gpu_ms), "cpu_ms": list(t.cpu_ms)}
-    for name, t in getattr(executor, "bridge_timings", {}).items():
+    for name, t in frame.bridge_timings.items():
         out[name] = {"gpu_ms": [], "cpu_ms": list(t.cpu_ms)}
     return out
 
@@ -104,8 +102,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
         clock.restore()
     clocks = gpu_clocks()  # right after the frames: the clocks they ran at, or close
     timings = result.timings
-    ex = result.executor
-    samples = _samples(ex)
+    samples = _samples(result.frame)
     order = [p["name"] for p in timings["passes"]]
     passes = []
     for name in order:
@@ -117,7 +114,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
                                      strict=False)] if any(p["gpu_ms"] for p in passes) else []
     cpu_frame = [sum(v) for v in zip(*(p["cpu_ms"] for p in passes if p["cpu_ms"]),
                                      strict=False)]
-    plan = ex.plan
+    plan = result.frame.plan
     record: dict[str, Any] = {
         "device": timings.get("device"), "driver": timings.get("driver"),
         "api": timings.get("api"), "backend": timings.get("backend", backend),

@@ -1,12 +1,14 @@
 """Cross-API graphs: where a resource made on one backend is used on another, a bridge pass
-copies it through host memory (wgpu-native exposes no Vulkan handles to share)."""
+copies it through host memory (wgpu-native exposes no Vulkan handles to share). A bridge
+pass says what it copies in its ``bridge`` (:class:`rfw.graph.graph.Bridge`: the resource,
+the copy, the backends on either side); it is pinned to no backend itself."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
 from .errors import GraphError
-from .graph import Graph, PassDecl
+from .graph import Bridge, Graph, PassDecl
 from .resources import Binding, SizeRule, Slot
 
 # slot types that write the resource they name in place
@@ -73,6 +75,7 @@ def _bridge(resource: str, spec: Slot, src: str, dst: str) -> PassDecl:
                    layers=spec.layers, usage=frozenset({"transfer_dst"}),
                    desc=f"{resource} copied from {src}")
         read = Slot("texture", usage=frozenset({"transfer_src"}))
-    return PassDecl(f"bridge.{resource}.{src}-{dst}", "transfer",
-                    inputs=(Binding("src", "in", read, resource),),
-                    outputs=(Binding("dst", "out", out, copy),), backend=f"{src}>{dst}")
+    name = f"bridge.{resource}.{src}-{dst}"
+    return PassDecl(name, "transfer", inputs=(Binding("src", "in", read, resource),),
+                    outputs=(Binding("dst", "out", out, copy),),
+                    bridge=Bridge(name, src, dst, resource, copy))

@@ -2,6 +2,8 @@
 
 validate -> cull -> order -> resolve -> lifetimes -> assign memory -> plan barriers ->
 parallel levels. Each step is a short function; executors make no decision made here.
+``place(plan, memory)`` runs the steps from memory on again with other placement rules (a
+device's exact sizes), from what compiling found up to lifetimes (``plan.front``).
 The steps live beside this driver: validate.py (1: accesses.py and steps.py derive what the
 slots and the steps inside passes touch), schedule.py (2, 3, 5, 8), resolve.py (4),
 placement.py (6), barriers.py (7); plan.py holds what they pass along and return.
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 from collections import OrderedDict, defaultdict
 from collections.abc import Iterable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from .barriers import plan_barriers, plan_step_barriers
@@ -46,7 +48,7 @@ from .schedule import cull, lifetimes, parallel_levels, unproduced_after_cull
 from .validate import validate
 
 __all__ = ["IMPLIED_CAPS", "STATS", "Access", "Barrier", "CompiledGraph", "Diagnostic",
-           "MemoryOptions", "ResourcePlan", "compile"]
+           "MemoryOptions", "ResourcePlan", "compile", "place"]
 
 # ---------------------------------------------------------------------------------------------
 # the driver
@@ -76,6 +78,8 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
     dictionary lookup, and a changed graph reuses the memory plan when lifetimes are equal.
     ``order_seed`` breaks ties in the pass order at random (seeded): another valid order,
     with the lifetimes, aliasing and barriers that follow from it (schedule fuzzing).
+    Other placement rules for the same plan (a device's sizes and alignments) are
+    :func:`place`'s: it does not compile the graph again.
     """
     size_from = "graph" if size is None else "given"
     size = size or graph.size
@@ -86,24 +90,65 @@ def compile(graph: Graph, size: tuple[int, int] | None = None,
         raise GraphError(f"output size {size[0]}x{size[1]} is not positive", file=graph.source)
     caps = None if caps is None else frozenset(caps)
     strict = graph.strict if strict is None else strict
-    key = (graph, tuple(size), size_from, caps, strict, cull_passes, memory, backend,
-           order_seed)
+    front_key = (graph, tuple(size), size_from, caps, strict, cull_passes, backend, order_seed)
+    key = (*front_key, memory)
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
     STATS["compile"] += 1
     try:
         graph = insert_bridges(graph, backend)
-        result = replace(_compile(graph, (int(size[0]), int(size[1])), caps, strict,
-                                  cull_passes, memory, order_seed), size_from=size_from)
+        front = _front(graph, (int(size[0]), int(size[1])), caps, strict, cull_passes,
+                       order_seed, front_key)
+        result = replace(_place(front, memory), size_from=size_from)
     except GraphError as e:
         raise e.in_file(graph.source) from None
     return _remember(_CACHE, key, result)
 
 
-def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, strict: bool,
-             cull_passes: bool, memory: MemoryOptions,
-             order_seed: int | None = None) -> CompiledGraph:
+def place(plan: CompiledGraph, memory: MemoryOptions) -> CompiledGraph:
+    """``plan`` with its transients placed by other rules (``memory``: e.g. a device's exact
+    sizes and alignments): the memory, barrier and queue-transfer steps again, from what
+    :func:`compile` found before it placed memory; the graph is not compiled again. The
+    same plan ``compile`` gives with ``memory``, and memoised with it."""
+    front = plan.front
+    key = (*front.key, memory)
+    if key in _CACHE:
+        _CACHE.move_to_end(key)
+        return _CACHE[key]
+    STATS["place"] += 1
+    try:
+        result = replace(_place(front, memory), size_from=plan.size_from)
+    except GraphError as e:
+        raise e.in_file(front.graph.source) from None
+    return _remember(_CACHE, key, result)
+
+
+@dataclass(frozen=True)
+class _Front:
+    """What compiling found before memory is placed: every step up to lifetimes."""
+
+    key: tuple  # compile's memo key, without the memory options
+    graph: Graph  # with its bridges
+    size: tuple[int, int]
+    declared: Declared
+    diagnostics: tuple[Diagnostic, ...]
+    culled: list[str]
+    mode: str
+    why: str
+    schedule: list[int]
+    on_compute: set[int]
+    queue_of: Any
+    submissions: Any
+    used: list[str]
+    resolved: dict[str, Resolved]
+    spans: dict[str, tuple[int, int]]
+    transient: set[str]
+    unproduced: list[tuple[Any, str, str, str]]
+
+
+def _front(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, strict: bool,
+           cull_passes: bool, order_seed: int | None, key: tuple) -> _Front:
     declared = validate(graph, caps, strict)
     problems = _Problems(graph, strict)
     problems.diagnostics = list(declared.diagnostics)
@@ -133,6 +178,14 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         spans = overlap_spans(spans, names_of(declared, schedule), submissions,
                               declared.accesses)
     transient = {n for n in used if n in spans and _is_transient(n, declared, resolved)}
+    return _Front(key, graph, size, declared, tuple(problems.diagnostics), culled, mode, why,
+                  schedule, on_compute, queue_of, submissions, used, resolved, spans,
+                  transient, unproduced)
+
+
+def _place(f: _Front, memory: MemoryOptions) -> CompiledGraph:
+    declared, schedule, resolved, spans, transient = (f.declared, f.schedule, f.resolved,
+                                                      f.spans, f.transient)
     items, heap_of, align = _memory_items(declared, resolved, spans, transient, memory)
     mem_key = (items, memory.alias)
     if mem_key in _MEMORY_CACHE:
@@ -141,21 +194,22 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         heaps, offsets = _remember(_MEMORY_CACHE, mem_key, assign_memory(items, memory.alias))
     placement = {n: (heap_of[n], offsets[n], offsets[n] + align[n]) for n in transient}
     barriers = plan_barriers(declared, schedule, resolved, placement, transient, spans)
-    transfers = plan_transfers(names_of(declared, schedule), queue_of, declared.accesses,
-                               barriers) if mode == "two families" and on_compute else []
+    transfers = plan_transfers(names_of(declared, schedule), f.queue_of, declared.accesses,
+                               barriers) if f.mode == "two families" and f.on_compute else []
     flat = [it for heap in items for it in heap]
     names = [declared.passes[i].name for i in schedule]
     kept = set(schedule)
-    plans = _resource_plans(declared, used, resolved, spans, transient, placement, align, names)
+    plans = _resource_plans(declared, f.used, resolved, spans, transient, placement, align,
+                            names)
     return CompiledGraph(
-        name=graph.name, size=size, order=tuple(names), culled=tuple(culled),
+        name=f.graph.name, size=f.size, order=tuple(names), culled=tuple(f.culled),
         disabled=tuple(declared.disabled), resources=tuple(plans), heaps=heaps,
         transient_bytes=sum(heaps), unaliased_bytes=sum(it.size for it in flat),
         lower_bound_bytes=lower_bound(flat, len(schedule)),
         raptor_reuse_bytes=_raptor_reuse_bytes(declared, flat, resolved, spans, schedule),
         barriers=tuple(barriers),
         parallel_levels=tuple(tuple(level) for level in parallel_levels(declared, schedule)),
-        diagnostics=tuple(problems.diagnostics),
+        diagnostics=f.diagnostics,
         accesses={n: declared.accesses[n] for n in names},
         edges=tuple((declared.passes[a].name, declared.passes[b].name, kind)
                     for (a, b), kind in sorted(declared.edges.items())
@@ -164,11 +218,14 @@ def _compile(graph: Graph, size: tuple[int, int], caps: frozenset[str] | None, s
         step_barriers=tuple(plan_step_barriers(declared, schedule)),
         steps={n: tuple(s.name for s in declared.passes[i].steps)
                for n, i in zip(names, schedule, strict=True) if declared.passes[i].steps},
-        queues=queue_plan(mode, why, queue_of, submissions, transfers),
+        queues=queue_plan(f.mode, f.why, f.queue_of, f.submissions, transfers),
         unproduced=tuple((p.name, slot, resource, producer)
-                         for p, slot, resource, producer in unproduced),
+                         for p, slot, resource, producer in f.unproduced),
         follow_output=sum(_follows_output(n, declared.resources) for n, r in resolved.items()
                           if r.kind == "image" and r.format),
+        bridges=tuple(declared.passes[i].name for i in schedule
+                      if declared.passes[i].bridge is not None),
+        front=f,
     )
 
 

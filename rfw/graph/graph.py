@@ -41,6 +41,23 @@ def _freeze(value: Any) -> Any:
     return value
 
 
+@dataclass(frozen=True)
+class Bridge:
+    """What a bridge pass (``rfw.graph.bridges``) copies: ``resource``, made on backend
+    ``src``, into ``copy`` (``<resource>@<dst>``), which backend ``dst``'s passes read."""
+
+    name: str  # the bridge pass: bridge.<resource>.<src>-<dst>
+    src: str
+    dst: str
+    resource: str
+    copy: str
+
+    @property
+    def route(self) -> str:
+        """``src>dst``, as timings.json names a bridge's backend."""
+        return f"{self.src}>{self.dst}"
+
+
 @dataclass(frozen=True, eq=True)
 class PassDecl:
     """One pass as declared: its type, its bound slots and its settings."""
@@ -56,13 +73,14 @@ class PassDecl:
     settings: tuple[tuple[str, Any], ...] = ()
     schema: tuple[str, ...] | None = None  # known setting names, when the pass class says
     steps: tuple[Step, ...] = ()  # ordered steps inside the pass, barriers planned between
+    bridge: Bridge | None = None  # a copy between backends (rfw.graph.bridges), not a pass
     origin: str | None = field(default=None, compare=False)  # "file:line" for messages
 
     @cached_property
     def _hash(self) -> int:
         return hash((self.name, self.type, self.inputs, self.outputs, self.enabled,
                      self.side_effect, self.requires, self.settings, self.schema, self.backend,
-                     self.steps))
+                     self.steps, self.bridge))
 
     def __hash__(self) -> int:
         return self._hash

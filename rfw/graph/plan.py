@@ -166,6 +166,11 @@ class CompiledGraph:
     queues: Any = None
     # (pass, slot, resource, its culled producer) of kept inputs the cull left unproduced
     unproduced: tuple[tuple[str, str, str, str], ...] = ()
+    # scheduled bridge passes (PassDecl.bridge: copies between backends, or a backend's
+    # half of one), in order: what executors copy through the host instead of recording
+    bridges: tuple[str, ...] = ()
+    # what compiling found before it placed memory: rfw.graph.compile.place starts there
+    front: Any = field(default=None, compare=False, repr=False)
 
     def barriers_before_step(self, pass_name: str, index: int,
                              previous: int) -> tuple[Barrier, ...]:

@@ -349,9 +349,7 @@ def plan_transfers(order: list[str], queue_of: dict[str, str],
 def queue_mode(graph: Any, declared: Declared, caps: frozenset[str] | None) -> tuple[str, str]:
     """The mode for a graph on a device; a frame that mixes backends stays on one queue
     (its bridges copy through the host between submissions)."""
-    if any(p.backend not in (None, "vk") or (p.type == "transfer"
-                                             and p.name.startswith("bridge."))
-           for p in declared.passes):
+    if any(p.backend not in (None, "vk") or p.bridge is not None for p in declared.passes):
         return "off", "the frame mixes backends"
     return choose(getattr(graph, "async_compute", "auto"), caps)
 

@@ -51,7 +51,7 @@ def test_timings_and_files(device, scene, tmp_path):
     if t["timestamps"]:
         assert all(p["gpu_ms"] > 0 for p in t["passes"])
         assert t["gpu_ms_total"] == pytest.approx(sum(p["gpu_ms"] for p in t["passes"]))
-    formats = {x.name: x.format for x in r.executor.plan.resources}
+    formats = {x.name: x.format for x in r.frame.plan.resources}
     written = write_outputs(r, tmp_path, formats)
     assert sorted(p.name for p in written) == ["timings.json", "tonemap.ldr.png"]
     assert json.loads((tmp_path / "timings.json").read_text())["passes"] == t["passes"]

@@ -37,11 +37,11 @@ def test_async_on_and_off_give_the_same_image(vk_device, courtyard):
     off = _render(vk_device, courtyard, "off")
     assert on.timings["validation"]["messages"] == 0, on.timings["validation"]
     assert off.timings["validation"]["messages"] == 0, off.timings["validation"]
-    q = on.executor.plan.queues
+    q = on.frame.plan.queues
     # lavapipe: one queue; the H200: a second queue of its graphics family
     assert q.mode == choose("on", vk_device.caps)[0] and q.async_passes() == ("ssao",)
-    assert off.executor.plan.queues.queues == ("graphics",)
-    assert on.executor.plan.order != off.executor.plan.order  # ssao moved up
+    assert off.frame.plan.queues.queues == ("graphics",)
+    assert on.frame.plan.order != off.frame.plan.order  # ssao moved up
     assert set(on.images) == set(off.images)
     for name, img in on.images.items():
         assert np.array_equal(img, off.images[name]), name
@@ -166,7 +166,7 @@ def test_async_in_other_orders_with_poison_gives_the_same_image(vk_device, court
     r = _render(vk_device, courtyard, "on", frames=2,
                 options=RunOptions(order_seed=seed, poison=True))
     assert r.timings["validation"]["messages"] == 0, r.timings["validation"]
-    assert r.executor.plan.queues.async_passes() == ("ssao",)
+    assert r.frame.plan.queues.async_passes() == ("ssao",)
     for name, img in r.images.items():
         assert np.array_equal(img, base.images[name]), name
 
@@ -185,7 +185,7 @@ def test_rt_shadows_builds_its_tlas_beside_the_gbuffer(vk_device, courtyard):
         cfg, _ = resolve_auto(cfg, vk_device.caps)
         out[switch] = render_vk(cfg, scene=courtyard, device=vk_device, frames=2)
         assert out[switch].timings["validation"]["messages"] == 0
-    assert out["on"].executor.plan.queues.async_passes() == ("accel",)
+    assert out["on"].frame.plan.queues.async_passes() == ("accel",)
     for name, img in out["on"].images.items():
         assert np.array_equal(img, out["off"].images[name]), name
 

@@ -244,7 +244,7 @@ def _mixed_poisoned(cfg: Any, device: Any, wgpu_device: Any, scene: Any) -> None
     before = poison.STATS["fills"]
     fuzzed = run(RunOptions(order_seed=7, poison=True))
     assert poison.STATS["fills"] > before
-    assert fuzzed.executor.plan.order == reference.executor.plan.order
+    assert fuzzed.frame.plan.order == reference.frame.plan.order
     assert not _differing(fuzzed.images, reference.images)
     device.check_validation()
     print(f"\n{cfg.name}: mixed frame, its one order, poisoned")

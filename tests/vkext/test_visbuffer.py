@@ -61,7 +61,7 @@ def gbuffer(device, scene, *sets: str) -> dict[str, np.ndarray]:
     result = render(replace(cfg, outputs=list(source.values())), scene=scene,
                     device=device, backend="vk")
     out = {n: np.asarray(result.images[r]) for n, r in source.items()}
-    out["resources"] = {r.name for r in result.executor.plan.resources}
+    out["resources"] = {r.name for r in result.frame.plan.resources}
     return out
 
 
