@@ -59,10 +59,7 @@ class Executor(ExecutorCore):
         self.present = tuple(present)  # outputs a window samples to show them
         self.shaders = ShaderCache(device)
         # a bridge's side on this backend (rfw.frame): the host copies, nothing is recorded
-        self._bridges = tuple(name for name in plan.order if name not in passes and
-                              name.startswith("bridge.") and all(
-                                  a.usages <= {"transfer_src", "transfer_dst"}
-                                  for a in plan.accesses.get(name, ())))
+        self._bridges = tuple(name for name in plan.bridges if name not in passes)
         for name in self._bridges:
             if len(plan.accesses[name]) > 1:
                 raise ShaderError(f"pass '{name}' copies between backends: the plan mixes "
