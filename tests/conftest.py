@@ -1,11 +1,17 @@
 """Shared fixtures: one wgpu device per session, a tiny scene built in code, the courtyard and
-a cache of renders per session, and the same random and clock state for every test."""
+a cache of renders per session, and the same random and clock state for every test; and
+the one way the suite runs the ``rfw`` command line in a subprocess (``rfw_cli``)."""
 
 from __future__ import annotations
 
+import os
 import random
+import subprocess
+import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,17 +25,43 @@ def tree_env() -> dict[str, str]:
     """The environment for a subprocess that runs this tree's rfw: the tree first on
     PYTHONPATH, then whatever PYTHONPATH made rfw's dependencies importable (the GPU
     machine has them there, not installed)."""
-    import os
-
     path = [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
     return {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
+
+
+def rfw_cli(*args: object, cwd: Path | str | None = None,
+            env: Mapping[str, str | None] | None = None,
+            environ: Mapping[str, str] | None = None, tree: bool = False,
+            safe_path: bool = False, timeout: float = 300,
+            **run: Any) -> subprocess.CompletedProcess:
+    """Run ``python -m rfw.cli ARGS`` to the end: its exit code and text output, never an
+    exception for a non-zero exit (the tests judge the code and stderr themselves).
+
+    ``env`` sets variables over this process's environment (None unsets one); ``environ``
+    is a whole environment instead of this process's (the CLI corpora build their own).
+    ``tree`` puts this tree first on PYTHONPATH, as ``tree_env`` does, for runs from a
+    folder where Python would not find it. ``safe_path`` runs ``python -P`` as the console
+    script does: the working folder is not on sys.path. A run past ``timeout`` seconds
+    fails the test instead of hanging the suite. ``run`` goes to subprocess.run as it is
+    (input, errors, preexec_fn)."""
+    full = None  # this process's environment, as it is
+    if env is not None or environ is not None or tree:
+        merged = {**(os.environ if environ is None else environ), **(env or {})}
+        full = {k: v for k, v in merged.items() if v is not None}
+        if tree:
+            path = [str(ROOT), *filter(None, [full.get("PYTHONPATH")])]
+            full["PYTHONPATH"] = os.pathsep.join(path)
+    python = [sys.executable, *(["-P"] if safe_path else []), "-m", "rfw.cli"]
+    return subprocess.run([*python, *map(str, args)], cwd=cwd, env=full, capture_output=True,
+                          text=True, timeout=timeout, check=False, **run)
+
+
 def pytest_configure(config):
     """Compile this tree's modules once, beside their sources, before any test starts rfw in
     a subprocess: with PYTHONDONTWRITEBYTECODE set (as on the CI machines, and as the fault
     corpus sets it for its children) nothing writes them, so each child compiled some 135
     modules again, half a second of every ``rfw`` it ran. Python still reads them."""
     import compileall
-    import os
 
     if os.environ.get("PYTEST_XDIST_WORKER"):  # the controller does it, once
         return

@@ -18,15 +18,12 @@ from PIL import Image
 import rfw
 from rfw.fileio import to_png_array
 
+from .conftest import rfw_cli
+
 ROOT = Path(__file__).resolve().parents[1]
 DEFERRED = str(ROOT / "configs" / "deferred.toml")
 FLAT = str(ROOT / "configs" / "flat.toml")
 SIZE = (32, 18)
-
-
-def cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=300, check=False)
 
 
 def decode(png: bytes) -> np.ndarray:
@@ -145,7 +142,7 @@ def test_bad_input_is_the_cli_line(tmp_path, sets, backend):
         rfw.run(DEFERRED, *sets, backend=backend, size=SIZE)
     args = ["run", DEFERRED, "--size", "32x18", "--out", str(tmp_path / "out")]
     args += [a for s in sets for a in ("--set", s)] + (["--backend", backend] if backend else [])
-    done = cli(*args, cwd=tmp_path)
+    done = rfw_cli(*args, cwd=tmp_path)
     assert done.returncode == 2
     assert done.stderr.splitlines() == [f"rfw: error: {err.value}"]
     assert "\n" not in str(err.value)
@@ -171,8 +168,8 @@ def test_save_writes_what_rfw_run_writes(pair, tmp_path):
     _, a, _, _ = pair
     written = a.save(tmp_path / "api")
     assert [p.name for p in written] == ["tonemap.ldr.png", "timings.json"]
-    done = cli("run", DEFERRED, "--size", "32x18", "--frames", "2", "--out",
-               str(tmp_path / "cli"), cwd=tmp_path)
+    done = rfw_cli("run", DEFERRED, "--size", "32x18", "--frames", "2", "--out",
+                   str(tmp_path / "cli"), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     ours = np.asarray(Image.open(tmp_path / "api" / "tonemap.ldr.png"))
     theirs = np.asarray(Image.open(tmp_path / "cli" / "tonemap.ldr.png"))

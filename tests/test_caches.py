@@ -5,14 +5,14 @@ Through the real CLI, as a user meets a damaged cache. The SPIR-V cache has its 
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
+
+from .conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ["run", str(ROOT / "configs" / "meshlet.toml"), "--backend", "vk", "--size", "64x36",
@@ -20,9 +20,7 @@ RUN = ["run", str(ROOT / "configs" / "meshlet.toml"), "--backend", "vk", "--size
 
 
 def rfw(args: list[str], cwd: Path, cache: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "RFW_CACHE_MESHLETS": str(cache)}
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
+    return rfw_cli(*args, cwd=cwd, env={"RFW_CACHE_MESHLETS": str(cache)})
 
 
 def warnings_of(done: subprocess.CompletedProcess) -> list[str]:

@@ -4,20 +4,16 @@ record, culling counters per frame on meshlet configs, and the report's path cha
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from .conftest import ROOT, rfw_cli
 
 
 def bench(out: Path, config: str, *args: str) -> list[dict]:
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", "bench", str(ROOT / config),
-                           "--size", "32x18", "--warmup", "1", "--out", str(out),
-                           "--no-progress", *args], capture_output=True, text=True,
-                          check=False)
+    done = rfw_cli("bench", ROOT / config, "--size", "32x18", "--warmup", "1", "--out", out,
+                   "--no-progress", *args)
     assert done.returncode == 0, done.stderr
     return [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
 
@@ -68,10 +64,8 @@ def test_meshlet_culling_counters_along_the_path(tmp_path):
 
 def test_meshlet_path_under_validation(tmp_path):
     # the camera written between frames on vk (host-mapped uniforms: frames drained first)
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", "run",
-                           str(ROOT / "configs/meshlet.toml"), "--backend", "vk", "--validate",
-                           "--size", "32x18", "--frames", "3", "--set", "camera.path=orbit",
-                           "--out", str(tmp_path / "o")], capture_output=True, text=True,
-                          check=False)
+    done = rfw_cli("run", ROOT / "configs/meshlet.toml", "--backend", "vk", "--validate",
+                   "--size", "32x18", "--frames", "3", "--set", "camera.path=orbit",
+                   "--out", tmp_path / "o")
     assert done.returncode == 0, done.stderr
     assert "validation: 0 message(s)" in done.stdout

@@ -6,9 +6,7 @@ from __future__ import annotations
 import base64
 import json
 import math
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,21 +17,16 @@ from rfw.camera_path import CameraPath, check_path
 from rfw.errors import RfwError
 from rfw.scene import Camera
 
+from .conftest import rfw_cli
+
 ROOT = Path(__file__).resolve().parents[1]
 FLAT = ROOT / "configs" / "flat.toml"
 SIZE = "32x18"
 
 
-def cli(*args: str, cwd: Path | None = None,
-        env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, check=False, cwd=cwd, timeout=300,
-                          env=None if env is None else {**os.environ, **env})
-
-
 def run(out: Path, *args: str, config: Path = FLAT,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    done = cli("run", str(config), "--size", SIZE, "--out", str(out), *args, env=env)
+    done = rfw_cli("run", str(config), "--size", SIZE, "--out", str(out), *args, env=env)
     assert done.returncode == 0, done.stderr
     return done
 
@@ -50,7 +43,7 @@ def refused(tmp_path: Path, *args: str, needles: tuple[str, ...],
     work.mkdir(exist_ok=True)
     out = tmp_path / "o"
     extra = ["--out", str(out), "--frames", "2"] if command == "run" else []
-    done = cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
+    done = rfw_cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
     assert done.returncode == 2, done.stdout + done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr

@@ -15,15 +15,13 @@ keeps that bar where it holds and falls back to ``golden_util.assert_similar`` e
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from .conftest import rfw_cli
 from .golden_util import assert_similar, mismatch, read_png
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,13 +49,6 @@ VK_ONLY = {
 }
 
 
-def rfw(*args: str, cwd: Path = ROOT, env: dict[str, str] | None = None
-        ) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, check=False,
-                          env={**os.environ, **(env or {})})
-
-
 def render(config: Path, backend: str, out: Path, sets: list[str],
            cache: Path | None = None) -> dict[str, np.ndarray]:
     """The config's output images, rendered by the CLI on ``backend`` (vk: under the
@@ -66,7 +57,7 @@ def render(config: Path, backend: str, out: Path, sets: list[str],
             "--out", str(out), *(["--validate"] if backend == "vk" else [])]
     for s in sets:
         args += ["--set", s]
-    done = rfw(*args, env={"RFW_CACHE_SPIRV": str(cache)} if cache else None)
+    done = rfw_cli(*args, cwd=ROOT, env={"RFW_CACHE_SPIRV": str(cache)} if cache else None)
     assert done.returncode == 0, f"{config.name} on {backend}: {done.stdout}{done.stderr}"
     images = {p.name: read_png(p) for p in sorted(out.glob("*.png"))}
     assert images, f"{config.name} on {backend} wrote no image"
@@ -117,8 +108,8 @@ def test_vk_only_configs_run_on_vk_and_wgpu_refuses_them(name, tmp_path):
     text = text.replace("[[pass]]\n", '[[pass]]\nbackend = "wgpu"\n')
     config = tmp_path / f"{name}.toml"
     config.write_text(text)
-    done = rfw("run", str(config), "--backend", "wgpu", "--size", SIZE, "--frames", "1",
-               "--out", str(tmp_path / "out"), cwd=tmp_path)
+    done = rfw_cli("run", str(config), "--backend", "wgpu", "--size", SIZE, "--frames", "1",
+                   "--out", str(tmp_path / "out"), cwd=tmp_path)
     pass_, cap = VK_ONLY[name]
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr

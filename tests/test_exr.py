@@ -4,8 +4,6 @@ item 8)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +12,8 @@ import pytest
 from rfw.config import load_config
 from rfw.fileio import read_exr, write_exr
 from rfw.render import render
+
+from .conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -39,11 +39,6 @@ inputs = { hdr = "lighting.hdr" }
 """
 
 
-def rfw(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=300, check=False)
-
-
 def bits(a: np.ndarray) -> np.ndarray:
     return a.view({2: np.uint16, 4: np.uint32}[a.dtype.itemsize])
 
@@ -52,7 +47,7 @@ def bits(a: np.ndarray) -> np.ndarray:
 def hdr_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("exr")
     (root / "hdr.toml").write_text(HDR)
-    done = rfw("run", "hdr.toml", "--exr", "--out", "out", cwd=root)
+    done = rfw_cli("run", "hdr.toml", "--exr", "--out", "out", cwd=root)
     assert done.returncode == 0, done.stderr
     return root, done
 
@@ -110,8 +105,8 @@ def test_write_exr_refuses_8bit(tmp_path):
 
 def test_exr_without_float_outputs_is_one_line(tmp_path):
     out = tmp_path / "out"
-    done = rfw("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--exr",
-               "--out", str(out), cwd=tmp_path)
+    done = rfw_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--exr",
+                   "--out", str(out), cwd=tmp_path)
     assert done.returncode == 2
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and "Traceback" not in done.stderr
@@ -121,8 +116,8 @@ def test_exr_without_float_outputs_is_one_line(tmp_path):
     assert not (out / "timings.json").exists() and not (out / "flat.color.png").exists()
     assert {p.name for p in tmp_path.iterdir()} <= {"out"}
     # the same config without --exr runs: the refusal is --exr's
-    done = rfw("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--out",
-               str(out), cwd=tmp_path)
+    done = rfw_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--out",
+                   str(out), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
 
 
@@ -133,21 +128,21 @@ def test_stale_exr_removed_by_a_run_without_exr(hdr_run, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "lighting.hdr.exr").write_bytes((root / "out" / "lighting.hdr.exr").read_bytes())
-    done = rfw("run", str(root / "hdr.toml"), "--out", str(out), cwd=tmp_path)
+    done = rfw_cli("run", str(root / "hdr.toml"), "--out", str(out), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not (out / "lighting.hdr.exr").exists() and (out / "lighting.hdr.png").exists()
 
 
 def test_exr_flag_only_for_run(tmp_path):
-    done = rfw("view", "--exr", cwd=tmp_path)
+    done = rfw_cli("view", "--exr", cwd=tmp_path)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1
     assert "unrecognized arguments: --exr" in done.stderr
 
 
 def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
     (tmp_path / "hdr.toml").write_text(HDR)
-    done = rfw("run", "hdr.toml", "--exr", "--frames", "3", "--save-every", "1", "--set",
-               "camera.path=orbit", "--out", "out", cwd=tmp_path)
+    done = rfw_cli("run", "hdr.toml", "--exr", "--frames", "3", "--save-every", "1", "--set",
+                   "camera.path=orbit", "--out", "out", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     frames = tmp_path / "out" / "frames"
     names = sorted(p.name for p in frames.iterdir())
@@ -163,7 +158,7 @@ def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
         # negative control: the first frame, from another camera of the orbit, differs
         assert not np.array_equal(bits(read_exr(frames / f"{out}.0000.exr")), bits(last))
     # a run without --exr leaves no EXR of an earlier run among its frames
-    done = rfw("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
-               cwd=tmp_path)
+    done = rfw_cli("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
+                   cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not list(frames.glob("*.exr"))

@@ -9,12 +9,9 @@ black background (within one level: the interpolation of equal values may round 
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 
-from .conftest import ROOT, tiny_scene
+from .conftest import ROOT, rfw_cli, tiny_scene
 from .test_golden import config, rgb
 
 NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
@@ -58,10 +55,8 @@ def test_other_ambient_is_not_explained(renders):
 
 
 def test_ambient_out_of_range_is_one_line(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", "run", "configs/flat.toml",
-                           "--size", "32x18", "--set", "flat.ambient=1.5", "--out",
-                           str(tmp_path)], cwd=ROOT, capture_output=True, text=True,
-                          check=False)
+    done = rfw_cli("run", "configs/flat.toml", "--size", "32x18", "--set", "flat.ambient=1.5",
+                   "--out", tmp_path, cwd=ROOT)
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert lines[0].startswith("rfw: error: ") and "ambient" in lines[0]

@@ -6,10 +6,8 @@ several GPUs is checked on a fake device list."""
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,17 +17,14 @@ from PIL import Image
 from rfw.backend import pick_gpu
 from rfw.errors import RfwError
 
+from .conftest import rfw_cli
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(tmp: Path, backend: str, gpu: str | None, out: str) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in os.environ.items() if k != "RFW_GPU"}
-    if gpu is not None:
-        env["RFW_GPU"] = gpu
-    return subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
-                           "flat.toml"), "--size", "32x18", "--backend", backend, "--out",
-                           str(tmp / out)], env=env, capture_output=True, text=True,
-                          timeout=300, check=False)
+    return rfw_cli("run", ROOT / "configs" / "flat.toml", "--size", "32x18", "--backend",
+                   backend, "--out", tmp / out, env={"RFW_GPU": gpu})
 
 
 @pytest.mark.parametrize("backend", ["wgpu", "vk"])

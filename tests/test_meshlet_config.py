@@ -6,8 +6,6 @@ graph resources whose barriers the compiler plans and ``rfw graph plan`` prints.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +14,7 @@ import pytest
 from rfw.config import apply_overrides, build, load_config
 from rfw.graph import Buffer, GraphBuilder, GraphError, Storage, Texture, compile
 
-from .conftest import tiny_scene
+from .conftest import rfw_cli, tiny_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "meshlet.toml"
@@ -133,8 +131,7 @@ def test_both_geometries_render_the_same_image():
 
 
 def _plan_barriers(*args: str) -> list[str]:
-    out = subprocess.run([sys.executable, "-m", "rfw.cli", "graph", "plan", str(CONFIG), *args],
-                         capture_output=True, text=True, cwd=ROOT, check=False)
+    out = rfw_cli("graph", "plan", CONFIG, *args, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
     start = next(k for k, line in enumerate(lines) if line.startswith("barriers ("))

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import functools
 import json
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -25,7 +23,7 @@ from rfw.config import apply_overrides, load_config
 from rfw.render import render, to_png_array
 from rfw.scene.model import Camera, Scene, SceneError, Texture
 
-from .conftest import ROOT, tiny_scene
+from .conftest import ROOT, rfw_cli, tiny_scene
 
 SIZE = "96x64"
 MIRROR = np.diag([-1.0, 1.0, 1.0, 1.0]).astype(np.float32)
@@ -224,17 +222,12 @@ def _cube_gltf(path, scales: list[list[float]]) -> None:
     path.write_text(json.dumps(doc))
 
 
-def _rfw(*args, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
-
-
 def test_zero_scale_node_loads_and_renders_through_the_cli(tmp_path):
     scene = tmp_path / "zero.gltf"
     _cube_gltf(scene, [[1, 1, 1], [0, 0, 0], [-1, 1, 1]])
     out = tmp_path / "out"
-    run = _rfw("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
-               "--size", "64x48", "--frames", "1", "--out", str(out), cwd=tmp_path)
+    run = rfw_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
+                  "--size", "64x48", "--frames", "1", "--out", str(out), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr
     warnings = [line for line in run.stderr.splitlines() if "skipped" in line]
@@ -253,8 +246,8 @@ def test_only_zero_scale_nodes_render_the_empty_scene_with_a_warning(tmp_path):
     # as an empty scene does (tests/scene/test_limits.py): the background, one line saying so
     scene = tmp_path / "zero.gltf"
     _cube_gltf(scene, [[0, 0, 0], [1, 0, 1]])
-    run = _rfw("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
-               "--size", "64x48", "--frames", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    run = rfw_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
+                  "--size", "64x48", "--frames", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     lines = [line for line in run.stderr.splitlines() if "nothing is drawable" in line]
     assert lines == [f"rfw: warning: {scene}: nothing is drawable (no instances, or every one "

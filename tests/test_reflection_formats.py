@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
+
+from .conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -94,12 +95,9 @@ def run(tmp: Path, fmt: str, backend: str,
     config.write_text(CONFIG)
     # extended, not replaced: on the GPU machine rfw's dependencies come through PYTHONPATH
     path = [str(site), str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path),
-           "RFW_CACHE_SPIRV": str(tmp / "spirv")}
-    return subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(config),
-                           "--backend", backend, "--frames", "1", "--out", str(tmp / "out")],
-                          capture_output=True, text=True, env=env, cwd=tmp, timeout=300,
-                          check=False)
+    env = {"PYTHONPATH": os.pathsep.join(path), "RFW_CACHE_SPIRV": str(tmp / "spirv")}
+    return rfw_cli("run", config, "--backend", backend, "--frames", "1", "--out", tmp / "out",
+                   env=env, cwd=tmp)
 
 
 CASES = [("wgpu", "fmt_fill.comp.glsl"), ("vk", "fmt_fill.comp.glsl"),

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 import textwrap
 from pathlib import Path
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from .conftest import ROOT
+from .conftest import ROOT, rfw_cli
 from .view_xvfb import needs_xvfb, under_xvfb
 
 pytestmark = needs_xvfb
@@ -86,10 +85,8 @@ def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int
 def run_cli(tmp: Path, size: str, *sets: str, config: Path = DEFERRED,
             args: tuple[str, ...] = ()) -> Path:
     out = tmp / "run"
-    done = subprocess.run(
-        [sys.executable, "-m", "rfw.cli", "run", str(config), "--size", size, "--frames", "1",
-         "--out", str(out), *args, *(a for s in sets for a in ("--set", s))],
-        capture_output=True, text=True, timeout=180, cwd=tmp, check=False)
+    done = rfw_cli("run", config, "--size", size, "--frames", "1", "--out", out, *args,
+                   *(a for s in sets for a in ("--set", s)), cwd=tmp)
     assert done.returncode == 0, done.stdout + done.stderr
     return out
 

@@ -13,14 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from ..conftest import rfw_cli
 from .test_paper_report import relative_refs
 
 TINY = ["--size", "32x18", "--frames", "2", "--warmup", "1", "--repeat", "1", "--no-progress"]
-
-
-def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-P", "-m", "rfw.cli", "bench", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=300, check=False)
 
 
 def _raylets() -> int:
@@ -36,7 +32,8 @@ def test_ray_executor_runs_the_matrix_as_tasks_and_merges_one_report(tmp_path):
     pytest.importorskip("ray", reason="ray is not installed (pip install 'rfw[scale]')")
     before = _raylets()
     t = time.perf_counter()
-    done = _bench(tmp_path, "forward", "flat", "--executor", "ray", "--out", "ray", *TINY)
+    done = rfw_cli("bench", "forward", "flat", "--executor", "ray", "--out", "ray", *TINY,
+                   cwd=tmp_path, safe_path=True)
     wall = time.perf_counter() - t
     print(f"rfw bench --executor ray, 2 runs: {wall:.1f} s")  # kept small; never asserted
     assert done.returncode == 0, done.stderr
@@ -64,7 +61,7 @@ def test_ray_executor_runs_the_matrix_as_tasks_and_merges_one_report(tmp_path):
     assert relative_refs((out / "report.html").read_text()) == []
     assert _raylets() <= before  # the local instance rfw started is stopped
     # negative control: the default executor runs here, with no Ray in its records
-    local = _bench(tmp_path, "flat", "--out", "local", *TINY)
+    local = rfw_cli("bench", "flat", "--out", "local", *TINY, cwd=tmp_path, safe_path=True)
     assert local.returncode == 0, local.stderr
     (rec,) = [json.loads(x) for x in (tmp_path / "local" / "results.jsonl").read_text()
               .splitlines()]

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import tree_env
+from ..conftest import rfw_cli, tree_env
 
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = str(ROOT / "configs" / "flat.toml")
@@ -55,9 +55,8 @@ def rfw(argv: list[str], cwd: Path, env: dict[str, str], *,
         preexec_fn: Callable[[], None] | None = None,
         timeout: float = TIMEOUT) -> subprocess.CompletedProcess:
     """Run ``python -m rfw.cli ARGV`` to the end."""
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *argv], cwd=cwd, env=env,
-                          capture_output=True, text=True, errors="replace", timeout=timeout,
-                          check=False, preexec_fn=preexec_fn)
+    return rfw_cli(*argv, cwd=cwd, environ=env, timeout=timeout, errors="replace",
+                   preexec_fn=preexec_fn)
 
 
 def start(argv: list[str], cwd: Path, env: dict[str, str], *,

@@ -24,11 +24,11 @@ import hashlib
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from ..conftest import rfw_cli
 from .corpus_cases import ACCEPTED, Accepted, Case, all_cases
 
 CASES = all_cases()
@@ -59,9 +59,7 @@ def _prepare(root: Path, files: dict[str, bytes]) -> Path:
 
 
 def _run(argv: list[str], cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *argv], cwd=cwd, env=env,
-                          capture_output=True, text=True, errors="replace", timeout=TIMEOUT,
-                          check=False)
+    return rfw_cli(*argv, cwd=cwd, environ=env, timeout=TIMEOUT, errors="replace")
 
 
 def snapshot(root: Path, skip: list[Path]) -> dict[str, str]:

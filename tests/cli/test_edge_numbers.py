@@ -18,11 +18,12 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
@@ -144,9 +145,7 @@ def _env(base: Path, extra: dict[str, str]) -> dict[str, str]:
 
 def _rfw(args: list[str], cwd: Path, base: Path, extra: dict[str, str]
          ) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=cwd,
-                          env=_env(base, extra), capture_output=True, text=True,
-                          timeout=TIMEOUT, check=False)
+    return rfw_cli(*args, cwd=cwd, environ=_env(base, extra), timeout=TIMEOUT)
 
 
 @pytest.fixture(scope="module")

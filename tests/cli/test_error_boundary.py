@@ -9,12 +9,13 @@ show that good values pass the same checks.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFERRED = ROOT / "configs" / "deferred.toml"
@@ -42,9 +43,8 @@ inputs = { hdr = "lighting.hdr" }
 
 
 def rfw(*args: object, cwd: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "HOME": str(cwd / "home"), "XDG_CACHE_HOME": str(cwd / "cache")}
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
-                          env=env, capture_output=True, text=True, timeout=300, check=False)
+    return rfw_cli(*args, cwd=cwd, env={"HOME": str(cwd / "home"),
+                                        "XDG_CACHE_HOME": str(cwd / "cache")})
 
 
 def error_line(done: subprocess.CompletedProcess, *needles: str) -> str:

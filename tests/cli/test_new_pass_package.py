@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ..conftest import rfw_cli
 from ..golden_util import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,9 +43,7 @@ def env(*front):
 
 
 def rfw(*args, cwd, site=None):
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, check=False,
-                          env=env(*([site] if site else [])))
+    return rfw_cli(*args, cwd=cwd, environ=env(*([site] if site else [])))
 
 
 @pytest.fixture(scope="module")

@@ -1,15 +1,14 @@
 """GLSL to SPIR-V with glslang: cache, includes, defines, errors with file and line, and
 layouts reflected from the binary (never hand-written)."""
 
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from rfw.spirv import ShaderCompileError, compile_glsl, reflect
+
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -159,10 +158,8 @@ VK_RUN = ["run", "configs/deferred.toml", "--backend", "vk", "--size", "64x36", 
 
 
 def rfw_vk(tmp_path, cache):
-    env = {**os.environ, "RFW_CACHE_SPIRV": str(cache)}
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *VK_RUN, "--out",
-                           str(tmp_path / "out")], capture_output=True, text=True, env=env,
-                          cwd=ROOT, timeout=300, check=False)
+    return rfw_cli(*VK_RUN, "--out", tmp_path / "out", cwd=ROOT,
+                   env={"RFW_CACHE_SPIRV": str(cache)})
 
 
 def test_corrupt_cache_entries_heal_through_the_cli(tmp_path):

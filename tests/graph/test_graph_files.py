@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import random
 import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -16,13 +15,10 @@ from rfw.errors import RfwError
 from rfw.graph import compile, loads_raptor, loads_toml
 from rfw.graph.inspect import describe, to_dot
 
+from ..conftest import rfw_cli
+
 DATA = Path(__file__).parent.parent / "data"
 ROOT = Path(__file__).parents[2]
-
-
-def rfw(*args: object, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, check=False, timeout=120)
 
 
 def _raptor_outputs(path: Path, key: str) -> list[str]:
@@ -31,7 +27,8 @@ def _raptor_outputs(path: Path, key: str) -> list[str]:
 
 
 def _plan_sizes(path: Path, *args: object) -> tuple[str, dict[str, tuple[int, int]]]:
-    text, js = rfw("graph", "plan", path, *args), rfw("graph", "plan", path, "--json", *args)
+    text = rfw_cli("graph", "plan", path, *args, cwd=ROOT)
+    js = rfw_cli("graph", "plan", path, "--json", *args, cwd=ROOT)
     assert text.returncode == 0 and js.returncode == 0, text.stderr + js.stderr
     sizes = {r["name"]: (r["width"], r["height"]) for r in json.loads(js.stdout)["resources"]}
     return text.stdout.splitlines()[0], sizes
@@ -106,14 +103,14 @@ def test_bad_graph_files_give_one_line_naming_file_and_element(tmp_path, name, c
                                                                expected):
     path = tmp_path / name
     path.write_bytes(content)
-    assert _one_error_line(rfw("graph", "plan", path)) == f"{path}: {expected}"
+    assert _one_error_line(rfw_cli("graph", "plan", path, cwd=ROOT)) == f"{path}: {expected}"
 
 
 def test_a_good_file_is_no_error(tmp_path):
     # negative control for the cases above: the same head with a valid output plans
     path = tmp_path / "good.toml"
     path.write_text(TOML_HEAD + 'outputs.c = { format = "rgba8unorm", mips = 7 }\n')
-    done = rfw("graph", "plan", path)
+    done = rfw_cli("graph", "plan", path, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("graph 'g' at 64x64 (its own size)")
 

@@ -5,7 +5,6 @@ that may be in use on both queues never shared, the switch, and ``rfw graph plan
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -16,6 +15,8 @@ from rfw.config import build, load_config
 from rfw.graph import Attachment, GraphBuilder, Texture, compile
 from rfw.graph import queues as gq
 from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, check_sync
+
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SSAO = ROOT / "configs" / "deferred_ssao_shadows.toml"
@@ -210,23 +211,18 @@ def test_the_switch_is_part_of_the_cache_key():
     assert _plan(switch="on").queues.on != _plan(switch="off").queues.on
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, cwd=ROOT, check=False)
-
-
 def test_graph_plan_prints_queues_submissions_and_transfers():
-    r = _cli("graph", "plan", str(SSAO), "--caps", "compute_family")
+    r = rfw_cli("graph", "plan", str(SSAO), "--caps", "compute_family", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "queues: graphics, compute (two families" in out
     assert "#1 compute  [ssao]  wait graphics = 1 at ALL_COMMANDS;  signal compute = 1" in out
     assert "#3 graphics [lighting, points_lines, tonemap, fxaa]  wait compute = 1" in out
     assert "ssao.ao: compute -> graphics; release after ssao" in out
-    r = _cli("graph", "plan", str(SSAO), "--json", "--caps", "compute_queue")
+    r = rfw_cli("graph", "plan", str(SSAO), "--json", "--caps", "compute_queue", cwd=ROOT)
     q = json.loads(r.stdout)["queues"]
     assert [s["queue"] for s in q["submissions"]] == [GRAPHICS, COMPUTE, GRAPHICS, GRAPHICS]
-    r = _cli("graph", "plan", str(SSAO))
+    r = rfw_cli("graph", "plan", str(SSAO), cwd=ROOT)
     assert "queues: graphics (off: async_compute = auto and the device has no second" in r.stdout
 
 
@@ -234,13 +230,14 @@ def test_graph_plan_prints_queues_submissions_and_transfers():
 def test_a_bad_switch_in_a_config_is_one_line(tmp_path, line):
     cfg = tmp_path / "c.toml"
     cfg.write_text(line + "\n" + SSAO.read_text())
-    r = _cli("graph", "plan", str(cfg))
+    r = rfw_cli("graph", "plan", str(cfg), cwd=ROOT)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.count("\n") == 1 and "async_compute: must be true, false or" in r.stderr
 
 
 def test_a_bad_switch_on_the_command_line_is_one_line(tmp_path):
-    r = _cli("run", str(SSAO), "--set", "async_compute=maybe", "--out", str(tmp_path / "o"))
+    r = rfw_cli("run", str(SSAO), "--set", "async_compute=maybe", "--out", str(tmp_path / "o"),
+                cwd=ROOT)
     assert r.returncode == 2
     assert r.stderr.strip().splitlines() == [
         f"rfw: error: {SSAO}: --set async_compute: must be true, false or \"auto\", "

@@ -8,35 +8,27 @@ stop keeping, and is only made when that plan leaves no input without its produc
 
 import json
 import re
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
 import tomli_w
 
-from ..conftest import tree_env
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 RAPTOR = sorted((ROOT / "tests" / "data" / "raptor").glob("*.json"))
 LOST = "no kept pass produces"
 
 
-def rfw(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, check=False,
-                          env=tree_env())
-
-
 def plan(graph, *extra, cwd):
-    done = rfw("graph", "plan", graph, "--json", *extra, cwd=cwd)
+    done = rfw_cli("graph", "plan", graph, "--json", *extra, cwd=cwd, tree=True)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
 
 def note_of(graph, cwd):
-    done = rfw("graph", "plan", graph, cwd=cwd)
+    done = rfw_cli("graph", "plan", graph, cwd=cwd, tree=True)
     assert done.returncode == 0, done.stderr
     notes = [line for line in done.stdout.splitlines() if line.startswith("note:")]
     assert len(notes) <= 1, done.stdout
@@ -75,7 +67,7 @@ def write_graph(tmp_path):
 def old_mapping(tmp_path, path):
     """The graph as rfw loaded it before: Raptor's reference inputs ordering only (the
     TOML ``rfw graph convert`` wrote then)."""
-    done = rfw("graph", "convert", path, cwd=tmp_path)
+    done = rfw_cli("graph", "convert", path, cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     data = tomllib.loads(done.stdout)
     [post] = [p for p in data["pass"] if p["name"] == "post"]
@@ -180,7 +172,7 @@ def test_every_raptor_suggestion_is_a_valid_graph(tmp_path, path):
 
 def _outputs(path, cwd):
     # the text plan names the graph outputs (the JSON plan leaves them out)
-    done = rfw("graph", "plan", path, cwd=cwd)
+    done = rfw_cli("graph", "plan", path, cwd=cwd, tree=True)
     [line] = [x for x in done.stdout.splitlines() if x.startswith("outputs:")]
     names = line.split(":", 1)[1].strip()
     return [] if names == "-" else names.split(", ")

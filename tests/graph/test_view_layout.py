@@ -9,14 +9,13 @@ import math
 import re
 import shutil
 import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 from PIL import ImageFont
 
-from ..conftest import tree_env
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 BOOK = ROOT.parent / "shared" / "data" / "raptor-graphs"
@@ -41,9 +40,7 @@ def rfw(*args, cwd, inproc=False):
             code = main([*map(str, args)])
         assert code == 0, err.getvalue()
         return out.getvalue()
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, check=False, timeout=120,
-                          env=tree_env())
+    done = rfw_cli(*args, cwd=cwd, tree=True)
     assert done.returncode == 0, done.stderr
     return done.stdout
 

@@ -15,7 +15,6 @@ import re
 import shutil
 import stat
 import struct
-import subprocess
 import sys
 import tarfile
 import zipfile
@@ -30,6 +29,8 @@ from rfw.scene import fetch as F
 from rfw.scene.fetch import catalogue, convert, download
 from rfw.scene.model import Camera, Instance
 from tests.conftest import box_mesh, tiny_scene
+
+from ..conftest import rfw_cli
 
 # the fake samples carry an extension rfw does not read, as ClearCoatTest does
 pytestmark = pytest.mark.filterwarnings("ignore:.*KHR_materials_clearcoat ignored")
@@ -821,12 +822,10 @@ def test_an_import_against_the_order_is_found(tmp_path):
 
 def test_cli_in_a_subprocess(tmp_path):
     cache = str(tmp_path / "c")
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", "scenes", "fetch", "--list",
-                           "--cache", cache], capture_output=True, text=True, check=False)
+    done = rfw_cli("scenes", "fetch", "--list", "--cache", cache)
     assert done.returncode == 0, done.stderr
     assert [ln.split()[0] for ln in done.stdout.splitlines()[1:-1]] == list(F.SCENES)
-    bad = subprocess.run([sys.executable, "-m", "rfw.cli", "scenes", "fetch", "dragonn",
-                          "--cache", cache], capture_output=True, text=True, check=False)
+    bad = rfw_cli("scenes", "fetch", "dragonn", "--cache", cache)
     assert bad.returncode == 2 and bad.stdout == ""
     assert bad.stderr.startswith("rfw: error: unknown scene 'dragonn' (available: dragon, ")
     assert len(bad.stderr.splitlines()) == 1

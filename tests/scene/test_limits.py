@@ -23,6 +23,8 @@ from rfw.backends.scene_data import mip_chain
 from rfw.scene import SceneError, limits, load_gltf
 from rfw.scene.model import Instance, Material, Mesh, Scene, Texture
 
+from ..conftest import rfw_cli
+
 ROOT = Path(__file__).resolve().parents[2]
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 UV = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
@@ -358,10 +360,8 @@ def test_empty_scene_and_skipped_only_instance_render_alike(tmp_path):
     images = {}
     for path in (empty, skipped, drawn):
         out = tmp_path / f"out-{path.stem}"
-        run = subprocess.run([sys.executable, "-m", "rfw.cli", "run", "configs/flat.toml",
-                              "--backend", "vk", "--scene", str(path), "--size", "32x32",
-                              "--frames", "1", "--out", str(out)],
-                             cwd=ROOT, capture_output=True, text=True, timeout=300)
+        run = rfw_cli("run", "configs/flat.toml", "--backend", "vk", "--scene", path, "--size",
+                      "32x32", "--frames", "1", "--out", out, cwd=ROOT)
         assert run.returncode == 0, run.stderr
         said = [line for line in run.stderr.splitlines() if "nothing is drawable" in line]
         if path is drawn:  # the control: a drawable scene says nothing and shows the quad

@@ -18,16 +18,15 @@ from rfw.scene import stress
 from rfw.scene.fetch import SCENES, scene_to_glb
 from rfw.scene.fetch.cache import FORMAT
 
+from ..conftest import rfw_cli
+
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
 
 
 def cli(*args: str, cache: Path, cwd: Path | None = None,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    environ = {k: v for k, v in os.environ.items() if k != "RFW_FETCH"}
-    environ.update(RFW_CACHE=str(cache), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], capture_output=True,
-                          text=True, check=False, env=environ, cwd=cwd)
+    return rfw_cli(*args, cwd=cwd, env={"RFW_FETCH": None, "RFW_CACHE": str(cache), **(env or {})})
 
 
 def one_line(done: subprocess.CompletedProcess, *needles: str) -> str:

@@ -7,9 +7,6 @@ benchmarks/bench_scene_load.py times loading, uploading and a frame of them."""
 from __future__ import annotations
 
 import itertools
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +15,7 @@ import pytest
 from rfw.scene import SceneError, builtin_scene, load_scene, stress
 from rfw.scene.stress import STRESS_INSTANCES, grid_transforms
 
+from ..conftest import rfw_cli
 from ..golden_util import read_png
 from .test_courtyard import digest
 
@@ -65,14 +63,9 @@ def test_bad_counts_are_scene_errors():
         builtin_scene("stres")
 
 
-def _rfw(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfw.cli", *args], cwd=ROOT,
-                          capture_output=True, text=True, check=False, env={**os.environ})
-
-
 def test_bad_count_through_the_cli_is_one_line(tmp_path):
-    done = _rfw("run", "configs/deferred.toml", "--scene", "stress:0", "--size", "32x24",
-                "--out", str(tmp_path))
+    done = rfw_cli("run", "configs/deferred.toml", "--scene", "stress:0", "--size", "32x24",
+                   "--out", str(tmp_path), cwd=ROOT)
     assert done.returncode == 2
     assert done.stderr.strip().count("\n") == 0
     assert done.stderr.startswith("rfw: error: stress:0: scene: the instance count")
@@ -81,8 +74,8 @@ def test_bad_count_through_the_cli_is_one_line(tmp_path):
 def _render(tmp_path: Path, backend: str, scene: str, *, config: str = "deferred",
             size: str = "96x64", output: str = "tonemap.ldr.png") -> np.ndarray:
     out = tmp_path / f"{backend}-{config}-{scene.replace(':', '_')}"
-    done = _rfw("run", f"configs/{config}.toml", "--backend", backend, "--scene", scene,
-                "--size", size, "--frames", "1", "--out", str(out))
+    done = rfw_cli("run", f"configs/{config}.toml", "--backend", backend, "--scene", scene,
+                   "--size", size, "--frames", "1", "--out", str(out), cwd=ROOT)
     assert done.returncode == 0, done.stdout + done.stderr
     return read_png(out / output)
 

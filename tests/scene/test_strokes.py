@@ -4,8 +4,6 @@ on both backends with identical images; triangles beside them are drawn as befor
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +12,7 @@ from PIL import Image
 
 from rfw.scene import SceneError, load_gltf
 
+from ..conftest import rfw_cli
 from .test_gltf import PIXELS, QUAD_POS, Gltf, png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -61,9 +60,8 @@ def test_color_0_is_kept_per_vertex_and_odd_lines_are_refused(tmp_path):
 def render(scene: Path, out: Path, backend: str, config: str = "configs/flat.toml",
            *sets: str) -> tuple[np.ndarray, list[str]]:
     args = [a for s in sets for a in ("--set", s)]
-    p = subprocess.run([sys.executable, "-m", "rfw.cli", "run", config, "--scene", str(scene),
-                        "--size", "48x32", "--frames", "1", "--out", str(out), "--backend",
-                        backend, *args], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    p = rfw_cli("run", config, "--scene", scene, "--size", "48x32", "--frames", "1", "--out", out,
+                "--backend", backend, *args, cwd=ROOT)
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     png = next(out.glob("*.png"))
     return np.asarray(Image.open(png).convert("RGB")), p.stderr.splitlines()

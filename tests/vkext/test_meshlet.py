@@ -18,8 +18,6 @@ compute every surviving pixel, whichever meshlets are skipped.
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +29,7 @@ from rfw.scene import default_scene
 from vkext.backend import render_vk
 from vkext.meshlet import MAX_TRIANGLES, MAX_VERTICES
 
-from ..conftest import tiny_scene
+from ..conftest import rfw_cli, tiny_scene
 from ..golden_util import assert_similar, mismatch
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -162,11 +160,9 @@ def test_too_small_meshlet_buffers_fail_in_one_line(vk_device, tmp_path, setting
         pytest.skip("no VK_EXT_mesh_shader")
 
     def run(value: int):
-        return subprocess.run(
-            [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" / "deferred_meshlet.toml"),
-             "--size", "32x18", "--frames", "1", "--set", f"cull.{setting}={value}", "--out",
-             str(tmp_path / str(value))], capture_output=True, text=True, cwd=tmp_path,
-            check=False)
+        return rfw_cli("run", ROOT / "configs" / "deferred_meshlet.toml", "--size", "32x18",
+                       "--frames", "1", "--set", f"cull.{setting}={value}", "--out",
+                       tmp_path / str(value), cwd=tmp_path)
 
     small = run(1)
     assert small.returncode == 2 and "Traceback" not in small.stderr

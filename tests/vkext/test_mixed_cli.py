@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,8 @@ import pytest
 from PIL import Image
 
 from vkext import VkDevice, VkUnavailableError
+
+from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
@@ -30,9 +31,7 @@ def _needs_vulkan():
 
 def rfw(tmp_path: Path, out: str, *args: str) -> tuple[subprocess.CompletedProcess, Path]:
     target = tmp_path / out
-    done = subprocess.run([sys.executable, "-m", "rfw.cli", "run", *args, "--frames", "1",
-                           "--out", str(target)], capture_output=True, text=True, cwd=ROOT,
-                          timeout=300, check=False)
+    done = rfw_cli("run", *args, "--frames", "1", "--out", target, cwd=ROOT)
     return done, target
 
 

@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -48,6 +46,7 @@ from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
+from ..conftest import rfw_cli
 from ..golden_util import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -325,10 +324,9 @@ def test_cli_order_seed_and_poison(deferred_ssao, tmp_path):
     # (one warm-up and one timed frame: two frames, as the fixture's run)
     fz, plan, reference = deferred_ssao
     seed = next(s for s in range(50) if fz.plan(s).order != plan.order)
-    cmd = [sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs/deferred_ssao_shadows.toml"),
-           "--backend", "vk", "--size", f"{SIZE[0]}x{SIZE[1]}", "--validate", "--poison",
-           "--order-seed", str(seed), "--out", str(tmp_path / "out")]
-    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    run = ["run", ROOT / "configs/deferred_ssao_shadows.toml"]
+    r = rfw_cli(*run, "--backend", "vk", "--size", f"{SIZE[0]}x{SIZE[1]}", "--validate",
+                "--poison", "--order-seed", seed, "--out", tmp_path / "out", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     timings = json.loads((tmp_path / "out/timings.json").read_text())
     assert [p["name"] for p in timings["passes"]] == list(fz.plan(seed).order)
@@ -337,8 +335,7 @@ def test_cli_order_seed_and_poison(deferred_ssao, tmp_path):
     # the negative control: the same comparison tells another image apart
     assert not np.array_equal(image[:, ::-1], reference["fxaa.color"])
     # and only vk has them: one line, exit 2
-    r = subprocess.run([*cmd[:5], "--backend", "wgpu", "--poison", "--out", str(tmp_path / "w")],
-                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = rfw_cli(*run, "--backend", "wgpu", "--poison", "--out", tmp_path / "w", cwd=ROOT)
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
     assert "--order-seed and --poison need --backend vk" in r.stderr
 
