@@ -18,7 +18,6 @@ import pytest
 
 from rfw.config import apply_overrides, build, load_config
 from rfw.meshlets import cached_meshlets, pack_for_gpu
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
@@ -35,11 +34,6 @@ ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "meshlet.toml"
 OFF = ["culling.cone=false", "culling.frustum=false", "culling.occlusion=false"]
 SIZE = (192, 108)
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.fixture(autouse=True)
