@@ -448,7 +448,12 @@ def test_staged_and_mapped_give_the_same_hits(vk_device, courtyard, monkeypatch)
     for placement in PLACEMENTS:
         for a, b in zip(got["staged"], got[placement], strict=True):
             _same(a, b)
-    assert not np.array_equal(got["staged"][0]["t"], got["staged"][1]["t"])  # t_max acts
+    # t_max acts: a ray whose nearest hit lies past its t_max misses, every other keeps its
+    # hit (measured: 9 of the 7000 rays hit past theirs)
+    full, capped = got["staged"]
+    past = np.isfinite(full["t"]) & (full["t"] > t_max.astype(np.float32))
+    assert past.sum() >= 5 and np.isinf(capped["t"][past]).all()
+    assert np.array_equal(capped["t"][~past], full["t"][~past])
 
 
 def test_ray_layouts_and_dtypes_give_the_same_hits(vk_device):
