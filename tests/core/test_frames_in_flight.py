@@ -20,10 +20,10 @@ from rfw.errors import RfwError
 from rfw.frame import InFlight, frames_in_flight
 from rfw.render import render
 
-from .conftest import rfw_cli, tiny_scene
-from .golden_util import changed_share
+from ..conftest import rfw_cli, tiny_scene
+from ..golden_util import changed_share
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FRAMES = 4
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from .conftest import rfw_cli
+from ..conftest import rfw_cli
 from .test_camera_path import FLAT, SIZE, refused
 
 # two keys from one eye, looking opposite ways (+z, then -z)

@@ -18,10 +18,10 @@ from PIL import Image
 import rfw
 from rfw.fileio import to_png_array
 
-from .conftest import rfw_cli
-from .golden_util import changed_share
+from ..conftest import rfw_cli
+from ..golden_util import changed_share
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFERRED = str(ROOT / "configs" / "deferred.toml")
 FLAT = str(ROOT / "configs" / "flat.toml")
 SIZE = (32, 18)

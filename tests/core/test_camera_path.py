@@ -17,10 +17,10 @@ from rfw.camera_path import CameraPath, check_path
 from rfw.errors import RfwError
 from rfw.scene import Camera
 
-from .conftest import rfw_cli
-from .golden_util import changed_share
+from ..conftest import rfw_cli
+from ..golden_util import changed_share
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
 SIZE = "32x18"
 
