@@ -149,9 +149,12 @@ def _fixed_clock(monkeypatch):
 
 @pytest.fixture(scope="session")
 def courtyard():
+    """The default scene, built once per session (per xdist worker: about a second each
+    time) and shared by every test that draws it: read only. A test that changes a scene
+    builds its own (``default_scene()``)."""
     from rfw.scene import default_scene
 
-    return default_scene()  # about a second to build: once per session (per xdist worker)
+    return default_scene()
 
 
 @pytest.fixture(scope="session")

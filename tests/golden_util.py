@@ -8,7 +8,8 @@ elsewhere, both with the command that creates them (``REGEN_COMMAND``), which wr
 current renders as goldens instead of comparing.
 
 Every image comparison of the suite (goldens, vertex against meshlet path, Vulkan against
-wgpu) goes through ``image_diff`` and ``BOUNDS`` (see ``Bounds`` for the measurements).
+wgpu) goes through ``image_diff`` and ``BOUNDS`` (see ``Bounds`` for the measurements); a
+check that a change reached a picture bounds ``changed_share`` from below.
 """
 
 from __future__ import annotations
@@ -147,6 +148,20 @@ def assert_similar(actual: np.ndarray, expected: np.ndarray, what: str) -> None:
     """Fails naming ``what`` and every exceeded bound unless the images match."""
     why = mismatch(actual, expected)
     assert not why, f"{what}: {why}"
+
+
+def changed_share(actual: np.ndarray, expected: np.ndarray, over: float = 2) -> float:
+    """The share of pixels that differ by more than ``over`` (levels of an 8-bit image,
+    the values' own units otherwise) in some channel: how much of a picture a change
+    reached. The same picture gives 0, and one changed pixel ``1 / pixels`` (0.0017 at
+    32x18), so "the change reached the image" is a bound well above that, set from what
+    the change measures; (H, W, C) arrays count pixels, others count elements."""
+    a, b = np.asarray(actual), np.asarray(expected)
+    if a.shape != b.shape:
+        raise ValueError(f"arrays differ in shape: {a.shape} vs {b.shape}")
+    d = np.abs(a.astype(np.float64) - b.astype(np.float64))
+    per_pixel = d.max(axis=-1) if d.ndim == 3 else d
+    return float((per_pixel > over).mean())
 
 
 def adapter_key(device: Any) -> str:

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from .golden_util import changed_share
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 NUMBER = r"[-+]?\d+\.\d+"
@@ -167,7 +169,7 @@ def test_plugin_pass(tmp_path):
     assert done.returncode == 0, done.stderr
     kept = np.asarray(Image.open(tmp_path / "zero" / "invert.inverted.png")).astype(int)
     assert np.array_equal(kept, color)
-    assert not np.array_equal(kept[..., :3], 255 - color[..., :3])
+    assert changed_share(kept[..., :3], 255 - color[..., :3]) > 0.5  # every pixel
 
 
 def test_plugin_pass_bad_setting_is_one_line(tmp_path):
@@ -228,7 +230,7 @@ def test_notebook_runs_and_shows_results(tmp_path):
     # 2.5) is not: the negative control
     ref = rfw.run(ROOT / "configs" / "deferred.toml", size=(32, 18), frames=1)
     assert np.array_equal(a, ref.images["tonemap.ldr"])
-    assert not np.array_equal(b, ref.images["tonemap.ldr"])
+    assert changed_share(b, ref.images["tonemap.ldr"]) > 0.5  # every pixel
 
 
 def _refused(done: subprocess.CompletedProcess, script: str, expected: str) -> None:

@@ -14,6 +14,7 @@ from rfw.fileio import read_exr, write_exr
 from rfw.render import render
 
 from .conftest import rfw_cli
+from .golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -156,7 +157,9 @@ def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
         last = read_exr(frames / f"{out}.0002.exr")
         assert np.array_equal(bits(last), bits(read_exr(tmp_path / "out" / f"{out}.exr")))
         # negative control: the first frame, from another camera of the orbit, differs
-        assert not np.array_equal(bits(read_exr(frames / f"{out}.0000.exr")), bits(last))
+        # (measured: 80 % of the HDR pixels and all of the depth by more than 0.001)
+        first = read_exr(frames / f"{out}.0000.exr")
+        assert changed_share(first, last, over=1e-3) > 0.25, out
     # a run without --exr leaves no EXR of an earlier run among its frames
     done = rfw_cli("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
                    cwd=tmp_path)

@@ -24,6 +24,7 @@ from rfw.render import render, to_png_array
 from rfw.scene.model import Camera, Scene, SceneError, Texture
 
 from .conftest import ROOT, rfw_cli, tiny_scene
+from .golden_util import changed_share
 
 SIZE = "96x64"
 MIRROR = np.diag([-1.0, 1.0, 1.0, 1.0]).astype(np.float32)
@@ -271,11 +272,12 @@ def test_degenerate_instances_in_a_built_scene_draw_nothing(capsys):
     err = capsys.readouterr().err
     assert "instance 'nan' skipped: transform has NaN" in err
     assert "instance 'flat' skipped: transform is singular" in err
-    # the control: a third, valid cube elsewhere does change the image
+    # the control: a third, valid cube elsewhere does change the image (114 of the 6144
+    # pixels, measured)
     moved = cube.transform.copy()
     moved[0, 3] = -1.5
     scene.instances.append(replace(cube, transform=moved, name="moved"))
-    assert not np.array_equal(image("forward", scene, "wgpu"), plain)
+    assert changed_share(image("forward", scene, "wgpu"), plain) > 0.005
 
 
 # ---------------------------------------------------------------------------------------------

@@ -11,6 +11,8 @@ import pytest
 
 import rfw
 
+from ..golden_util import changed_share
+
 pytest.importorskip("vulkan")
 
 
@@ -60,7 +62,7 @@ def test_threads_casting_on_one_scene_get_the_serial_hits(threads):
     # control: the ray sets differ, so another thread's hits would not pass as one's own
     hit = [s["primitive"] >= 0 for s in serial]
     assert all(h.mean() > 0.5 for h in hit)
-    assert not np.array_equal(serial[0]["t"], serial[1]["t"])
+    assert changed_share(serial[0]["t"], serial[1]["t"], over=0) > 0.5  # every ray
 
 
 def test_a_scene_closed_by_another_thread_refuses_cleanly():

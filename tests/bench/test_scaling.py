@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ..golden_util import changed_share
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -147,6 +149,7 @@ def test_raw_floor_depth_moves_with_the_camera():
                       modes=("instanced",), depth_out=a)
     raw_floor.measure(scene.meshes[0], transforms, vp @ nudge, (64, 36), frames=1, warmup=0,
                       modes=("instanced",), depth_out=b)
-    covered = a["instanced"] < 1
-    assert covered.mean() > 0.01
-    assert not np.array_equal(covered, b["instanced"] < 1)
+    # the floor covers 11 % of the pixels, and the nudge moves the depth of all of them
+    # (measured: 264 of the 2304 pixels; 11 change coverage)
+    assert (a["instanced"] < 1).mean() > 0.01
+    assert changed_share(a["instanced"], b["instanced"], over=1e-6) > 0.05

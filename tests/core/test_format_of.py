@@ -13,7 +13,7 @@ from rfw.graph import Attachment, Buffer, GraphBuilder, GraphError, History, Tex
 from rfw.passes import storage_format
 from rfw.templates import new_pass
 
-from ..golden_util import read_png
+from ..golden_util import changed_share, read_png
 
 # the generated pass after tonemap (rgba8unorm) or, as the control, after lighting
 # (rgba16float); gain 2 so the rendered check sees the pass ran
@@ -190,7 +190,7 @@ def test_the_template_after_tonemap_renders_on_both_backends(tmp_path, plugin):
         # an 8-bit storage image: gain 2 of k/255 stores 2k exactly (clamped), alpha as read
         want = np.minimum(ldr[..., :3].astype(np.int32) * 2, 255)
         assert np.array_equal(fx[..., :3], want) and np.array_equal(fx[..., 3], ldr[..., 3])
-        assert not np.array_equal(fx, ldr)  # control: the gain did something
+        assert changed_share(fx, ldr) > 0.5  # control: the gain did something (to all)
         images[backend] = fx
     assert np.array_equal(images["wgpu"], images["vk"])
 

@@ -19,6 +19,7 @@ from rfw.scene.fetch import SCENES, scene_to_glb
 from rfw.scene.fetch.cache import FORMAT
 
 from ..conftest import rfw_cli
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
@@ -108,7 +109,7 @@ def test_cached_name_renders_its_glb(tmp_path):
     assert default.returncode == 0, default.stderr
     a, b, c = (image(tmp_path / d / "flat.color.png") for d in ("name", "path", "default"))
     assert np.array_equal(a, b)
-    assert not np.array_equal(a, c)  # control: the courtyard is another picture
+    assert changed_share(a, c) > 0.25  # control: the courtyard is another picture (84 %)
     timings = json.loads((tmp_path / "name" / "timings.json").read_text())
     assert timings["triangles"] == 3 * 12
     # a config's scene may be a name too
@@ -184,7 +185,7 @@ def test_a_config_and_the_python_api_take_scene_names(tmp_path):
     # negative control: the default scene's image is another
     default = tmp_path / "default"
     assert run(default, cache).returncode == 0
-    assert not np.array_equal(image(default / "flat.color.png"), expected)
+    assert changed_share(image(default / "flat.color.png"), expected) > 0.25  # 84 %
 
 
 def test_bench_and_view_say_how_to_fetch_and_take_fetch(tmp_path):

@@ -21,7 +21,6 @@ import vkext.commands.barriers as barriers_module
 from rfw.config import apply_overrides, load_config
 from rfw.graph import AccelStructure, GraphBuilder, GraphError, Step, compile
 from rfw.render import render
-from rfw.scene import default_scene
 from rfw.scene.model import Instance, Material, Scene
 from vkext.accel import (
     ALPHA_MASK,
@@ -38,11 +37,6 @@ from ..conftest import box_mesh
 
 BUILD = {"ACCELERATION_STRUCTURE_BUILD_KHR"}
 RT_PRIMARY = Path(__file__).resolve().parents[2] / "configs" / "rt_primary.toml"
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.fixture(autouse=True)

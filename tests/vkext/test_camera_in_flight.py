@@ -16,6 +16,7 @@ from rfw.frame import open_frame
 from vkext.consts import const, ffi, vk
 
 from ..conftest import tiny_scene
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 OUTPUT = "tonemap.ldr"
@@ -100,7 +101,7 @@ def test_a_frame_in_flight_keeps_its_camera(vk_device):
     a = scene.default_camera()
     b = _turned(a)
     want_a, want_b = _static(vk_device, scene, a), _static(vk_device, scene, b)
-    assert not np.array_equal(want_a, want_b)  # the cameras see differently
+    assert changed_share(want_a, want_b) > 0.2  # the cameras see differently (58 %)
     held, after, busy = _held(vk_device, scene, a, b)
     assert busy == 1  # the camera was set while the held frame waited: no drain
     assert np.array_equal(held, want_a)
@@ -126,4 +127,4 @@ def test_a_camera_written_at_once_reaches_the_frame_in_flight(vk_device, monkeyp
     monkeypatch.setattr(VkScene, "copy_camera", lambda self, cmd, source: None)
     held, _, busy = _held(vk_device, scene, a, b)
     assert busy == 1
-    assert np.array_equal(held, want_b) and not np.array_equal(held, want_a)
+    assert np.array_equal(held, want_b) and changed_share(held, want_a) > 0.2  # 58 %

@@ -19,7 +19,6 @@ from rfw import ComputePass, Settings
 from rfw.config import apply_overrides, load_config
 from rfw.graph import GraphBuilder, History, Texture
 from rfw.render import render
-from rfw.scene import default_scene
 from rfw.shaders import ShaderError
 from rfw.spirv import ShaderCompileError
 from vkext.backend import render_vk
@@ -37,11 +36,6 @@ DEFERRED = ROOT / "configs" / "deferred.toml"
 def deferred(size: str, *sets: str):
     return apply_overrides(load_config(DEFERRED), ["shadow.enabled=true", f"size={size}",
                                                    *sets])
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.fixture(scope="module")

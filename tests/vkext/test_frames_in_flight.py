@@ -13,6 +13,7 @@ from rfw.config import apply_overrides, build, load_config
 from rfw.frame import open_frame
 
 from ..conftest import tiny_scene
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 FRAMES = 8
@@ -67,6 +68,8 @@ def test_changes_while_frames_are_in_flight_render_as_with_one(vk_device):
     assert np.array_equal(two, fresh)
     assert two[..., :3].std() > 10
     # negative controls: without the camera turns, or without the light change, it differs
+    # (measured: 58 % of the pixels by more than 2 levels, and 1.6 %, 82 pixels: the
+    # ambient term shows in the shade)
     unturned, _ = _render(vk_device, 1, changes=False, ambient=0.6)
     dim, _ = _render(vk_device, 1, changes=False, start=2)
-    assert not np.array_equal(two, unturned) and not np.array_equal(two, dim)
+    assert changed_share(two, unturned) > 0.2 and changed_share(two, dim) > 0.005

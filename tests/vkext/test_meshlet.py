@@ -25,7 +25,6 @@ import pytest
 
 from rfw.config import apply_overrides, load_config
 from rfw.meshlets import cached_meshlets
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 from vkext.meshlet import MAX_TRIANGLES, MAX_VERTICES
 
@@ -60,11 +59,6 @@ def _check_counters(c: dict[str, int], scene) -> None:
     assert c["meshlets_considered"] == c["meshlets_total"]
     assert c["meshlets_drawn"] + c["culled_cone"] + c["culled_frustum"] == \
         c["meshlets_considered"]
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 def test_config_runs_every_pass_on_vk_with_mesh_shaders():

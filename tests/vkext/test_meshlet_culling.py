@@ -18,7 +18,6 @@ import pytest
 
 from rfw.config import apply_overrides, build, load_config
 from rfw.meshlets import cached_meshlets, pack_for_gpu
-from rfw.scene import default_scene
 from vkext.backend import render_vk
 from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
@@ -31,15 +30,12 @@ from vkext.meshlet import (
 )
 from vkext.scene import VkScene
 
+from ..golden_util import changed_share
+
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "meshlet.toml"
 OFF = ["culling.cone=false", "culling.frustum=false", "culling.occlusion=false"]
 SIZE = (192, 108)
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.fixture(autouse=True)
@@ -169,10 +165,12 @@ def test_frozen_culling_keeps_the_first_camera(vk_device, courtyard):
     # culled from the first camera while viewing from the second: the same meshlets
     assert (b["drawn"], b["frustum_culled"], b["cone_culled"]) == \
         (a["drawn"], a["frustum_culled"], a["cone_culled"])
-    (_, moved), = _frames(vk_device, courtyard, cams[1:])
+    (unfrozen, moved), = _frames(vk_device, courtyard, cams[1:])
     assert moved["drawn"] != b["drawn"]
     [(ref, _)] = _frames(vk_device, courtyard, cams[1:], *OFF)
-    assert not np.array_equal(image, ref)  # geometry culled for the first view is missing
+    # geometry culled for the first view is missing: 8.8 % of the pixels (measured)
+    assert changed_share(image, ref) > 0.02
+    assert np.array_equal(unfrozen, ref)  # control: culling for this view keeps every pixel
 
 
 def _reference(scene, vscene, ms) -> dict[int, np.ndarray]:

@@ -24,7 +24,6 @@ from rfw.frame import open_frame
 from rfw.graph import Buffer, GraphBuilder, compile
 from rfw.mixed import split
 from rfw.render import render
-from rfw.scene import default_scene
 from rfw.shaders import ShaderError
 from vkext.commands import one_time
 from vkext.fitting import check_passes, fit_graph, fit_plan
@@ -64,11 +63,6 @@ def live_wgpu() -> dict[str, int]:
     gc.collect()
     counts = wgpu.diagnostics.object_counts.get_dict()
     return {k: v["count"] for k, v in counts.items() if k != "total"}
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,6 @@ import pytest
 
 import rfw
 from rfw.errors import RfwError
-from rfw.scene import default_scene
 from vkext import buffers as vk_buffers
 from vkext.accel import scene_accel
 
@@ -72,8 +71,8 @@ def test_casts_equal_raycast_and_embree(vk_device, method):
             _check_against(ref, got, o, d, float(np.abs(v).max()))
 
 
-def test_from_scene_equals_raycast_of_the_scene(vk_device):
-    scene = default_scene()
+def test_from_scene_equals_raycast_of_the_scene(vk_device, courtyard):
+    scene = courtyard
     v, f, owner = flatten(scene)
     o, d = _rays_around(v, 6000, seed=21)
     with rfw.RayScene.from_scene(scene, device=vk_device) as rs:
@@ -433,10 +432,10 @@ def test_repeated_casts_of_changing_sizes(vk_device, monkeypatch, counts, method
         assert not np.array_equal(scene.cast(o, turned)["t"], ref["t"])
 
 
-def test_staged_and_mapped_give_the_same_hits(vk_device, monkeypatch):
+def test_staged_and_mapped_give_the_same_hits(vk_device, courtyard, monkeypatch):
     """On the courtyard (every instance), casts through copies and through mapped memory
     (both streams or one) agree bit for bit; per-ray intervals go through all too."""
-    scene = default_scene()
+    scene = courtyard
     v, _, _ = flatten(scene)
     o, d = _rays_around(v, 7000, seed=31)
     t_max = np.random.default_rng(3).uniform(1.0, 40.0, len(o))
@@ -449,7 +448,12 @@ def test_staged_and_mapped_give_the_same_hits(vk_device, monkeypatch):
     for placement in PLACEMENTS:
         for a, b in zip(got["staged"], got[placement], strict=True):
             _same(a, b)
-    assert not np.array_equal(got["staged"][0]["t"], got["staged"][1]["t"])  # t_max acts
+    # t_max acts: a ray whose nearest hit lies past its t_max misses, every other keeps its
+    # hit (measured: 9 of the 7000 rays hit past theirs)
+    full, capped = got["staged"]
+    past = np.isfinite(full["t"]) & (full["t"] > t_max.astype(np.float32))
+    assert past.sum() >= 5 and np.isinf(capped["t"][past]).all()
+    assert np.array_equal(capped["t"][~past], full["t"][~past])
 
 
 def test_ray_layouts_and_dtypes_give_the_same_hits(vk_device):

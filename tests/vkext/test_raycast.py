@@ -19,7 +19,6 @@ import pytest
 import trimesh
 
 import rfw
-from rfw.scene import default_scene
 
 from .embree_ref import HIT_AGREEMENT, T_RTOL, embree_cast, flatten
 
@@ -106,11 +105,6 @@ def test_mesh_agrees_with_embree(vk_device, name, method):
     assert (got["primitive"][~np.isfinite(got["t"])] == -1).all()
     ref = embree_cast(v, mesh.faces, o, d)
     _check_against(ref, got, o, d, float(np.abs(v).max()))
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 @pytest.mark.parametrize("method", METHODS)

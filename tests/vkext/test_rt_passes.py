@@ -18,7 +18,6 @@ import pytest
 from rfw.config import apply_overrides, load_config, resolve_auto
 from rfw.graph import GraphError
 from rfw.render import render
-from rfw.scene import default_scene
 
 from ..conftest import tiny_scene
 
@@ -32,11 +31,6 @@ def _needs_ray_tracing(vk_device):
     missing = [c for c in RT if c not in vk_device.caps]
     if missing:
         pytest.skip(f"no {', '.join(missing)}")
-
-
-@pytest.fixture(scope="module")
-def courtyard():
-    return default_scene()
 
 
 def run(vk_device, scene, *sets: str, outputs: tuple[str, ...] = ()):

@@ -18,7 +18,6 @@ import pytest
 
 from rfw.config import PassEntry, apply_overrides, load_config
 from rfw.render import render
-from rfw.scene import default_scene
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "rt_primary.toml"
 
@@ -32,16 +31,15 @@ def _needs_ray_tracing(vk_device):
 
 
 @pytest.fixture(scope="module")
-def images(vk_device):
+def images(vk_device, courtyard):
     out = {}
-    scene = default_scene()
     for method in ("ray_pipeline", "ray_query"):
         if method == "ray_query" and "VK_KHR_ray_query" not in vk_device.caps:
             continue  # the H100 has pipelines only
         cfg = apply_overrides(load_config(CONFIG), ["size=192x108", f"method={method}"])
         cfg = replace(cfg, passes=[*cfg.passes, PassEntry("gbuffer", "gbuffer")],
                       outputs=[*cfg.outputs, "gbuffer.albedo", "gbuffer.depth"])
-        out[method] = render(cfg, scene=scene, device=vk_device, backend="vk").images
+        out[method] = render(cfg, scene=courtyard, device=vk_device, backend="vk").images
     return out
 
 

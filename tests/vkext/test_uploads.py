@@ -13,6 +13,8 @@ from vkext.buffers import staging_buffer
 from vkext.commands import BufferBarrier, barrier, record_upload
 from vkext.consts import vk
 
+from ..golden_util import changed_share
+
 SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                 frozenset({"SHADER_SAMPLED_READ"}))
 COPY_READ = State(None, frozenset({"COPY"}), frozenset({"TRANSFER_READ"}))
@@ -52,7 +54,7 @@ def test_buffers_and_mips_arrive(vk_device):
             got = read_image(vk_device, img, layout_now=SAMPLED, mip=k)
             assert np.array_equal(got, want), f"mip {k}"
         # the comparison can fail: the mips are not each other
-        assert not np.array_equal(mips[0][:3, :6], mips[1])
+        assert changed_share(mips[0][:3, :6], mips[1], over=0) > 0.5  # all 18 texels
     finally:
         for obj in reversed(made):
             obj.destroy()

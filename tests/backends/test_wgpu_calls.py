@@ -18,9 +18,9 @@ from rfw.backends.wgpu.timestamps import Stamps
 from rfw.config import apply_overrides, build, load_config
 from rfw.frame import camera_for, open_frame
 
-from .conftest import tiny_scene
+from ..conftest import tiny_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _open(name: str = "flat", size: str = "32x24"):

@@ -19,7 +19,7 @@ Image = pytest.importorskip("PIL.Image")
 from rfw.meshlet_view import load_mesh, meshlet_colors, triangle_meshlet_ids  # noqa: E402
 from rfw.meshlets import build_meshlets  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _sphere() -> tuple[np.ndarray, np.ndarray]:

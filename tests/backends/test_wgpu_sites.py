@@ -20,6 +20,7 @@ from rfw.frame import open_frame
 from rfw.passes import Settings
 
 from ..conftest import ROOT, tiny_scene
+from ..golden_util import changed_share
 
 SIZE = "size=96x64"
 
@@ -117,7 +118,7 @@ def test_a_setting_reaches_a_repeated_dispatch(device, lookups):
         frame.run(1)
         assert lookups["programs"] == 0
         changed = frame.read("tonemap.ldr").copy()
-        assert not np.array_equal(changed, image)
+        assert changed_share(changed, image) > 0.5  # every pixel
         fresh.run(1)
         assert np.array_equal(changed, fresh.read("tonemap.ldr"))
     finally:

@@ -17,9 +17,9 @@ from PIL import Image
 from rfw.backend import pick_gpu
 from rfw.errors import RfwError
 
-from .conftest import rfw_cli
+from ..conftest import rfw_cli
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(tmp: Path, backend: str, gpu: str | None, out: str) -> subprocess.CompletedProcess:

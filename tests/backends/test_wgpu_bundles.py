@@ -15,6 +15,7 @@ from rfw.config import apply_overrides, build, load_config
 from rfw.frame import open_frame
 
 from ..conftest import ROOT, tiny_scene
+from ..golden_util import changed_share
 
 SIZE = "size=96x64"
 
@@ -76,10 +77,12 @@ def test_a_pipeline_setting_records_again(device, counted):
         ex = frame.executors["wgpu"]
         frame.run(2)
         before, image = counted["encoders"], _image(frame, "fxaa.color")
+        frame.run(1)
+        assert np.array_equal(_image(frame, "fxaa.color"), image)  # control: unchanged
         ex.passes["overdraw"].params.cull = "none"
         frame.run(2)
         assert counted["encoders"] == before + 1  # overdraw alone, and once
-        assert not np.array_equal(_image(frame, "fxaa.color"), image)  # back faces counted
+        assert changed_share(_image(frame, "fxaa.color"), image) > 0.2  # back faces: 61 %
     finally:
         frame.destroy()
 
@@ -91,6 +94,8 @@ def test_another_scene_records_again(device, counted):
         ex = frame.executors["wgpu"]
         frame.run(2)
         before, image = counted["encoders"], _image(frame, "tonemap.ldr")
+        frame.run(1)
+        assert np.array_equal(_image(frame, "tonemap.ldr"), image)  # control: unchanged
         moved = tiny_scene()
         moved.instances[1].transform[0, 3] = 1.5  # the cube steps aside
         old = ex.scene
@@ -99,7 +104,7 @@ def test_another_scene_records_again(device, counted):
         try:
             frame.run(2)
             assert counted["encoders"] == before + 1
-            assert not np.array_equal(_image(frame, "tonemap.ldr"), image)
+            assert changed_share(_image(frame, "tonemap.ldr"), image) > 0.02  # 6.8 %
         finally:
             ex.scene.destroy()
             ex.scene = old
@@ -119,7 +124,7 @@ def test_a_uniform_setting_reaches_the_replayed_draws(device, counted):
         frame.run(1)
         assert counted["encoders"] == before
         changed = _image(frame, "tonemap.ldr")
-        assert not np.array_equal(changed, image)
+        assert changed_share(changed, image) > 0.05  # 23 % of the pixels
         fresh.run(1)
         assert np.array_equal(changed, _image(fresh, "tonemap.ldr"))
     finally:

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from .test_camera_path import FLAT, SIZE, cli, refused
+from ..conftest import rfw_cli
+from .test_camera_path import FLAT, SIZE, refused
 
 # two keys from one eye, looking opposite ways (+z, then -z)
 KEYS = ("camera.path.keys=[{position=[0,1,0],target=[0,1,5]},"
@@ -21,8 +22,8 @@ SLERP = "camera.path.target_interpolation=slerp"
 
 def run(out: Path, *args: str, frames: int = 2) -> dict:
     """``rfw run`` that succeeds quietly (no warning on stderr); its timings.json."""
-    done = cli("run", str(FLAT), "--size", SIZE, "--frames", str(frames), "--out", str(out),
-               *args)
+    done = rfw_cli("run", str(FLAT), "--size", SIZE, "--frames", str(frames), "--out",
+                   str(out), *args)
     assert done.returncode == 0, done.stderr
     assert done.stderr == "", done.stderr
     return json.loads((out / "timings.json").read_text())

@@ -1,4 +1,4 @@
-"""Running ``rfw view`` under Xvfb in tests (tests/test_view_*.py)."""
+"""Running ``rfw view`` under Xvfb in tests (tests/core/test_view_*.py)."""
 
 from __future__ import annotations
 

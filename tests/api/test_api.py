@@ -18,9 +18,10 @@ from PIL import Image
 import rfw
 from rfw.fileio import to_png_array
 
-from .conftest import rfw_cli
+from ..conftest import rfw_cli
+from ..golden_util import changed_share
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFERRED = str(ROOT / "configs" / "deferred.toml")
 FLAT = str(ROOT / "configs" / "flat.toml")
 SIZE = (32, 18)
@@ -61,13 +62,25 @@ def test_result_has_numpy_images_and_timings(pair):
     assert isinstance(ldr, np.ndarray) and ldr.dtype == np.uint8 and ldr.shape == (18, 32, 4)
     assert a.formats == {"tonemap.ldr": "rgba8unorm"}
     assert list(a.gpu_ms) == ["gbuffer", "lighting", "tonemap"]
-    assert all(v is not None and v >= 0 for v in a.gpu_ms.values())
+    assert a.timings["timestamps"] and all(v is not None and v > 0 for v in a.gpu_ms.values())
     assert a.gpu_ms_total == pytest.approx(sum(a.gpu_ms.values()))
     assert a.timings["frames"] == 2 and a.timings["size"] == list(SIZE)
     # the override reached the pass: brighter; the same setting again gives the same image
     # (the negative control of "an override changes the image")
     assert b.images["tonemap.ldr"][..., :3].astype(int).sum() > ldr[..., :3].astype(int).sum()
     assert np.array_equal(again.images["tonemap.ldr"], ldr)
+
+
+def test_each_pass_time_is_its_own(pair):
+    # the G-buffer pass, which draws the courtyard's 405 instances, takes far longer than the
+    # tonemap's one dispatch over 576 pixels (measured, medians of 5 frames: 520-982 times
+    # on lavapipe with a busy CPU, whose preemptions once stretched a lone frame's tonemap to
+    # 9 ms, 8 times less than its G-buffer; 84 times on the H200 at 1280x720): times never
+    # written (0), all alike or handed to another pass fail
+    s, _, _, _ = pair
+    ms = s.render(rfw.load(DEFERRED, size=SIZE), frames=5).gpu_ms
+    assert all(v is not None and v > 0 for v in ms.values()), ms
+    assert ms["gbuffer"] > 3 * ms["tonemap"], ms
 
 
 def test_session_reuses_device_and_scene(monkeypatch):
@@ -161,7 +174,7 @@ def test_jupyter_display(pair):
         assert f"<td>{name}</td><td>{ms:.3f}</td>" in page
     # negative control: another render's picture does not pass for this one
     _, _, b, _ = pair
-    assert not np.array_equal(decode(b._repr_png_()), decode(png))
+    assert changed_share(decode(b._repr_png_()), decode(png)) > 0.5  # every pixel
 
 
 def test_save_writes_what_rfw_run_writes(pair, tmp_path):

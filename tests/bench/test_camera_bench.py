@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import ROOT, rfw_cli
+from ..conftest import ROOT, rfw_cli
 
 
 def bench(out: Path, config: str, *args: str) -> list[dict]:

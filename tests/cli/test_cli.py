@@ -22,7 +22,7 @@ import pytest
 
 from rfw import cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 RAPTOR_DIR = ROOT / "tests" / "data" / "raptor"
 RAPTOR_FILES = sorted(RAPTOR_DIR.glob("*.json"))
 RAPTOR_IDS = [p.stem for p in RAPTOR_FILES]

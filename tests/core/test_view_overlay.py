@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from .conftest import ROOT, rfw_cli
+from ..conftest import ROOT, rfw_cli
 from .view_xvfb import needs_xvfb, under_xvfb
 
 pytestmark = needs_xvfb

@@ -17,9 +17,10 @@ from rfw.camera_path import CameraPath, check_path
 from rfw.errors import RfwError
 from rfw.scene import Camera
 
-from .conftest import rfw_cli
+from ..conftest import rfw_cli
+from ..golden_util import changed_share
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
 SIZE = "32x18"
 
@@ -135,7 +136,7 @@ def test_set_camera_keys_render_like_the_config(tmp_path):
         "--set", "camera.zfar=90")
     a, b, c = (image(tmp_path / d / "flat.color.png") for d in "abc")
     assert np.array_equal(a, b)
-    assert not np.array_equal(a, c)  # control: another field of view shows
+    assert changed_share(a, c) > 0.05  # control: another field of view shows (17 %)
 
 
 @pytest.mark.parametrize(("value", "needles"), [
@@ -185,7 +186,7 @@ def test_path_renders_each_frame_from_its_camera(tmp_path):
     for k in range(4):  # deterministic: the same path gives the same frames
         assert np.array_equal(frames[k], again[k])
         for j in range(k):
-            assert not np.array_equal(frames[k], frames[j]), (j, k)
+            assert changed_share(frames[k], frames[j]) > 0.1, (j, k)  # 38-61 %
     timings = json.loads((tmp_path / "p1" / "timings.json").read_text())
     cams = timings["camera_path"]["frames"]
     assert [c["t"] for c in cams] == pytest.approx([0.0, 1 / 3, 2 / 3, 1.0])
@@ -202,10 +203,10 @@ def test_path_renders_each_frame_from_its_camera(tmp_path):
     # same last frame
     run(tmp_path / "p3", "--frames", "4", config=cfg)
     assert np.array_equal(image(tmp_path / "p3" / "flat.color.png"), frames[-1])
-    # control: a keyframe shifted by a little renders differently
+    # control: a keyframe shifted by a little renders differently (17 % of the pixels)
     run(tmp_path / "s", "--set", "camera.position=[9.2, 2.5, 2.0]", "--set",
         f"camera.target={B[1]}")
-    assert not np.array_equal(image(tmp_path / "s" / "flat.color.png"), frames[-1])
+    assert changed_share(image(tmp_path / "s" / "flat.color.png"), frames[-1]) > 0.05
 
 
 def test_orbit_from_set_on_vk_under_validation(tmp_path):
@@ -216,7 +217,7 @@ def test_orbit_from_set_on_vk_under_validation(tmp_path):
     saved = sorted(p.name for p in (out / "frames").iterdir())
     assert saved == ["flat.color.0000.png", "flat.color.0002.png"]  # every 2nd and the last
     first, last = (image(out / "frames" / n) for n in saved)
-    assert not np.array_equal(first, last)
+    assert changed_share(first, last) > 0.2  # 75 %
     cams = json.loads((out / "timings.json").read_text())["camera_path"]
     assert cams["kind"] == "orbit" and [c["t"] for c in cams["frames"]] == \
         pytest.approx([0.0, 1 / 3, 2 / 3])
@@ -276,7 +277,8 @@ def test_gltf_cameras_by_name_or_index(tmp_path):
                                  for d in ("name", "index", "front", "first"))
     assert np.array_equal(name, index)
     assert np.array_equal(front, first)
-    assert not np.array_equal(name, front)  # control: the other camera sees otherwise
+    # control: the other camera sees otherwise (36 of the 576 pixels)
+    assert changed_share(name, front) > 0.02
     line = refused(tmp_path, "--scene", scene, "--set", "camera.gltf=sidee",
                    needles=("camera.gltf", "'sidee'", "0: 'front', 1: 'side'",
                             "did you mean 'side'"))
@@ -379,12 +381,12 @@ def test_vk_path_frames_in_flight_render_each_frames_camera(tmp_path, config, ou
     two_frames, one_frames = (_frames(tmp_path / d, output, n) for d in ("two", "one"))
     for k in range(n):
         assert np.array_equal(two_frames[k], one_frames[k]), k
-    for k in range(1, n):  # the camera moved
-        assert not np.array_equal(two_frames[k], two_frames[k - 1]), k
+    for k in range(1, n):  # the camera moved: 91-99 % of the pixels differ (measured)
+        assert changed_share(two_frames[k], two_frames[k - 1]) > 0.25, k
     # control: a frame from its neighbour's camera fails the comparison
     for k in range(1, n):
-        assert not np.array_equal(two_frames[k], one_frames[k - 1]), k
-        assert not np.array_equal(two_frames[k - 1], one_frames[k]), k
+        assert changed_share(two_frames[k], one_frames[k - 1]) > 0.25, k
+        assert changed_share(two_frames[k - 1], one_frames[k]) > 0.25, k
 
 
 def test_vk_camera_copy_is_synchronized_or_validation_says_so(monkeypatch):
