@@ -15,7 +15,7 @@ submission by its index (``wgpuDevicePoll``), which is what a frame in flight wa
 no buffer is mapped for it.
 
 This uses wgpu-py's backend module (``wgpu.backends.wgpu_native._api``), which is not its
-public API: ``pyproject.toml`` pins wgpu, and ``tests/test_wgpu_calls.py`` checks these
+public API: ``pyproject.toml`` pins wgpu, and ``tests/backends/test_wgpu_calls.py`` checks these
 calls against wgpu-py's own.
 """
 
