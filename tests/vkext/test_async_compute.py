@@ -6,9 +6,6 @@ it one after the other (the H200 runs them on a second queue of its graphics fam
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +17,8 @@ from vkext import VkDevice
 from vkext.backend import render_vk
 from vkext.queues import AsyncQueues
 
+from ..conftest import rfw_cli
+from ..golden_util import changed_share
 from ..graph.test_queues import SSAO
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,7 +55,8 @@ def test_the_image_changes_when_ssao_is_off(vk_device, courtyard):
     cfg = apply_overrides(load_config(SSAO), [f"size={SIZE}", "async_compute=on", "ao=off"])
     no_ao = render_vk(cfg, scene=courtyard, device=vk_device, frames=1)
     name = next(iter(on.images))
-    assert not np.array_equal(on.images[name], no_ao.images[name])
+    # the change reached the image: 0.094 of the pixels measured on lavapipe
+    assert changed_share(on.images[name], no_ao.images[name]) > 0.02
 
 
 def test_reused_timeline_values_are_reported(courtyard, monkeypatch):
@@ -137,10 +137,8 @@ def test_the_second_queue_choice():
 
 
 def test_a_bad_async_queue_preference_is_one_line(tmp_path):
-    env = {**os.environ, "RFW_VK_ASYNC_QUEUE": "fast"}
-    r = subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
-                        "flat.toml"), "--backend", "vk", "--size", "16x16", "--out",
-                        str(tmp_path / "out")], env=env, capture_output=True, text=True)
+    r = rfw_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x16",
+                "--out", tmp_path / "out", env={"RFW_VK_ASYNC_QUEUE": "fast"})
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "RFW_VK_ASYNC_QUEUE" in lines[0] and "'fast'" in lines[0]

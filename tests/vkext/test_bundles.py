@@ -17,6 +17,7 @@ from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
 from ..conftest import tiny_scene
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -90,7 +91,8 @@ def test_a_setting_reaches_the_gpu_without_recording_again(vk_device, monkeypatc
                      settings=change, bundles=False)
     assert [calls for _, calls in cached] == [[2, 2], []]
     # the uniform values are rewritten each frame: frame 1 shows the new settings
-    assert not np.array_equal(cached[0][0], cached[1][0])
+    # the change reached the image: 0.35 of the pixels measured on lavapipe
+    assert changed_share(cached[0][0], cached[1][0]) > 0.1
     for (a, _), (b, _) in zip(cached, inline, strict=True):
         assert np.array_equal(a, b)
 
@@ -107,7 +109,8 @@ def test_a_changed_pipeline_state_records_again(vk_device, monkeypatch):
     assert [calls for _, calls in cached] == [[2], [2], []]
     assert [calls for _, calls in inline] == [[2], [2], [2]]
     # back faces drawn too: more fragments per pixel (a stale bundle would repeat frame 0)
-    assert not np.array_equal(cached[0][0], cached[1][0])
+    # the change reached the image: 0.62 of the pixels measured on lavapipe
+    assert changed_share(cached[0][0], cached[1][0]) > 0.2
     for (a, _), (b, _) in zip(cached, inline, strict=True):
         assert np.array_equal(a, b)
 
@@ -118,5 +121,6 @@ def test_another_scene_records_again(vk_device, monkeypatch, courtyard):
                      swap_scene={1: courtyard})
     calls = [calls for _, calls in cached]
     assert calls[0] == [2] and len(calls[1]) == 1 and calls[1][0] > 300 and calls[2] == []
-    assert not np.array_equal(cached[0][0], cached[1][0])
+    # the change reached the image: 0.81 of the pixels measured on lavapipe
+    assert changed_share(cached[0][0], cached[1][0]) > 0.25
     assert np.array_equal(cached[1][0], cached[2][0])

@@ -8,9 +8,6 @@ frame, bit for bit, and every frame keeps its timing samples."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from itertools import pairwise
 from pathlib import Path
 
@@ -23,7 +20,8 @@ from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
-from ..conftest import tiny_scene
+from ..conftest import rfw_cli, tiny_scene
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -79,7 +77,8 @@ def test_a_changed_setting_records_the_frame_again(vk_device, monkeypatch):
     begun, images, _ = _run(vk_device, monkeypatch, "deferred", 8, settings=change)
     # negative control: the slots' primaries no longer hold what the changed frames record
     assert begun == [2, 2]
-    assert not np.array_equal(images[0], images[1])  # the change reached the image
+    # the change reached the image: 1 of the pixels measured on lavapipe
+    assert changed_share(images[0], images[1]) > 0.5
     _, inline, _ = _run(vk_device, monkeypatch, "deferred", 8, settings=change, replay=False)
     assert all(np.array_equal(a, b) for a, b in zip(images, inline, strict=True))
 
@@ -97,10 +96,8 @@ def test_passes_that_record_every_frame_record_the_frame(vk_device, monkeypatch)
 @pytest.mark.parametrize(("value", "code"), [("maybe", 2), ("0", 0)])
 def test_a_bad_switch_is_one_line_and_exit_2(tmp_path, value, code):
     # "0" (a good value, the baseline) is the negative control
-    run = subprocess.run([sys.executable, "-m", "rfw.cli", "run", str(ROOT / "configs" /
-                          "flat.toml"), "--backend", "vk", "--size", "16x8", "--out",
-                          str(tmp_path / "o")], capture_output=True, text=True, timeout=600,
-                         env={**os.environ, "RFW_VK_FRAME_REPLAY": value})
+    run = rfw_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x8",
+                  "--out", tmp_path / "o", timeout=600, env={"RFW_VK_FRAME_REPLAY": value})
     assert run.returncode == code, run.stderr
     if code:
         assert run.stderr.count("\n") == 1 and "RFW_VK_FRAME_REPLAY: expected 0 or 1" in \

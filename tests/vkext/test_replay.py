@@ -26,6 +26,7 @@ from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
 from ..conftest import tiny_scene
+from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -108,7 +109,8 @@ def test_unchanged_passes_record_nothing_after_the_first_frame(vk_device, monkey
     # negative control: inline, every frame records every pass again
     assert all(c == first for _, c in inline)
     _same_images(cached, inline)
-    assert not np.array_equal(cached[1][0], cached[2][0])  # the exposure reached frame 2
+    # the exposure reached frame 2: 1 of the pixels measured on lavapipe
+    assert changed_share(cached[1][0], cached[2][0]) > 0.5
     assert np.array_equal(cached[1][0], cached[3][0])  # and its undoing frame 3
 
 
@@ -150,7 +152,8 @@ def test_meshlet_passes_replay_while_the_camera_moves(vk_device, monkeypatch, me
     assert counts[2:] == [{}, {}, {}]
     assert all(c["mesh tasks"] == counts[0]["mesh tasks"] for _, c in inline)
     _same_images(cached, inline)
-    assert not np.array_equal(cached[2][0], cached[3][0])  # the view moved
+    # the view moved: 0.996 of the pixels measured on lavapipe
+    assert changed_share(cached[2][0], cached[3][0]) > 0.3
 
 
 def test_mesh_draws_are_bundled_under_sync_validation(vk_device, monkeypatch, meshlets):
