@@ -307,6 +307,9 @@ def storage_format(format: str) -> str:
                      "output needs a plain r/rg/rgba format, not sRGB or bgra)")
 
 
+# what ``Pass.replay`` may say
+REPLAY = ("auto", False)
+
 # what ``Pass.scene_needs`` may name, and whether a scene (rfw.scene.Scene) holds it
 SCENE_NEEDS: dict[str, Any] = {
     "strokes": lambda scene: bool(scene.stroke_instances),  # points or lines (glTF 0-3)
@@ -332,7 +335,7 @@ class Pass:
     # its slots, the scene and ``replay_key(ctx)``, so an executor that can keep them
     # executes them again instead of calling ``record`` (rfw.exec.replay); False: recorded
     # every frame (commands that depend on anything else, e.g. bytes computed per frame)
-    replay: ClassVar[str | bool] = False
+    replay: ClassVar[str | bool] = False  # one of REPLAY (register_pass checks)
 
     class Params(Settings):
         pass

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from .errors import RfwTypeError, check_identifier, check_path, check_type, type_name
 from .graph.errors import GraphError, did_you_mean
-from .passes import Pass
+from .passes import REPLAY, Pass
 from .plugins import entry_points
 
 ENTRY_POINT_GROUP = "rfw.passes"
@@ -43,6 +43,9 @@ def register_pass(pass_id: str, *, folder: str | os.PathLike | None = None,
             raise GraphError(f"pass id '{pass_id}' is registered twice: by "
                              f"{old.__module__}.{old.__qualname__} and "
                              f"{cls.__module__}.{cls.__qualname__}")
+        if cls.replay not in REPLAY:
+            raise GraphError(f"'replay' must be \"auto\" or False, not {cls.replay!r}",
+                             element=where)
         cls.id = pass_id
         if cls.shader:  # a bad shader_source, or no file to find shaders beside: here,
             cls.folder()  # when the class is defined, not at its first render

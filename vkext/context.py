@@ -164,10 +164,13 @@ class VkPassContext(ContextCore):
         ``requires = (MESH_SHADER, ...)``."""
         from .meshlet import scene_of
 
+        self._check_mesh_shader()
+        return scene_of(self)
+
+    def _check_mesh_shader(self) -> None:
         if MESH_SHADER not in self.pass_.requires:
             raise ShaderError(f"pass '{self.pass_.name}' draws meshlets but does not declare "
                               f"requires = ({MESH_SHADER!r},)")
-        return scene_of(self)
 
     def draw_meshlets(self, *, color: Sequence[tuple[str, Any]],
                       depth: tuple[str, Any] | None, flags: int, phase: str,
@@ -176,7 +179,7 @@ class VkPassContext(ContextCore):
         """``vkext.meshlet.draw_meshlets`` into this pass's slots."""
         from .meshlet import draw_meshlets
 
-        self.meshlets  # noqa: B018  (the capability's check)
+        self._check_mesh_shader()
         return draw_meshlets(self, color=color, depth=depth, flags=flags, phase=phase,
                              freeze=freeze, depth_compare=depth_compare, cull=cull)
 

@@ -15,10 +15,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from ..graph.errors import GraphError
 from ..passes import Pass
-
-REPLAY = ("auto", False)
 
 
 def settings_key(params: Any) -> tuple:
@@ -26,24 +23,12 @@ def settings_key(params: Any) -> tuple:
     return (type(params), tuple(vars(params).items())) if params is not None else ()
 
 
-def check_replay(pass_: Pass) -> bool:
-    """Whether the pass declares ``replay = "auto"``; anything but "auto" or False is a
-    GraphError naming the pass."""
-    value = type(pass_).replay
-    if value is False:
-        return False
-    if value == "auto":
-        return True
-    raise GraphError(f"'replay' must be \"auto\" or False, not {value!r}",
-                     element=f"pass '{pass_.name}'")
-
-
 def replay_key(pass_: Pass, ctx: Any, slot_objects: Iterable[Any]) -> tuple | None:
     """The key under which ``pass_``'s commands recorded through ``ctx`` may be executed
     again: its type, settings, the objects behind its slots (history images swap between
     frames, so objects, not names), the scene and ``pass_.replay_key(ctx)``. None: record
     (the pass does not declare replay, or a part of the key cannot be hashed)."""
-    if not check_replay(pass_):
+    if pass_.replay != "auto":  # False (register_pass refused anything else)
         return None
     key = ("pass", type(pass_), settings_key(pass_.params), tuple(slot_objects), ctx.scene,
            pass_.replay_key(ctx))

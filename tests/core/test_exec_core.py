@@ -91,3 +91,18 @@ def test_history_swaps_on_wgpu_too(device, monkeypatch):
     assert np.all(_accumulated(device, 5) == 5 * 0.125)  # one step per frame through the swap
     monkeypatch.setattr(Executor, "_swap", lambda self, a, b: None)
     assert np.all(_accumulated(device, 5) == 0.125)  # negative control: no swap, no history
+
+
+def test_a_replay_other_than_auto_or_false_is_refused_when_registered():
+    from rfw import ComputePass, register_pass
+    from rfw.graph import GraphError
+
+    class Sometimes(ComputePass):
+        shader_source = "#version 460\nvoid main() {}\n"
+        shader = "sometimes.comp.glsl"
+        replay = "sometimes"
+
+    with pytest.raises(GraphError, match=r"'replay' must be \"auto\" or False, not 'sometimes'"):
+        register_pass("replay_sometimes")(Sometimes)
+    Sometimes.replay = "auto"  # negative control: the declared value registers
+    assert register_pass("replay_sometimes")(Sometimes) is Sometimes

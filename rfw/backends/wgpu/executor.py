@@ -23,7 +23,7 @@ from .calls import FrameCalls
 from .context import PassContext
 from .device import Device
 from .programs import Binding, ShaderCache
-from .resources import buffer_usage, share_textures, texture_usage, wgpu_format
+from .resources import buffer_usage, share_textures, texture_usage, usage_flags, wgpu_format
 from .timestamps import STAMP_BATCH, FrameSlot, Stamps
 
 
@@ -66,7 +66,7 @@ class Executor(ExecutorCore):
                                   "them, and runs through rfw.render.render (rfw.frame "
                                   "gives each backend its part of it)")
         self._textures: dict[str, Any] = {}
-        self._views: dict[str, Any] = {}
+        self._views: dict[tuple[str, int | None], Any] = {}  # (resource, mip) -> view
         self._uniforms: dict[tuple[str, str], Any] = {}
         # per call site (pass, n-th dispatch or scene draw): the last call and what it found
         self.call_sites: dict[tuple, tuple] = {}
@@ -122,7 +122,7 @@ class Executor(ExecutorCore):
 
     def view(self, resource: str, *, mip: int | None = None) -> Any:
         """The resource's view (every mip), or a view of mip ``mip`` alone."""
-        key = resource if mip is None else f"{resource}@mip{mip}"
+        key = (resource, mip)
         if key not in self._views:
             tex = self.texture(resource)
             if mip is not None and not 0 <= mip < tex.mip_level_count:
@@ -265,13 +265,9 @@ class Executor(ExecutorCore):
         # history: the textures behind two resources trade places, with their views
         if a in self.owner and b in self.owner:
             self.owner[a], self.owner[b] = self.owner[b], self.owner[a]
-            views = {k: v for k, v in self._views.items() if k.split("@mip")[0] in (a, b)}
-            for k in views:
-                del self._views[k]
-            for k, v in views.items():
-                base, _, mip = k.partition("@mip")
-                other = b if base == a else a
-                self._views[other + ("@mip" + mip if mip else "")] = v
+            views = {k: self._views.pop(k) for k in list(self._views) if k[0] in (a, b)}
+            for (name, mip), v in views.items():
+                self._views[(b if name == a else a, mip)] = v
 
     def _bridge(self, name: str) -> None:
         """A bridge's side of the plan (``rfw.frame``: the copy goes through the host
@@ -387,13 +383,8 @@ class Executor(ExecutorCore):
 
     def _make_buffer(self, label: str, data: np.ndarray, usage: tuple[str, ...]) -> Any:
         """A buffer holding ``data`` (a pass's setup tables), destroyed with the executor."""
-        flags = 0
-        for u in usage:
-            flags |= {"storage": wgpu.BufferUsage.STORAGE, "uniform": wgpu.BufferUsage.UNIFORM,
-                      "vertex": wgpu.BufferUsage.VERTEX, "index": wgpu.BufferUsage.INDEX,
-                      "indirect": wgpu.BufferUsage.INDIRECT}[u]
-        buf = self.device.device.create_buffer_with_data(data=data.tobytes(), usage=flags,
-                                                         label=label)
+        buf = self.device.device.create_buffer_with_data(data=data.tobytes(),
+                                                         usage=usage_flags(usage), label=label)
         self._made.append(buf)
         return buf
 

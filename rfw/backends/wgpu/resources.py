@@ -7,6 +7,7 @@ lifetimes share one texture instead (:func:`share_textures`).
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Iterable
 
 import wgpu
 
@@ -37,12 +38,17 @@ _BUFFER_USAGE = {"storage": wgpu.BufferUsage.STORAGE, "uniform": wgpu.BufferUsag
                  "transfer_dst": wgpu.BufferUsage.COPY_DST}
 
 
-def buffer_usage(r: ResourcePlan) -> int:
-    # copies both ways so buffers can be cleared, filled and read back
-    usage = wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST
-    for u in r.usages:
+def usage_flags(usages: Iterable[str]) -> int:
+    """wgpu buffer usage flags of rfw's usage names (unknown names add none)."""
+    usage = 0
+    for u in usages:
         usage |= _BUFFER_USAGE.get(u, 0)
     return usage
+
+
+def buffer_usage(r: ResourcePlan) -> int:
+    # copies both ways so buffers can be cleared, filled and read back
+    return wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST | usage_flags(r.usages)
 
 
 def texture_usage(r: ResourcePlan, readback: bool) -> int:
