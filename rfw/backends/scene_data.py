@@ -142,9 +142,11 @@ def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
 
 
 def material_bytes(m: Material) -> bytes:
-    return struct.pack("<4f4f4f4I", *m.base_color, *m.emissive, m.normal_scale,
+    """material.glsl's MaterialFactors: flags x alpha mode, y double-sided, z the specular
+    factor's float bits (uintBitsToFloat)."""
+    return struct.pack("<4f4f4f2If1I", *m.base_color, *m.emissive, m.normal_scale,
                        m.metallic, m.roughness, m.occlusion_strength, m.alpha_cutoff,
-                       _ALPHA.get(m.alpha_mode, 0), int(m.double_sided), 0, 0)
+                       _ALPHA.get(m.alpha_mode, 0), int(m.double_sided), m.specular, 0)
 
 
 def instance_bytes(model: np.ndarray) -> bytes:

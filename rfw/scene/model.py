@@ -47,6 +47,9 @@ class Material:
     alpha_mode: str = "OPAQUE"  # OPAQUE | MASK | BLEND
     alpha_cutoff: float = 0.5
     double_sided: bool = False
+    # KHR_materials_specular's specularFactor: the strength of a dielectric's specular lobe
+    # (0: pure Lambert). The path tracer reads it; the raster passes shade it as 1.
+    specular: float = 1.0
 
 
 # how a mesh's indices join its vertices, in WebGPU's names: triangles for ``Scene.meshes``,

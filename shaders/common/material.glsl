@@ -16,7 +16,8 @@ struct MaterialFactors {
     vec4 base_color;
     vec4 emissive;     // w: normal scale
     vec4 params;       // metallic, roughness, occlusion strength, cutoff
-    uvec4 flags;       // x: alpha mode (0 opaque, 1 mask, 2 blend)
+    uvec4 flags;       // x: alpha mode (0 opaque, 1 mask, 2 blend), y: double-sided,
+                       // z: specular factor (float bits)
 };
 
 struct Surface {
