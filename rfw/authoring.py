@@ -11,7 +11,8 @@ written once for every backend, and what it may rely on is listed here:
   declares in ``requires``), :class:`SetupContext`, and the typed scene views
   :class:`SceneView` / :class:`VkSceneView`;
 * the scene tables passes that read the scene from a shader build (instance matrices,
-  material factors, the visibility buffer's id split) and the G-buffer's layout, which
+  material factors, the tables of ``scene_tables``/``texture_lists`` that reach any
+  triangle and its material, the visibility buffer's id split) and the G-buffer's layout, which
   several passes share.
 
 Replay is declared, not called: a pass whose commands depend on nothing but its settings,
@@ -65,7 +66,8 @@ __all__ = [
     "RayTracingContext", "RenderPass", "SceneError", "SceneView", "Settings",
     "SettingsError", "SetupContext", "SizeRule", "Slot", "Step", "Storage", "Tex2D",
     "Texture", "VkSceneView", "did_you_mean", "format_info", "instance_blocks",
-    "material_bytes", "register_pass", "storage_format", "triangle_bits",
+    "material_bytes", "register_pass", "scene_tables", "storage_format", "texture_lists",
+    "triangle_bits",
 ]
 
 # what a pass that draws meshlets declares in ``requires`` (MeshShaderContext)
@@ -181,3 +183,49 @@ class MeshShaderContext(PassContext, Protocol):
                       cull: str = "back") -> int:
         """Draw the scene's opaque and masked instances through the task and mesh
         shaders; returns the indirect draws recorded."""
+
+
+# the std430 rows of the scene tables a shader reads any triangle's data and material from
+# (shaders/common/scene_tables.glsl: SceneMesh, SceneInstance, SceneMaterial)
+MESH_DTYPE = np.dtype([("addresses", "<u8", 5), ("material", "<u4"), ("pad", "<u4")])
+INSTANCE_DTYPE = np.dtype([("matrices", "<f4", 32), ("mesh", "<u4", 4)])
+MATERIAL_DTYPE = np.dtype([("factors", "u1", 64), ("textures", "<i4", 8)])
+
+
+def texture_lists(scene: Any) -> tuple[list, list]:
+    """The textures (the scene's, then its white, white sRGB and flat-normal defaults) and
+    samplers (the scene's, then its default) that the material table indexes."""
+    return ([*scene.textures, scene.white, scene.white_srgb, scene.flat_normal],
+            [*scene.samplers, scene.default_sampler])
+
+
+def scene_tables(vk_scene: Any) -> dict[str, np.ndarray]:
+    """Per mesh its streams' device addresses and material; per instance its matrices, mesh
+    and mirroring; per material its factors and texture and sampler slots (the ones the
+    G-buffer binds: a missing texture is the default that ``VkScene`` binds in its place)."""
+    scene = vk_scene.scene
+    meshes = np.zeros(max(1, len(scene.meshes)), MESH_DTYPE)
+    for k, m in enumerate(scene.meshes):
+        meshes[k] = ([p.address for p in vk_scene.mesh_buffers[k]], m.material, 0)
+    instances = np.zeros(max(1, len(scene.instances)), INSTANCE_DTYPE)
+    if scene.instances:
+        instances["matrices"] = instance_blocks([i.transform for i in scene.instances])
+        instances["mesh"][:, 0] = [i.mesh for i in scene.instances]
+        instances["mesh"][:, 1] = vk_scene.mirrored
+    # texture_lists' order: the scene's textures, then white, white sRGB, flat normal; the
+    # scene's samplers (one per texture), then the default
+    n = len(scene.textures)
+    white, white_srgb, flat, default_sampler = n, n + 1, n + 2, n
+    materials = np.zeros(max(1, len(scene.materials)), MATERIAL_DTYPE)
+    for k, m in enumerate(scene.materials):
+        slots = [_or(m.base_color_texture, white_srgb), _or(m.metallic_roughness_texture, white),
+                 _or(m.normal_texture, flat), _or(m.occlusion_texture, white),
+                 _or(m.emissive_texture, white_srgb),
+                 _or(m.base_color_texture, default_sampler), 0, 0]
+        materials[k] = (np.frombuffer(material_bytes(m), np.uint8), slots)
+    return {"meshes": meshes, "instances": instances, "materials": materials}
+
+
+def _or(index: int | None, fallback: int) -> int:
+    return fallback if index is None else index
+

@@ -25,22 +25,6 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "streams.glsl"
 
-// vis_resolve.py's MESH_DTYPE, INSTANCE_DTYPE and MATERIAL_DTYPE
-struct VisMesh {
-    uint64_t positions;  // device addresses of the mesh's parts of the scene's streams
-    uint64_t normals;
-    uint64_t uvs;
-    uint64_t tangents;
-    uint64_t indices;
-    uint material;
-    uint pad;
-};
-struct VisInstance {
-    mat4 model;
-    mat4 normal;  // inverse transpose of the model matrix
-    uvec4 mesh;  // x: mesh, y: 1 where the transform mirrors (the tangent's w flips)
-};
-
 #ifdef ATOMIC
 // visbuffer.py's write = "atomic": per pixel (depth bits << 32 | ~id)
 layout(set = 0, binding = 0, std430) readonly buffer Ids { uvec2 v[]; } ids;
@@ -48,8 +32,6 @@ layout(set = 0, binding = 0, std430) readonly buffer Ids { uvec2 v[]; } ids;
 layout(set = 0, binding = 0) uniform utexture2D t_ids;
 #endif
 layout(set = 0, binding = 1) uniform texture2D t_depth;
-layout(set = 0, binding = 2, std430) readonly buffer Meshes { VisMesh m[]; } meshes;
-layout(set = 0, binding = 3, std430) readonly buffer Instances { VisInstance i[]; } instances;
 layout(set = 0, binding = 5) uniform texture2D textures[MAX_TEXTURES];
 layout(set = 0, binding = 6) uniform sampler samplers[MAX_SAMPLERS];
 layout(set = 0, binding = 7, rgba16f) uniform writeonly image2D o_albedo;
@@ -67,17 +49,10 @@ vec2 g_duv_dx, g_duv_dy;
     samplers[nonuniformEXT(g_slots.sampler_)]), uv, g_duv_dx, g_duv_dy)
 #include "material.glsl"
 
-struct VisMaterial {
-    MaterialFactors factors;
-    ivec4 textures;  // base color, metallic-roughness, normal, occlusion (into textures[])
-    ivec4 more;  // x: emissive texture, y: sampler (into samplers[])
-};
-layout(set = 0, binding = 4, std430) readonly buffer Materials { VisMaterial m[]; } materials;
-
-vec3 vec3_at(uint64_t address, uint i) {
-    Floats f = Floats(address);
-    return vec3(f.v[3 * i], f.v[3 * i + 1], f.v[3 * i + 2]);
-}
+#include "scene_tables.glsl"
+layout(set = 0, binding = 2, std430) readonly buffer Meshes { SceneMesh m[]; } meshes;
+layout(set = 0, binding = 3, std430) readonly buffer Instances { SceneInstance i[]; } instances;
+layout(set = 0, binding = 4, std430) readonly buffer Materials { SceneMaterial m[]; } materials;
 
 // the albedo as the G-buffer's rgba8unorm-srgb attachment holds it: 8-bit sRGB levels,
 // decoded (storage images cannot be sRGB, so lighting reads this linear value instead)
@@ -121,8 +96,8 @@ void main() {
 #endif
     // visbuffer.py's triangle_bits: the instance in the high bits, the triangle below
     uvec2 ids = uvec2(id >> TRIANGLE_BITS, id & ((1u << TRIANGLE_BITS) - 1u));
-    VisInstance inst = instances.i[ids.x];
-    VisMesh mesh = meshes.m[inst.mesh.x];
+    SceneInstance inst = instances.i[ids.x];
+    SceneMesh mesh = meshes.m[inst.mesh.x];
     Uints index = Uints(mesh.indices);
     uint i0 = index.v[3 * ids.y], i1 = index.v[3 * ids.y + 1], i2 = index.v[3 * ids.y + 2];
 
@@ -156,7 +131,7 @@ void main() {
     vec4 t = vec4((inst.model * vec4(t_obj.xyz, 0.0)).xyz,
                   inst.mesh.y == 1u ? -t_obj.w : t_obj.w);
 
-    VisMaterial mat = materials.m[mesh.material];
+    SceneMaterial mat = materials.m[mesh.material];
     g_slots = Slots(mat.textures.x, mat.textures.y, mat.textures.z, mat.textures.w,
                     mat.more.x, mat.more.y);
     Surface s = material_surface(mat.factors, uv, n, t);

@@ -1,23 +1,16 @@
 """Visibility-buffer resolve: the G-buffer computed from instance and triangle ids."""
 
-import numpy as np
-
 from rfw.authoring import (
     Buffer,
     ComputePass,
     Settings,
     SettingsError,
     Tex2D,
-    instance_blocks,
-    material_bytes,
     register_pass,
+    scene_tables,
+    texture_lists,
     triangle_bits,
 )
-
-# the std430 twins of vis_resolve.comp.glsl's VisMesh, VisInstance and VisMaterial
-MESH_DTYPE = np.dtype([("addresses", "<u8", 5), ("material", "<u4"), ("pad", "<u4")])
-INSTANCE_DTYPE = np.dtype([("matrices", "<f4", 32), ("mesh", "<u4", 4)])
-MATERIAL_DTYPE = np.dtype([("factors", "u1", 64), ("textures", "<i4", 8)])
 
 
 @register_pass("vis_resolve")
@@ -91,42 +84,3 @@ class VisResolvePass(ComputePass):
                      o_albedo=ctx.storage("albedo"), o_normal=ctx.storage("normal"),
                      o_material=ctx.storage("material"), o_emissive=ctx.storage("emissive"),
                      **self.tables)
-
-
-def texture_lists(scene) -> tuple[list, list]:
-    """The textures (the scene's, then its white, white sRGB and flat-normal defaults) and
-    samplers (the scene's, then its default) that the material table indexes."""
-    return ([*scene.textures, scene.white, scene.white_srgb, scene.flat_normal],
-            [*scene.samplers, scene.default_sampler])
-
-
-def scene_tables(vk_scene) -> dict[str, np.ndarray]:
-    """Per mesh its streams' device addresses and material; per instance its matrices, mesh
-    and mirroring; per material its factors and texture and sampler slots (the ones the
-    G-buffer binds: a missing texture is the default that ``VkScene`` binds in its place)."""
-    scene = vk_scene.scene
-    meshes = np.zeros(max(1, len(scene.meshes)), MESH_DTYPE)
-    for k, m in enumerate(scene.meshes):
-        meshes[k] = ([p.address for p in vk_scene.mesh_buffers[k]], m.material, 0)
-    instances = np.zeros(max(1, len(scene.instances)), INSTANCE_DTYPE)
-    if scene.instances:
-        instances["matrices"] = instance_blocks([i.transform for i in scene.instances])
-        instances["mesh"][:, 0] = [i.mesh for i in scene.instances]
-        instances["mesh"][:, 1] = vk_scene.mirrored
-    # texture_lists' order: the scene's textures, then white, white sRGB, flat normal; the
-    # scene's samplers (one per texture), then the default
-    n = len(scene.textures)
-    white, white_srgb, flat, default_sampler = n, n + 1, n + 2, n
-    materials = np.zeros(max(1, len(scene.materials)), MATERIAL_DTYPE)
-    for k, m in enumerate(scene.materials):
-        slots = [_or(m.base_color_texture, white_srgb), _or(m.metallic_roughness_texture, white),
-                 _or(m.normal_texture, flat), _or(m.occlusion_texture, white),
-                 _or(m.emissive_texture, white_srgb),
-                 _or(m.base_color_texture, default_sampler), 0, 0]
-        materials[k] = (np.frombuffer(material_bytes(m), np.uint8), slots)
-    return {"meshes": meshes, "instances": instances, "materials": materials}
-
-
-def _or(index: int | None, fallback: int) -> int:
-    return fallback if index is None else index
-
