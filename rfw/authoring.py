@@ -35,6 +35,7 @@ from .graph import (
     Attachment,
     Buffer,
     DepthAttachment,
+    History,
     Part,
     SizeRule,
     Slot,
@@ -61,7 +62,7 @@ from .scene.model import Scene, SceneError
 
 __all__ = [
     "GBUFFER", "MESH_SHADER", "TOPOLOGIES", "AccelStructure", "Attachment", "Buffer",
-    "ComputePass", "DepthAttachment", "DepthPrepassMixin", "MeshShaderContext",
+    "ComputePass", "DepthAttachment", "DepthPrepassMixin", "History", "MeshShaderContext",
     "MeshletSceneView", "Part", "Pass", "PassContext", "Range", "RayTracedPass",
     "RayTracingContext", "RenderPass", "SceneError", "SceneView", "Settings",
     "SettingsError", "SetupContext", "SizeRule", "Slot", "Step", "Storage", "Tex2D",
@@ -126,6 +127,7 @@ class VkSceneView(SceneView, Protocol):
     streams and the acceleration structures."""
 
     mesh_buffers: list[Any]  # per mesh: positions, normals, uvs, tangents, indices
+    camera_blob: bytes  # the cameras' bytes of the frame being recorded (camera paths move it)
 
     def accel(self, *, prefer: str | None = None, allow_update: bool = False,
               compact: bool = False) -> Any:

@@ -515,6 +515,7 @@ class RayTracedPass(Pass):
     shaders: ClassVar[dict[str, str]] = {}
     miss: ClassVar[str | None] = None  # ray pipeline: the miss shader beside the raygen one
     closest_hit: ClassVar[str | None] = None  # and its closest-hit shader, if any
+    any_hit: ClassVar[str | None] = None  # and its any-hit shader (non-opaque geometry), if any
 
     class Params(Settings):
         method: str = "ray_pipeline"  # ray_query | ray_pipeline
@@ -535,7 +536,7 @@ class RayTracedPass(Pass):
             ctx.dispatch(threads=size, **bindings)
         else:
             ctx.trace_rays(size=size, miss=self.miss, closest_hit=self.closest_hit,
-                           max_recursion=self.params.max_recursion,  # type: ignore[attr-defined]
+                           any_hit=self.any_hit, max_recursion=self.params.max_recursion,  # type: ignore[attr-defined]
                            **bindings)
 
 
