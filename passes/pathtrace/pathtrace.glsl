@@ -22,6 +22,7 @@ layout(set = 0, binding = 13, std140) uniform Params {
     float sky;
     float ao_radius;
     int light;
+    uint jitter;
 } u_params;
 // what changes every frame: the first sample's index, and 1 where the sums restart
 layout(push_constant) uniform Frame {
@@ -371,7 +372,7 @@ void render_pixel(ivec2 px, ivec2 isize) {
     uint count = uint(clamp(u_params.spp, 1, 4096));
     for (uint s = 0u; s < count; s++) {
         g_sample = u_frame.sample_base + s;
-        vec2 jitter = sample4(0x7fffu).xy;
+        vec2 jitter = u_params.jitter != 0u ? sample4(0x7fffu).xy : vec2(0.5);
         vec3 o, d;
         camera_ray(vec2(px) + jitter, size, o, d);
 #if defined(MODE_AO)

@@ -68,7 +68,9 @@ class PathTracePass(RayTracedPass):
     means, per channel (alpha: samples). ``mode`` ``ao`` and ``visibility`` make per-effect
     references instead: the ambient occlusion rt_ao computes (radius ``ao_radius``) and the
     visibility of light ``light`` (-1: the sun) that rt_shadows computes, each averaged over
-    the pixel.
+    the pixel. ``jitter = false`` sends camera rays through pixel centres only: the truth
+    of what a technique that samples each pixel once at its centre should give (no
+    anti-aliasing), to judge its shading apart from its edges.
     """
 
     shaders = {"ray_query": "pathtrace.comp.glsl", "ray_pipeline": "pathtrace.rgen.glsl"}
@@ -95,6 +97,7 @@ class PathTracePass(RayTracedPass):
         sky: float = 1.0  # the sky's radiance: the lights block's ambient times this
         ao_radius: float = 1.0  # mode ao: world units a ray may travel and still occlude
         light: int = -1  # mode visibility: the light (-1: the sun)
+        jitter: bool = True  # false: camera rays through pixel centres (no anti-aliasing)
         mode: str = "full"  # full | ao | visibility
 
     def __init__(self, name, params=None, **settings):
