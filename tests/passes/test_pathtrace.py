@@ -189,3 +189,11 @@ def test_sobol_directions_give_stratified_points():
     # negative control: the elementary-interval check fails for pseudo-random points
     r = np.random.default_rng(0).random((256, 2))
     assert len(np.unique(np.floor(r[:, 0] * 16) * 16 + np.floor(r[:, 1] * 16))) < 256
+
+
+def test_the_sums_restart_when_the_camera_moves():
+    # an orbit moves the camera every frame: every frame starts again from its own samples
+    moving = trace(tiny_scene(), 16, 3, "pt.spp=2", "camera.path=orbit")
+    assert np.all(moving["pt.error"][..., 3] == 2)
+    still = trace(tiny_scene(), 16, 3, "pt.spp=2")  # negative control: a static camera sums
+    assert np.all(still["pt.error"][..., 3] == 6)
