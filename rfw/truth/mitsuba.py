@@ -30,8 +30,9 @@ What maps exactly (the agreement scenes, ``rfw.scene.agreement``, use only this)
   the background): Mitsuba's ``hide_emitters``, which is exact per sample.
 - **The camera**: Mitsuba's ``perspective`` sensor placed by the inverse of rfw's own view
   matrix (Mitsuba looks along +Z with +X to the left, rfw along -Z with +X to the right),
-  ``fov_axis = "y"`` with rfw's ``yfov``, near and far as rfw's; a box filter of one pixel,
-  so each sample is uniform over its pixel, as rfw's jittered primary rays are.
+  ``fov_axis = "y"`` with rfw's ``yfov``, near and far as rfw's; a box filter of one pixel
+  and Mitsuba's ``multijitter`` sampler, so the samples are uniform over the pixel, as rfw's
+  jittered primary rays are (stratified, which lowers the noise, not the expectation).
 - **Geometry**: every drawable instance is one world-space Mitsuba mesh (positions through
   the transform, normals through its inverse transpose, winding flipped for mirrored ones),
   with its vertex normals (smooth shading) and uvs.
@@ -140,7 +141,7 @@ def sensor_dict(scene: Scene, size: tuple[int, int], camera: int = 0, *,
     return {"type": "perspective", "fov": math.degrees(cam.yfov), "fov_axis": "y",
             "near_clip": float(cam.znear), "far_clip": float(cam.zfar),
             "to_world": mi.ScalarTransform4f(to_world.tolist()),
-            "sampler": sampler or {"type": "independent", "sample_count": spp},
+            "sampler": sampler or {"type": "multijitter", "sample_count": spp},
             "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
                      "rfilter": {"type": "box"}, "pixel_format": "rgba" if alpha else "rgb",
                      "component_format": "float32"}}

@@ -4,6 +4,7 @@ and the sky, seeds, and its camera against rfw's raster on the vk backend, pixel
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -221,3 +222,35 @@ def test_camera_agrees_with_rfws_raster(make):
         mismatch = (hit != hit_theirs).sum() + (np.abs(flipped[same] / theirs[same] - 1)
                                                 > 1e-2).sum()
         assert mismatch > 40
+
+
+# ---------------------------------------------------------------------------------------------
+# benchmarks/mitsuba_check.py
+
+
+def test_mitsuba_check_end_to_end(tmp_path, capsys):
+    """The check runs on a stand-in (no path tracer config), caches its references, reads
+    an rfw EXR when given one, and its negative control (a brighter light) stands out of
+    the noise floor by its bias."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("mitsuba_check",
+                                                  ROOT / "benchmarks" / "mitsuba_check.py")
+    check = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(check)
+    common = ["--scenes", "cornell", "--size", "24x16", "--spp", "8", "--out", str(tmp_path),
+              "--rfw-config", str(tmp_path / "none.toml")]
+    assert check.main(common) == 0
+    first = capsys.readouterr().out
+    assert "stand-in = floor: mitsuba seed 1" in first and "control: light +10%" in first
+    lines = [json.loads(t) for t in (tmp_path / "mitsuba_check.jsonl").read_text().splitlines()]
+    rows = {r["image"]: r for r in lines}
+    floor, light = rows["stand-in = floor: mitsuba seed 1"], rows["control: light +10%"]
+    assert light["rel_bias"] > floor["rel_bias"] + 0.05
+    assert all(r["hdr_flip"] > 0 and r["spp"] == 8 for r in lines)
+    (exr,) = (tmp_path / "mitsuba").glob("cornell-*.exr")
+    assert check.main([*common, "--rfw", f"cornell={exr}", "--no-controls"]) == 0
+    again = capsys.readouterr().out
+    assert ": cached" in again
+    last = json.loads((tmp_path / "mitsuba_check.jsonl").read_text().splitlines()[-1])
+    assert last["image"] == f"rfw {exr}" and last["rel_mae"] == 0.0 and last["hdr_flip"] == 0.0
