@@ -5,7 +5,8 @@ libLLVM that ``scripts/setup-system.sh`` installs). ``scene_dict`` converts a sc
 rfw's conventions, ``render`` renders it to linear radiance, ``depth`` gives the distance to
 the first hit through each pixel centre (for checking that the two cameras agree).
 
-What maps exactly (the agreement scenes, ``rfw.scene.agreement``, use only this):
+What maps (exactly, but for the metal's shadowing term, measured below; the agreement scenes,
+``rfw.scene.agreement``, use only this):
 
 - **Lambert** (``metallic = 0``, ``specular = 0``): ``pbr.glsl``'s diffuse term is then
   base / pi, Mitsuba's ``diffuse`` BSDF.
@@ -86,8 +87,8 @@ def _rgb(value) -> dict[str, Any]:
 
 
 def bsdf_dict(m: Material) -> tuple[dict[str, Any], bool]:
-    """Mitsuba's BSDF for ``m`` and whether it matches rfw's model exactly (module
-    docstring)."""
+    """Mitsuba's BSDF for ``m``, and whether it is one of the two that match rfw's model
+    (Lambert exactly, metals but for the shadowing term: module docstring)."""
     if m.metallic == 1.0:
         out = {"type": "principled", "base_color": _rgb(m.base_color), "metallic": 1.0,
                "roughness": float(m.roughness)}
