@@ -352,8 +352,9 @@ def parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
     run = sub.add_parser("run", help="render a config headless: images and per-pass timings")
     run.add_argument("config", nargs="?", help="config TOML (default: configs/deferred.toml)")
-    run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...), 'default', "
-                     "'stress:COUNT' or a fetched scene's name ('rfw scenes list')")
+    run.add_argument("--scene", help="scene file (.gltf .glb .obj .ply ...), a built-in "
+                     "scene ('default', 'cornell', 'stress:COUNT', ...) or a fetched scene's "
+                     "name ('rfw scenes list')")
     run.add_argument("--size", type=argtypes.size, help="output size WxH")
     run.add_argument("--frames", type=argtypes.count(1, MAX_FRAMES),
                      help="frames to time (after one warm-up)")

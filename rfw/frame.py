@@ -230,7 +230,7 @@ def load_scene_for(cfg: Config, scene: Any = None) -> Any:
 
     if cfg.scene == "default":
         return default_scene()
-    if is_builtin(cfg.scene) and not Path(cfg.scene).exists():  # stress, stress:COUNT
+    if is_builtin(cfg.scene) and not Path(cfg.scene).exists():  # courtyard, stress:COUNT, ...
         return load_scene(cfg.scene)
     path = Path(cfg.scene)
     if not path.exists() and not path.suffix:

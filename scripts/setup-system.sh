@@ -14,8 +14,11 @@ keyring=/usr/share/keyrings/debian-archive-keyring.gpg
 # base packages come from the normal suite; mesa comes from bookworm-backports.
 # xauth is needed by xvfb-run (only a recommends of xvfb, and recommends are skipped).
 # libegl1 and libusb-1.0-0: the benchmark peers (moderngl/VTK on headless EGL; open3d links libusb).
+# libllvm19: Dr.Jit's LLVM backend (mitsuba's llvm_ad_rgb, rfw.truth) loads libLLVM at run time;
+# with only 14 and 15 (mesa's) present it picks one that fails on its kernels ("LLVM ERROR:
+# Cannot select: fminimum").
 base_pkgs=(libvulkan1 vulkan-tools vulkan-validationlayers glslang-tools spirv-tools g++ python3-dev
-  libglfw3 xvfb xauth python3-venv python3-pip graphviz libegl1 libusb-1.0-0)
+  libglfw3 xvfb xauth python3-venv python3-pip graphviz libegl1 libusb-1.0-0 libllvm19)
 # mesa's gl/egl/gbm libraries come from backports too, so every mesa library is one version.
 mesa_pkgs=(mesa-vulkan-drivers libgl1-mesa-dri libglx-mesa0 libegl-mesa0 libgbm1)
 apt_opts=(-y -q --no-install-recommends -o DPkg::Lock::Timeout=300

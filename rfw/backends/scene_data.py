@@ -30,6 +30,8 @@ INSTANCE_BYTES = 128  # mesh.glsl's InstanceData (model and normal matrices), st
 MAX_LIGHTS = 16
 DEFAULT_SUN = Light("directional", (1.0, 0.97, 0.92), 3.0, direction=(-0.35, -1.0, -0.45),
                     name="rfw default sun")
+# lights.ambient: the raster passes' ambient term and the path tracer's uniform sky radiance
+AMBIENT = (0.03, 0.035, 0.045)
 _ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
 
 
@@ -194,7 +196,7 @@ def lights_bytes(scene: Scene) -> tuple[bytes, np.ndarray, bool]:
     matrix = sun_view_proj(scene, direction)
     out = struct.pack("<4I", len(lights), sun, 0, 0)
     out += matrix.T.tobytes()
-    out += struct.pack("<4f", 0.03, 0.035, 0.045, 0.0)
+    out += struct.pack("<4f", *AMBIENT, 0.0)
     kinds = {"directional": 0, "point": 1, "spot": 2}
     for li in lights:
         out += struct.pack("<4f", *li.position, kinds[li.kind])

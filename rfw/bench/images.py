@@ -1,7 +1,7 @@
-"""Image differences for the report: PSNR, FLIP (NVIDIA's perceptual error; SSIM where the
-``flip-evaluator`` package is missing) and colour-mapped difference images, scaled to their
-own largest difference (or to one scale shared by a report's images: ``--diff-scale
-shared``), each drawn with a legend stating its scale."""
+"""Image differences for the report: PSNR, FLIP (NVIDIA's perceptual error; HDR-FLIP for linear
+radiance; SSIM where the ``flip-evaluator`` package is missing) and colour-mapped difference
+images, scaled to their own largest difference (or to one scale shared by a report's images:
+``--diff-scale shared``), each drawn with a legend stating its scale."""
 
 from __future__ import annotations
 
@@ -125,6 +125,20 @@ def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray] | 
     error_map, mean, _ = flip_evaluator.evaluate(a, b, "LDR")
     rgb = (np.clip(error_map, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
     return float(mean), rgb
+
+
+def hdr_flip(reference: np.ndarray, test: np.ndarray) -> float | None:
+    """Mean HDR-FLIP error of linear (H, W, 3) radiance images (0 = identical; FLIP picks
+    its exposure range from ``reference``); None when ``flip-evaluator`` is not installed.
+    Negative values (a noisy estimate's) are clipped to 0, as FLIP takes none."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    a, b = (np.ascontiguousarray(np.maximum(x[..., :3], 0.0), np.float32)
+            for x in (reference, test))
+    _, mean, _ = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False)
+    return float(mean)
 
 
 def ssim(reference: np.ndarray, test: np.ndarray) -> float | None:

@@ -107,8 +107,8 @@ def resolve_scene(scene: str | None, *, fetch: bool = False) -> str | None:
     from ..scene.names import resolve_scene as by_name
 
     scene = by_name(scene, fetch=fetch, element="--scene")  # a fetched scene: its GLB
-    if is_builtin(scene) and not Path(scene).exists():  # stress, stress:COUNT
-        if scene != "courtyard":
+    if is_builtin(scene) and not Path(scene).exists():  # stress, stress:COUNT, cornell ...
+        if scene.startswith("stress"):
             stress_count(scene)  # a bad count fails here, before any run
         return scene
     p = Path(scene).expanduser()

@@ -3,13 +3,16 @@
 ``load_scene`` picks the loader from the file suffix; every loader returns a ``Scene`` and
 raises ``SceneError`` (naming the file and the element) for anything it cannot read.
 Built-in scenes are generated, and found by name (``builtin_scene``): ``default`` and
-``courtyard`` (the courtyard), ``stress`` (100,000 cubes) and ``stress:COUNT``.
+``courtyard`` (the courtyard), ``stress`` (100,000 cubes) and ``stress:COUNT``, and the
+agreement scenes ``cornell`` and ``spheres`` (which rfw's path tracer and Mitsuba 3 render
+alike, ``rfw.truth``).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from .agreement import cornell, spheres
 from .courtyard import courtyard
 from .gltf import load_gltf
 from .meshfile import load_meshfile, mesh_suffixes
@@ -19,14 +22,16 @@ from .stress import MAX_INSTANCES, STRESS_INSTANCES, stress
 GLTF_SUFFIXES = frozenset({".gltf", ".glb"})
 
 
-BUILTIN_SCENES = ("default", "courtyard", "stress", "stress:COUNT")
+BUILTIN_SCENES = ("default", "courtyard", "cornell", "spheres", "stress", "stress:COUNT")
+# the built-in scenes without a parameter, each built by one call
+_FIXED = {"default": courtyard, "courtyard": courtyard, "cornell": cornell, "spheres": spheres}
 
 
 def is_builtin(name: str | Path) -> bool:
     """Whether ``name`` names a built-in scene (``stress:x`` does, and is refused later by
     ``builtin_scene`` with the reason)."""
     text = str(name)
-    return text in ("default", "courtyard", "stress") or text.startswith("stress:")
+    return text in _FIXED or text == "stress" or text.startswith("stress:")
 
 
 def builtin_scene(name: str) -> Scene:
@@ -38,8 +43,8 @@ def builtin_scene(name: str) -> Scene:
         For an unknown name, or a ``stress:COUNT`` whose count is not an integer from 1 to
         ``MAX_INSTANCES``.
     """
-    if name in ("default", "courtyard"):
-        return courtyard(0)
+    if name in _FIXED:
+        return _FIXED[name]()
     return stress(stress_count(name))
 
 
@@ -57,7 +62,7 @@ def stress_count(name: str) -> int:
         return int(text)
     raise SceneError(f"no built-in scene is called {name!r} (built-in: "
                      f"{', '.join(BUILTIN_SCENES)})", file=name, element="scene",
-                     suggest=(name, BUILTIN_SCENES[:3]))
+                     suggest=(name, BUILTIN_SCENES[:-1]))
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -96,6 +101,6 @@ def default_scene() -> Scene:
 
 __all__ = [
     "BUILTIN_SCENES", "Camera", "Instance", "Light", "Material", "Mesh", "Scene", "SceneError",
-    "Texture", "builtin_scene", "courtyard", "default_scene", "is_builtin", "load_gltf",
-    "load_meshfile", "load_scene", "stress",
+    "Texture", "builtin_scene", "cornell", "courtyard", "default_scene", "is_builtin",
+    "load_gltf", "load_meshfile", "load_scene", "spheres", "stress",
 ]

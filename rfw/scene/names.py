@@ -1,7 +1,7 @@
 """Scenes by name: ``--scene dragon`` is the fetched scene's GLB in the cache.
 
 A scene argument is, in this order: a built-in scene (``default``, ``courtyard``,
-``stress``, ``stress:COUNT``), an existing file, a file path (it has a suffix: left to the
+``cornell``, ``spheres``, ``stress``, ``stress:COUNT``), an existing file, a file path (it has a suffix: left to the
 loader, which says it is not found), or the name of a fetchable scene
 (:data:`rfw.scene.fetch.SCENES`). A fetchable scene not in the cache is fetched on demand
 only when allowed (``rfw run --fetch`` or ``RFW_FETCH=1``), with a progress bar; otherwise,
@@ -43,7 +43,7 @@ def known_names() -> list[str]:
     from . import BUILTIN_SCENES
     from .fetch.catalogue import SCENES
 
-    return [*BUILTIN_SCENES[:3], *SCENES]
+    return [*BUILTIN_SCENES[:-1], *SCENES]  # stress:COUNT is a pattern, not a name
 
 
 def resolve_scene(text: str, *, fetch: bool = False, cache: Path | None = None,
@@ -62,7 +62,8 @@ def resolve_scene(text: str, *, fetch: bool = False, cache: Path | None = None,
 
     if not text.strip():  # Path("") is "."; the default scene would show without a word
         raise SceneError(f"{text!r} names no scene: give a scene file, a built-in scene "
-                         f"(default, courtyard, stress:COUNT) or a name from 'rfw scenes list'",
+                         f"(default, courtyard, cornell, spheres, stress:COUNT) or a name from "
+                         f"'rfw scenes list'",
                          file=file, element=element)
     path = Path(text)
     if is_builtin(text) or path.exists() or path.suffix or not path.name:
@@ -132,6 +133,8 @@ def _fetch_with_progress(name: str, cache: Path, *, file: str | None, element: s
 BUILTIN_ROWS = (
     ("default", "the generated courtyard (alias of courtyard)"),
     ("courtyard", "the generated courtyard: columns, fountain, textured floor"),
+    ("cornell", "a Cornell box with a point light (Lambert; rfw.truth's agreement scene)"),
+    ("spheres", "a Lambert and a rough metal sphere on a plane, sun and sky (agreement scene)"),
     ("stress", "100,000 generated cubes (stress:COUNT for another count)"),
 )
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from rfw.bench.images import compare, diff_image, psnr, scaled_diff
+from rfw.bench.images import compare, diff_image, hdr_flip, psnr, scaled_diff
 
 
 def _image(seed: int = 0) -> np.ndarray:
@@ -43,3 +43,22 @@ def test_diff_image_scales_to_its_largest_difference_and_flip_sees_a_change():
     assert 0 < c["psnr"] < math.inf and c["diff_max"] == 3
     if "flip" in c:
         assert c["flip"] > 0 and c["flip_map"].shape == (18, 32, 3)
+
+
+def test_hdr_flip_of_linear_radiance():
+    """0 for the same image (alpha and negative noise aside), growing with a brightness
+    change, and it sees a change above 1 that an 8-bit image would clip."""
+    rng = np.random.default_rng(2)
+    ref = rng.uniform(0.0, 4.0, size=(24, 32, 3)).astype(np.float32)
+    with_alpha = np.concatenate([ref, np.zeros((24, 32, 1), np.float32)], axis=2)
+    same = hdr_flip(ref, with_alpha)
+    if same is None:  # flip-evaluator not installed
+        return
+    noisy = ref.copy()
+    noisy[0, 0] = -0.5  # a noisy estimate may dip below 0: FLIP sees it as 0
+    assert same == 0.0 and hdr_flip(np.maximum(noisy, 0), noisy) == 0.0
+    small, large = (hdr_flip(ref, ref * k) for k in (1.05, 1.3))
+    assert 0 < small < large
+    bright = ref.copy()
+    bright[ref > 1.0] *= 1.5  # only values an 8-bit image would clip
+    assert hdr_flip(ref, bright) > 0.01

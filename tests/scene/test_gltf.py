@@ -500,6 +500,45 @@ def test_emissive_strength_extension(tmp_path):
     assert load_gltf(g.write(tmp_path)).materials[0].emissive == (4, 2, 0)
 
 
+def test_specular_extension(tmp_path):
+    g = Gltf()
+    g.doc["extensionsUsed"] = g.doc["extensionsRequired"] = ["KHR_materials_specular"]
+    g.doc["materials"] = [{"extensions": {"KHR_materials_specular": {"specularFactor": 0.25}}},
+                          {"extensions": {"KHR_materials_specular": {}}}, {}]
+    g.node(mesh=g.mesh(*(g.primitive(material=k) for k in range(3))))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        scene = load_gltf(g.write(tmp_path))
+    assert [scene.materials[m.material].specular for m in scene.meshes] == [0.25, 1.0, 1.0]
+    assert not [w for w in seen if "specular" in str(w.message)]  # all of it was read
+
+
+@pytest.mark.parametrize("unread", [{"specularTexture": {"index": 0}},
+                                    {"specularColorFactor": [1, 0.5, 0.5]},
+                                    {"specularColorTexture": {"index": 0}}])
+def test_specular_parts_not_read_warn(tmp_path, unread):
+    g = Gltf()
+    ext = {"specularFactor": 0.5, **unread}
+    g.doc["materials"] = [{"extensions": {"KHR_materials_specular": ext}}] * 2
+    g.node(mesh=g.mesh(g.primitive(material=0), g.primitive(material=1)))
+    with pytest.warns(UserWarning) as seen:
+        scene = load_gltf(g.write(tmp_path))
+    lines = [str(w.message) for w in seen if "specular" in str(w.message)]
+    # one line for every material that has them, naming the first
+    assert len(lines) == 1 and "materials[0].extensions.KHR_materials_specular and 1 more: " \
+        "specularTexture, specularColorFactor and specularColorTexture not read" in lines[0]
+    assert [m.specular for m in scene.materials] == [0.5, 0.5]
+
+
+def test_bad_specular_factor_names_the_element(tmp_path):
+    g = Gltf()
+    g.doc["materials"] = [{"extensions": {"KHR_materials_specular": {"specularFactor": "x"}}}]
+    g.node(mesh=g.mesh(g.primitive(material=0)))
+    with pytest.raises(SceneError, match=r"materials\[0\]\.extensions\.KHR_materials_specular: "
+                                         r"specularFactor must be a finite number"):
+        load_gltf(g.write(tmp_path))
+
+
 # ---------------------------------------------------------------------------------------------
 # cameras and lights
 

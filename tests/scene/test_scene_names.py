@@ -130,7 +130,7 @@ def test_scenes_list(tmp_path):
     done = cli("scenes", "list", cache=cache)
     assert done.returncode == 0, done.stderr
     rows = {ln.split()[0]: ln for ln in done.stdout.splitlines()[1:-1]}
-    assert list(rows) == ["default", "courtyard", "stress", *SCENES]
+    assert list(rows) == ["default", "courtyard", "cornell", "spheres", "stress", *SCENES]
     assert "built-in" in rows["courtyard"]
     box = rows["boxtextured"].split()
     assert box[1:4] == ["fetch", "(debian)", "yes"] and "36 tris" in rows["boxtextured"]

@@ -11,7 +11,8 @@ What is read: the node hierarchy (TRS or matrix), the chosen scene, every triang
 not, strided, sparse), POSITION / NORMAL / TANGENT, the TEXCOORD_0 or TEXCOORD_1 set a
 primitive's textures use (with KHR_texture_transform), a constant COLOR_0 (folded into the
 material; one that varies per vertex is drawn with its mean and a warning), metallic-roughness
-materials with their five textures and samplers, perspective cameras and
+materials with their five textures and samplers, KHR_materials_specular's specularFactor
+(its texture and colour are not read, with a warning), perspective cameras and
 KHR_lights_punctual. Normals and tangents are computed where the file has none.
 
 Not read: skins and morph targets (meshes appear in their bind pose), animations, texture

@@ -16,6 +16,7 @@ from .file import GltfFile
 SUPPORTED_EXTENSIONS = frozenset({
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
+    "KHR_materials_specular",  # specularFactor; its texture and colour are warned as unread
     "KHR_mesh_quantization",  # integer positions / normals: any component type is read
     "EXT_texture_webp",  # Pillow decodes WebP
     "KHR_texture_transform",  # applied to the primitive's texture coordinates

@@ -40,6 +40,8 @@ _UNREAD = {
     "skins": "skins not read: skinned meshes are drawn unposed, by their nodes' transforms",
     "morphs": "morph targets not read: meshes are drawn with their base shape",
     "animations": "animations not read: the scene is drawn as the file poses it",
+    "specular": "specularTexture, specularColorFactor and specularColorTexture not read: the "
+                "specular lobe is scaled by specularFactor alone, uncoloured",
 }
 
 _URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")

@@ -1,6 +1,6 @@
-"""Materials: metallic-roughness factors and their five textures, the one TEXCOORD set and
-KHR_texture_transform a material's textures are sampled with, and materials tinted by a
-primitive's constant COLOR_0."""
+"""Materials: metallic-roughness factors and their five textures, KHR_materials_specular's
+factor, the one TEXCOORD set and KHR_texture_transform a material's textures are sampled with,
+and materials tinted by a primitive's constant COLOR_0."""
 
 from __future__ import annotations
 
@@ -62,6 +62,7 @@ class Materials:
                                      "KHR_materials_emissive_strength.emissiveStrength", 1.0)
                 emissive = tuple(c * k for c in emissive)
             out.emissive = emissive
+            out.specular = self.specular(m.extensions, mwhere)
             out.base_color_texture = self.texture_info(pbr.baseColorTexture, True,
                                                        f"{mwhere}.baseColorTexture")
             out.metallic_roughness_texture = self.texture_info(
@@ -90,6 +91,23 @@ class Materials:
         if self.texture_uses:
             self.uv_sets[k] = (*self.uv_set(mwhere), mwhere)
         return k
+
+    def specular(self, extensions: Any, mwhere: str) -> float:
+        """KHR_materials_specular's specularFactor (1 without the extension). Its texture and
+        its colour (factor or texture) are not read: recorded as read past."""
+        ext = (extensions or {}).get("KHR_materials_specular")
+        if ext is None:
+            return 1.0
+        where = f"{mwhere}.extensions.KHR_materials_specular"
+        if not isinstance(ext, dict):
+            self.file.fail(where, "must be an object")
+        factor = self.file.number(ext.get("specularFactor"), where, "specularFactor", 1.0)
+        color = self.file.numbers(ext.get("specularColorFactor"), 3, where,
+                                  "specularColorFactor", (1.0, 1.0, 1.0))
+        if ext.get("specularTexture") is not None or ext.get("specularColorTexture") is not None \
+                or color != (1.0, 1.0, 1.0):
+            self.file.unread["specular"].append(where)
+        return factor
 
     def uv_set(self, mwhere: str) -> tuple[int, np.ndarray | None]:
         """The one TEXCOORD set and transform the material's textures are sampled with: the

@@ -1,0 +1,1 @@
+"""rfw.truth: the independent renders the path tracer is checked against."""
