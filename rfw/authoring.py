@@ -34,6 +34,7 @@ from .graph import (
     Attachment,
     Buffer,
     DepthAttachment,
+    History,
     Part,
     SizeRule,
     Slot,
@@ -60,7 +61,7 @@ from .scene.model import Scene, SceneError
 
 __all__ = [
     "GBUFFER", "MESH_SHADER", "TOPOLOGIES", "AccelStructure", "Attachment", "Buffer",
-    "ComputePass", "DepthAttachment", "DepthPrepassMixin", "MeshShaderContext",
+    "ComputePass", "DepthAttachment", "DepthPrepassMixin", "History", "MeshShaderContext",
     "MeshletSceneView", "Part", "Pass", "PassContext", "Range", "RayTracedPass",
     "RayTracingContext", "RenderPass", "SceneError", "SceneView", "Settings",
     "SettingsError", "SetupContext", "SizeRule", "Slot", "Step", "Storage", "Tex2D",
