@@ -45,14 +45,18 @@ vec4 from_ycocg(vec4 c) {
     return vec4(t + c.y, c.x + c.z, t - c.y, c.w);
 }
 
-// h moved toward the box's centre until it is inside (a clip keeps its hue, a clamp not)
+// h's color moved toward the box's centre until it is inside (a clip keeps its hue, a
+// clamp not), its coverage clamped to the box's own. The box grows by the rounding of
+// half floats, so a history equal to this frame's sample but for rounding stays as it is.
 vec4 clip_to_box(vec4 h, vec4 lo, vec4 hi) {
-    vec4 centre = 0.5 * (lo + hi);
-    vec4 extent = 0.5 * (hi - lo) + 1e-5;
-    vec4 d = h - centre;
-    vec4 r = abs(d / extent);
-    float m = max(max(r.x, r.y), max(r.z, r.w));
-    return m > 1.0 ? centre + d / m : h;
+    vec3 centre = 0.5 * (lo.xyz + hi.xyz);
+    // (relative to luma: chroma near 0 carries the rounding of the luma's channels)
+    float luma = max(abs(lo.x), abs(hi.x));
+    vec3 extent = 0.5 * (hi.xyz - lo.xyz) + 2e-3 * luma + 1e-5;
+    vec3 d = h.xyz - centre;
+    vec3 r = abs(d / extent);
+    float m = max(r.x, max(r.y, r.z));
+    return vec4(m > 1.0 ? centre + d / m : h.xyz, clamp(h.w, lo.w, hi.w));
 }
 
 // last frame's result at pixel position p, Catmull-Rom filtered (sharper than bilinear:
@@ -160,10 +164,13 @@ void main() {
 #if CLAMP == 1
             history = clamp(history, lo, hi);
 #elif CLAMP == 2
+            // the box around the mean, stretched to hold this frame's sample: a pixel
+            // unlike its neighbours (a highlight) is not pulled toward them
             vec4 mean = m1 / 9.0;
             vec4 sigma = sqrt(max(m2 / 9.0 - mean * mean, 0.0));
-            history = clip_to_box(history, mean - u_params.variance_gamma * sigma,
-                                  mean + u_params.variance_gamma * sigma);
+            vec4 here_c = to_ycocg(current);
+            history = clip_to_box(history, min(mean - u_params.variance_gamma * sigma, here_c),
+                                  max(mean + u_params.variance_gamma * sigma, here_c));
 #endif
             vec4 h = from_ycocg(history);
             if (!any(isnan(h)) && !any(isinf(h))) {
