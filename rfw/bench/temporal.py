@@ -5,8 +5,9 @@ frames, over the pixels that do not move between them: a still image scores 0, a
 technique adds on a still camera (jitter that no resolve settles, noise that changes every
 frame) raises it. Which pixels do not move comes from each frame's motion vectors (the
 G-buffer's ``velocity``, in pixels) and depth: a pixel counts where its motion is below
-``max_motion`` pixels and its depth changed by at most ``max_depth_change``; without them
-(a still camera over a still scene) every pixel counts. 8-bit images are display-encoded
+``max_motion`` pixels and its depth changed by at most ``max_depth_change`` (pixels where
+nothing is drawn have no motion to tell: they are left out); without them (a still camera
+over a still scene) every pixel counts. 8-bit images are display-encoded
 (rfw's tonemapped output and its PNGs) and are decoded from sRGB first, so the index is in
 linear units of the display range (0 to 1); float images are linear already.
 
@@ -72,11 +73,12 @@ def still_pixels(velocity: np.ndarray, depth: np.ndarray, prev_depth: np.ndarray
                  max_motion: float = 0.01, max_depth_change: float = 1e-4) -> np.ndarray:
     """(H, W) bool: pixels whose surface did not move on screen (|velocity| below
     ``max_motion`` pixels) and whose depth changed by at most ``max_depth_change`` since
-    the frame before (nothing moved in front of them)."""
+    the frame before (nothing moved in front of them). Where nothing is drawn (depth 1)
+    the motion is unknown (the G-buffer clears it to 0): such pixels are not counted."""
     v = np.asarray(velocity, np.float64)
     moved = np.hypot(v[..., 0], v[..., 1]) >= max_motion
     d, p = (np.asarray(x, np.float64).reshape(v.shape[:2]) for x in (depth, prev_depth))
-    return ~moved & (np.abs(d - p) <= max_depth_change)
+    return ~moved & (d < 1.0) & (np.abs(d - p) <= max_depth_change)
 
 
 def flicker_index(frames: Sequence[np.ndarray], *,
