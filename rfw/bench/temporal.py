@@ -5,9 +5,10 @@ frames, over the pixels that do not move between them: a still image scores 0, a
 technique adds on a still camera (jitter that no resolve settles, noise that changes every
 frame) raises it. Which pixels do not move comes from each frame's motion vectors (the
 G-buffer's ``velocity``, in pixels) and depth: a pixel counts where its motion is below
-``max_motion`` pixels and its depth changed by at most ``max_depth_change`` (pixels where
-nothing is drawn have no motion to tell: they are left out); without them (a still camera
-over a still scene) every pixel counts. 8-bit images are display-encoded
+``max_motion`` pixels and its surface is one that was there the frame before (nothing came
+in front of it: :func:`still_pixels`; pixels where nothing is drawn have no motion to tell
+and are left out); without them (a still camera over a still scene) every pixel counts.
+``still_share`` says how many pixels were counted. 8-bit images are display-encoded
 (rfw's tonemapped output and its PNGs) and are decoded from sRGB first, so the index is in
 linear units of the display range (0 to 1); float images are linear already.
 
@@ -17,15 +18,15 @@ and spread over the sequence.
 
 ``run_flicker(folder)`` reads what ``rfw run --frames N --save-every 1`` wrote
 (``frames/<output>.<k>.png``, or the EXR frames ``--exr`` adds for float outputs);
-``rfw bench`` records the flicker index of runs along a camera path and of jittered runs
-(``temporal`` in each record, :func:`along_run`).
+``rfw bench`` records the flicker index of runs along a camera path and of runs with a
+jittered camera (``temporal`` in each record, :func:`along_run`).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -70,21 +71,30 @@ class Flicker:
 
 
 def still_pixels(velocity: np.ndarray, depth: np.ndarray, prev_depth: np.ndarray, *,
-                 max_motion: float = 0.01, max_depth_change: float = 1e-4) -> np.ndarray:
+                 max_motion: float = 0.01, max_depth_change: float = 0.05) -> np.ndarray:
     """(H, W) bool: pixels whose surface did not move on screen (|velocity| below
-    ``max_motion`` pixels) and whose depth changed by at most ``max_depth_change`` since
-    the frame before (nothing moved in front of them). Where nothing is drawn (depth 1)
-    the motion is unknown (the G-buffer clears it to 0): such pixels are not counted."""
+    ``max_motion`` pixels) and is one the frame before had there: its distance within
+    the range of the frame before's 3x3 neighbourhood, widened by ``max_depth_change`` of
+    itself (a sub-pixel jitter moves an edge's sample from one of its surfaces to the
+    other; something that comes in front is nearer than all of them). Distance is read as
+    ``1 - depth``, near / distance for rfw's projection (depth 0 near, 1 far, the far plane
+    well beyond the scene), so the share holds at any distance. Where nothing is drawn
+    (depth 1) the motion is unknown (the G-buffer clears it to 0): not counted."""
     v = np.asarray(velocity, np.float64)
     moved = np.hypot(v[..., 0], v[..., 1]) >= max_motion
-    d, p = (np.asarray(x, np.float64).reshape(v.shape[:2]) for x in (depth, prev_depth))
-    return ~moved & (d < 1.0) & (np.abs(d - p) <= max_depth_change)
+    d, p = (1.0 - np.asarray(x, np.float64).reshape(v.shape[:2]) for x in (depth, prev_depth))
+    padded = np.pad(p, 1, mode="edge")
+    around = np.stack([padded[y:y + p.shape[0], x:x + p.shape[1]]
+                       for y in range(3) for x in range(3)])
+    lo, hi = around.min(axis=0), around.max(axis=0)
+    inside = (d >= lo * (1.0 - max_depth_change)) & (d <= hi * (1.0 + max_depth_change))
+    return ~moved & (d > 0.0) & inside
 
 
 def flicker_index(frames: Sequence[np.ndarray], *,
                   velocity: Sequence[np.ndarray] | None = None,
                   depth: Sequence[np.ndarray] | None = None, max_motion: float = 0.01,
-                  max_depth_change: float = 1e-4) -> Flicker:
+                  max_depth_change: float = 0.05) -> Flicker:
     """The flicker index of ``frames`` (at least two images of one size, in order).
     ``velocity`` and ``depth``, one per frame, pick the still pixels of each pair (frame k's
     motion to frame k - 1, and both frames' depth: :func:`still_pixels`); without them every
@@ -212,3 +222,48 @@ def run_flicker(folder: str | Path, output: str | None = None, *, skip: int = 0)
     temporal resolve's history filling up)."""
     frames = run_frames(folder, output)
     return flicker_index(frames[skip:])
+
+
+def along_run(cfg: Any, *, backend: str, options: Any) -> dict[str, Any] | None:
+    """The flicker index of ``cfg``'s timed frames (the first output), from an untimed
+    replay that reads each frame back (which the timed run must not: it waits for every
+    frame). Along a camera path the still pixels come from the G-buffer's motion vectors
+    and depth, turned on for the replay (they add an output, the image is the same); a
+    config without a ``gbuffer`` pass has none to tell them by (``flicker`` None, and
+    ``why``). On a still camera every pixel counts. None for a run that neither moves nor
+    jitters its camera: it renders one image, again and again."""
+    from ..config import apply_overrides, build
+    from ..render import render
+
+    path = "path" in (cfg.camera or {})
+    jitter = max((p.camera_jitter() for p in build(cfg).passes.values()), default=0)
+    if not path and not jitter:
+        return None
+    first = cfg.outputs[0]
+    still = None
+    if path:
+        entry = next((e for e in cfg.passes if e.enabled and e.use == "gbuffer"), None)
+        if entry is None:
+            return {"flicker": None, "frames": options.frames, "why": "the camera moves, and "
+                    "no gbuffer pass gives the motion vectors that tell still pixels"}
+        cfg = apply_overrides(cfg, [f"{entry.name}.velocity=true"])
+        gbuffer = build(cfg).passes[entry.name]
+        depth = entry.inputs.get("depth") if gbuffer.params.prepass else f"{entry.name}.depth"
+        still = (f"{entry.name}.velocity", depth)
+        cfg = replace(cfg, outputs=list(dict.fromkeys([first, *still])))
+    images: list[np.ndarray] = []
+    velocity: list[np.ndarray] = []
+    depths: list[np.ndarray] = []
+
+    def read(k: int, frame: Any) -> None:
+        images.append(frame.read(first).copy())
+        if still is not None:
+            velocity.append(frame.read(still[0]).copy())
+            depths.append(frame.read(still[1]).copy())
+
+    render(cfg, backend=backend, each_frame=read, options=options)
+    if len(images) < 2:
+        return {"flicker": None, "frames": len(images), "why": "one frame: nothing to compare"}
+    out = flicker_index(images, velocity=velocity or None, depth=depths or None)
+    return {**out.as_dict(), "frames": len(images), "output": first, "jitter": jitter,
+            "still": "velocity and depth" if still else "every pixel (a still camera)"}

@@ -53,9 +53,19 @@ def test_moving_pixels_are_left_out_by_velocity_and_depth():
     velocity[1][:, :3, 0] = 1.5  # ... because it moved: then only the still half counts
     out = flicker_index([a, b], velocity=velocity, depth=depth)
     assert out.index == 0.0 and out.still_share == 0.5
-    depth[1][:, 3:] = 0.4  # something came in front of the other half: nothing counts
+    depth[1][:, 3:] = 0.2  # something came in front of the other half: nothing counts
     out = flicker_index([a, b], velocity=velocity, depth=depth)
     assert out.index is None and out.per_pair == [None] and out.still_share == 0.0
+
+
+def test_a_surface_from_around_the_pixel_is_still_a_nearer_one_is_not():
+    velocity = np.zeros((1, 4, 2))
+    # 1 - depth (near / distance): an edge between 0.01 and 0.005, a jitter may show either
+    before = np.array([[0.99, 0.99, 0.995, 0.995]])
+    now = np.array([[0.9896, 0.995, 0.99, 0.9894]])
+    # 4 % nearer, the neighbour's surface, the other neighbour's, and twice as near as any
+    # surface around it
+    assert still_pixels(velocity, now, before).tolist() == [[True, True, True, False]]
 
 
 def test_background_is_not_counted_as_still_when_motion_is_given():
