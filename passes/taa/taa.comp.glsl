@@ -96,18 +96,16 @@ float linear_depth(float d) {
 bool history_matches(vec2 p, float expected, ivec2 size) {
     // texel centre c of last frame's depth was sampled at c - jitter there
     ivec2 base = ivec2(floor(p + motion.jitter.zw)) - 1;
-    bool match = false;
     for (int k = 0; k < 9; k++) {
         ivec2 t = clamp(base + ivec2(k % 3, k / 3), ivec2(0), size - 1);
         float d = texelFetch(t_history_depth, t, 0).r;
-        if (expected < 0.0) {
-            match = match || d >= 1.0;
-        } else if (d < 1.0) {
-            match = match ||
-                abs(linear_depth(d) - expected) <= u_params.depth_tolerance * expected;
+        bool match = expected < 0.0 ? d >= 1.0 : d < 1.0 &&
+            abs(linear_depth(d) - expected) <= u_params.depth_tolerance * expected;
+        if (match) {
+            return true;
         }
     }
-    return match;
+    return false;
 }
 
 void main() {
