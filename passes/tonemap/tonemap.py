@@ -5,9 +5,12 @@ from rfw.authoring import ComputePass, Settings, Tex2D, register_pass
 
 @register_pass("tonemap")
 class TonemapPass(ComputePass):
-    """Exposure, then a filmic curve (ACES fit), then sRGB encoding. Where the HDR alpha
-    is 0 (nothing drawn) the sky color is shown; an alpha between 0 and 1 is coverage, the
-    color premultiplied by it and composited over the sky."""
+    """Exposure, then a filmic curve (ACES fit), then sRGB encoding.
+
+    Where the HDR alpha is 0 (nothing drawn) the sky color is shown; an alpha between 0 and
+    1 is coverage (a temporal resolve's edges), the color premultiplied by it and
+    composited over the sky.
+    """
 
     # its commands depend on nothing but its settings, slot resources and scene
     replay = "auto"
