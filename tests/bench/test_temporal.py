@@ -120,3 +120,18 @@ def test_run_flicker_reads_the_saved_frames(tmp_path):
     (frames / "tonemap.ldr.0002.png").unlink()
     with pytest.raises(RfwError, match="not consecutive"):
         run_frames(tmp_path)
+
+
+def test_run_flicker_of_rfw_runs_saving_every_frame(tmp_path):
+    from ..conftest import ROOT, rfw_cli
+
+    def flicker(aa: str) -> float:
+        out = tmp_path / aa
+        done = rfw_cli("run", ROOT / "configs" / "deferred_ssao_shadows.toml", "--size",
+                       "32x18", "--frames", "6", "--save-every", "1", "--set", f"aa={aa}",
+                       "--out", out)
+        assert done.returncode == 0, done.stderr
+        return run_flicker(out, "fxaa.color", skip=2).index
+
+    assert flicker("none") == 0.0  # the same frame six times
+    assert flicker("taa") > 0.0  # jittered
