@@ -118,7 +118,9 @@ class SceneView(Protocol):
     mirrored: Any  # per instance: whether its transform mirrors (winding flips)
 
     def bindings(self) -> dict[str, Any]:
-        """The scene's own bindings (camera, lights, instances, materials) by name."""
+        """The scene's own bindings by name: camera and lights (group 1), and for a pass's
+        own group ``motion`` (``shaders/common/motion.glsl``: last frame's camera) and
+        ``prev_instances`` (last frame's instance rows)."""
 
 
 @runtime_checkable

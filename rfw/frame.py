@@ -518,6 +518,9 @@ def start(frame_plan: FramePlan, sides: dict[str, Side], *, scene: Any = None,
     scene already uploaded there (e.g. ``rfw view``'s, kept across changes of config): used
     as it is, and left to the caller to destroy."""
     frame = Frame(frame_plan, {}, {s: side.backend for s, side in sides.items()})
+    # one jitter for the whole frame, whichever side the pass that asks for it runs on
+    jitter = max((p.camera_jitter() for side in sides.values() for p in side.passes.values()),
+                 default=0)
     try:
         for s, side in sides.items():
             uploaded = (uploads or {}).get(s)
@@ -528,6 +531,8 @@ def start(frame_plan: FramePlan, sides: dict[str, Side], *, scene: Any = None,
                 uploaded = side.backend.scene(side.device, scene, camera,
                                               size or frame_plan.plan.size)
                 frame.scenes.append(uploaded)
+            if uploaded is not None:
+                uploaded.frames.jitter = jitter
             frame.executors[s] = side.backend.executor(
                 side.device, side.plan, side.passes, frame_plan.slots, uploaded,
                 readback=side.outputs, fitted=side.fitted, options=options)

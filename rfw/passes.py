@@ -395,6 +395,12 @@ class Pass:
         ``ctx.buffer``); ``ctx`` is a :class:`rfw.authoring.SetupContext`. Called once per
         executor, before its first frame."""
 
+    def camera_jitter(self) -> int:
+        """How many phases of sub-pixel camera jitter (Halton 2, 3) this pass needs; 0, the
+        default: none. A temporal resolve asks for it, and then every pass of the frame
+        draws with the jittered camera (the largest count any pass asks for)."""
+        return 0
+
     def replay_key(self, ctx: Any) -> Any:
         """What else a ``replay = "auto"`` pass's commands depend on (hashable; read before
         ``record`` with the same ``ctx``): none by default."""

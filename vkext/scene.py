@@ -21,11 +21,12 @@ from typing import Any
 import numpy as np
 
 from rfw.backends.scene_data import (
+    MOTION_BYTES,
     SCENE_GROUPS,
+    CameraFrames,
     check_instance_limits,
     instance_blocks,
     lights_bytes,
-    main_camera_bytes,
     material_bytes,
     mip_levels,
     mirrored_arrays,
@@ -236,6 +237,8 @@ class VkScene:
         self.scene = scene = with_back_faces(scene.drawable())
         self.camera = camera or scene.default_camera()
         self.size = (1, 1)
+        self.frames = CameraFrames()
+        self._sun = b""
         self._objects: list[Any] = []
         self.meshlets: Any = None  # vkext.meshlet.MeshletScene, made by the first meshlet pass
         self.allocator = BlockAllocator(device, block_size=block_size, label="scene")
@@ -296,12 +299,14 @@ class VkScene:
             up.buffer(self.static_uniforms, np.frombuffer(bytes(blob), np.uint8))
         self._instances(up)
 
-        # camera (main, sun) and lights: the lights written here, once; the cameras copied in
-        # by each frame from its own slot's bytes (copy_camera), so frames in flight keep theirs
+        # camera (main, sun, the main one's motion block) and lights: the lights written here,
+        # once; the cameras copied in by each frame from its own slot's bytes (copy_camera),
+        # so frames in flight keep theirs
         lights, self.sun_matrix, self.default_light = lights_bytes(scene)
         self._cam_offsets = (0, align_up(CAMERA_BYTES, align))
-        self._lights_offset = align_up(self._cam_offsets[1] + CAMERA_BYTES, align)
-        self.camera_span = self._cam_offsets[1] + CAMERA_BYTES  # both cameras' bytes
+        self._motion_offset = align_up(self._cam_offsets[1] + CAMERA_BYTES, align)
+        self.camera_span = self._motion_offset + MOTION_BYTES  # the cameras' bytes
+        self._lights_offset = align_up(self.camera_span, align)
         self.camera_blob = bytes(self.camera_span)  # what set_viewport made last
         self.dynamic_uniforms = self.allocator.create_buffer(
             self._lights_offset + LIGHTS_BYTES, ("uniform", "transfer_dst"),
@@ -465,12 +470,23 @@ class VkScene:
         is written here, so frames in flight are not disturbed. Each executor frame copies
         the bytes it began with into the cameras' buffer (:meth:`copy_camera`)."""
         self.size = (int(size[0]), int(size[1]))
+        self._sun = sun_camera_bytes(self.camera, self.sun_matrix, self.size)
+        self._blob(*self.frames.still(self.camera, self.size))
+
+    def begin_frame(self, index: int) -> None:
+        """Frame ``index`` begins: the main camera as it sees it (jittered where a pass asks
+        for jitter, ``frames.jitter``) and last frame's matrices (``CameraFrames``), into
+        ``camera_blob``, which the frame copies in as it begins."""
+        frame = self.frames.begin(self.camera, self.size, index)
+        if frame is not None:
+            self._blob(*frame)
+
+    def _blob(self, main: bytes, motion: bytes) -> None:
         blob = bytearray(self.camera_span)
-        main = main_camera_bytes(self.camera, self.size)
-        sun = sun_camera_bytes(self.camera, self.sun_matrix, self.size)
         blob[0:len(main)] = main
         off = self._cam_offsets[1]
-        blob[off:off + len(sun)] = sun
+        blob[off:off + len(self._sun)] = self._sun
+        blob[self._motion_offset:self._motion_offset + len(motion)] = motion
         self.camera_blob = bytes(blob)
 
     def copy_camera(self, cmd: Any, source: Buffer) -> None:
@@ -512,8 +528,14 @@ class VkScene:
         return cache[key]
 
     def bindings(self) -> dict[str, Any]:
-        """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights."""
-        return {"camera": self.camera_range("main"), "lights": self.lights_range}
+        """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights; and
+        what a pass may bind in its own set: ``motion`` (motion.glsl's block, copied in with
+        the cameras) and ``prev_instances``, last frame's instance rows (the same rows:
+        instances do not move yet)."""
+        return {"camera": self.camera_range("main"), "lights": self.lights_range,
+                "motion": BufferRange(self.dynamic_uniforms.handle, self._motion_offset,
+                                      MOTION_BYTES),
+                "prev_instances": self.instances_range}
 
     def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
              alpha: tuple[str, ...] = ("OPAQUE", "MASK"),

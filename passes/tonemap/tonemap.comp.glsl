@@ -27,8 +27,11 @@ void main() {
         return;
     }
     vec4 texel = texelFetch(t_hdr, ivec2(id), 0);
-    // passes that leave the background empty (alpha 0) get the sky color
-    vec3 hdr = (texel.a > 0.0 ? texel.rgb : u_params.sky) * u_params.exposure;
+    // passes that leave the background empty (alpha 0) get the sky color; a coverage
+    // between (a temporal resolve's edge against the background) is color premultiplied
+    // by it, over the sky
+    vec3 under = texel.a >= 1.0 ? texel.rgb : texel.rgb + (1.0 - texel.a) * u_params.sky;
+    vec3 hdr = (texel.a > 0.0 ? under : u_params.sky) * u_params.exposure;
     vec3 c = clamp(hdr, vec3(0.0), vec3(1.0));
     if (u_params.curve == 1) {
         c = aces(hdr);

@@ -222,6 +222,90 @@ def main_camera_bytes(camera: Camera, size: tuple[int, int]) -> bytes:
                         camera.position, size)
 
 
+MOTION_BYTES = 208  # motion.glsl's MotionBlock
+
+
+def halton(index: int, base: int) -> float:
+    """The radical inverse of ``index`` in ``base``: the Halton sequence's ``index``-th point."""
+    out, f = 0.0, 1.0
+    while index > 0:
+        f /= base
+        out += f * (index % base)
+        index //= base
+    return out
+
+
+def jitter_offset(frame: int, phases: int) -> tuple[float, float]:
+    """Frame ``frame``'s sub-pixel shift of the image in pixels (x right, y down, each in
+    [-0.5, 0.5)): Halton (2, 3) point ``frame % phases + 1`` (point 0 is the corner); (0, 0)
+    without ``phases``."""
+    if phases <= 0:
+        return 0.0, 0.0
+    k = frame % phases + 1
+    return halton(k, 2) - 0.5, halton(k, 3) - 0.5
+
+
+def jittered(proj: np.ndarray, offset: tuple[float, float], size: tuple[int, int]
+             ) -> np.ndarray:
+    """``proj`` followed by a shift of normalised device coordinates that moves the image
+    by ``offset`` pixels (y down, ndc y up): any projection, not only a perspective one."""
+    shift = np.identity(4)
+    shift[0, 3] = 2.0 * offset[0] / size[0]
+    shift[1, 3] = -2.0 * offset[1] / size[1]
+    return (shift @ proj.astype(np.float64)).astype(np.float32)
+
+
+class CameraFrames:
+    """The main camera as each frame sees it: its projection jittered by ``jitter`` phases
+    of sub-pixel offsets (0: none, the camera as it is), and the motion block
+    (``motion.glsl``) holding last frame's view-projection for motion vectors.
+
+    ``begin(camera, size, index)`` gives the bytes of frame ``index`` when it begins. The
+    frame after the one begun last takes that frame's matrices as its previous ones; any
+    other frame (the first, an executor's first on a kept scene) has no previous frame and
+    gets its own (zero motion). A camera set between frames is the next frame's: nothing
+    of the frame that ran is changed by it."""
+
+    def __init__(self) -> None:
+        self.jitter = 0  # Halton (2, 3) phases: set by the frame from its passes
+        self.index: int | None = None  # the frame begun last
+        self._ran: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
+
+    def begin(self, camera: Camera, size: tuple[int, int], index: int
+              ) -> tuple[bytes, bytes] | None:
+        """The main camera's and the motion block's bytes for frame ``index``; None when
+        that frame has begun already (a second executor on the scene, the same frame)."""
+        if index == self.index:
+            return None
+        prev = self._ran if self.index is not None and index == self.index + 1 else None
+        self.index = index
+        main, motion, self._ran = self._frame(camera, size, index, prev)
+        return main, motion
+
+    def still(self, camera: Camera, size: tuple[int, int]) -> tuple[bytes, bytes]:
+        """The bytes before any frame begins (``set_viewport``): the camera as it is, no
+        jitter, no motion."""
+        main, motion, _ = self._frame(camera, size, 0, None, jitter=0)
+        return main, motion
+
+    def _frame(self, camera: Camera, size: tuple[int, int], index: int,
+               prev: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None, *,
+               jitter: int | None = None) -> tuple[bytes, bytes, tuple]:
+        view = camera.view()
+        proj = camera.projection(size[0] / size[1])
+        offset = jitter_offset(index, self.jitter if jitter is None else jitter)
+        # unjittered: motion vectors carry the motion alone, not the jitter
+        vp = proj.astype(np.float64) @ view.astype(np.float64)
+        now = (vp, np.linalg.inv(vp), offset)
+        before = prev if prev is not None else now
+        main = camera_bytes(camera, view, jittered(proj, offset, size) if any(offset)
+                            else proj, camera.position, size)
+        motion = b"".join(np.asarray(m, np.float32).T.tobytes()
+                          for m in (before[0], before[1], vp))
+        motion += struct.pack("<4f", *offset, *before[2])
+        return main, motion, now
+
+
 def sun_camera_bytes(camera: Camera, sun: np.ndarray, size: tuple[int, int]) -> bytes:
     # the sun camera: view_proj carries everything the shadow pass needs
     return camera_bytes(camera, np.identity(4, np.float32), sun, (0, 0, 0), size)

@@ -5,7 +5,8 @@
 
 Writes ``DIR/record.json`` (per pass and per frame: GPU ms from timestamps, CPU record ms;
 whole-frame wall ms; memory, culling and ray counters where the run has them; along a
-camera path, each frame's camera and, where there are culling counters, each frame's; the
+camera path, each frame's camera and, where there are culling counters, each frame's; along
+a camera path or with a jittered camera the flicker index, :mod:`rfw.bench.temporal`; the
 hashes of its config, graph, scene and shaders, :mod:`rfw.bench.inputs`) and
 ``DIR/image.png`` (the config's first output). A failure writes ``{"error": ...}`` and
 exits 1, so the runner can report it instead of dropping the variant.
@@ -26,6 +27,7 @@ from ..errors import RfwError
 from ..fileio import atomic_write
 from .inputs import run_inputs, watching_shaders
 from .runner import gpu_clocks
+from .temporal import along_run
 
 # timings.json keys copied into the record as they are, where a run has them
 EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "default_light",
@@ -140,6 +142,10 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
                             "source": "plan"}
     if "camera_path" in timings and timings.get("culling"):
         record["culling_frames"] = culling_along_path(cfg, backend=backend, options=options)
+    # along a camera path or with a jittered camera: how much the image flickers
+    temporal = along_run(cfg, backend=backend, options=options)
+    if temporal is not None:
+        record["temporal"] = temporal
     formats = {r.name: r.format for r in plan.resources}
     first = next(iter(result.images))
     record["output"] = first

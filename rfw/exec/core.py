@@ -195,8 +195,12 @@ class ExecutorCore(FrameExecutor):
         """Start a frame: ``record`` passes into it, ``flush`` to submit what was recorded
         and wait, ``end_frame`` to submit the rest without waiting. The frame takes the
         next slot once the frame that used it last is finished; from the second frame on,
-        history resources swap (last frame's ``x`` is this one's ``x@prev``)."""
+        history resources swap (last frame's ``x`` is this one's ``x@prev``). The scene
+        learns which frame begins (``begin_frame``: its jittered camera and last frame's
+        matrices, written so that frames in flight keep theirs)."""
         self._before_frame()
+        if self.scene is not None:
+            self.scene.begin_frame(self.frame_index)
         slot = self._frame_slot = self.in_flight.slot(self.frame_index)
         if self.frame_index:
             for copy, name in self.history:

@@ -95,6 +95,11 @@ class Executor(ExecutorCore):
                  for r in self.plan.resources}
         images = [r for r in self.plan.resources if r.kind == "image" and r.format]
         self.owner = share_textures(images, set(self.readback) | set(self.present), spans)
+        # a history pair's textures trade places every frame: one read back, both copyable
+        readback = set(self.readback)
+        for copy, name in self.history:
+            if copy in readback or name in readback:
+                readback |= {copy, name}
         for r in images:
             if self.owner[r.name] != r.name:
                 continue
@@ -104,7 +109,7 @@ class Executor(ExecutorCore):
                 upload |= wgpu.TextureUsage.TEXTURE_BINDING
             self._textures[r.name] = self.device.device.create_texture(
                 size=(r.width, r.height, r.layers), format=wgpu_format(r.format),
-                usage=(texture_usage(r, r.name in self.readback) | upload) or
+                usage=(texture_usage(r, r.name in readback) | upload) or
                 wgpu.TextureUsage.TEXTURE_BINDING,
                 mip_level_count=r.mips, sample_count=r.samples, label=r.name)
         self.texture_count = len(self._textures)

@@ -18,11 +18,12 @@ from ...scene.sides import with_back_faces
 from ...units import align_up
 from ..scene_data import (
     INSTANCE_BYTES,
+    MOTION_BYTES,
     SCENE_GROUPS,
+    CameraFrames,
     check_instance_limits,
     instance_blocks,
     lights_bytes,
-    main_camera_bytes,
     material_bytes,
     mip_levels,
     mirrored_arrays,
@@ -80,6 +81,10 @@ class GpuScene:
         self.instance_buffer = self._instances()
         self._instance_uniforms: Any = None  # made for a WGSL program's own group 3 only
         self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
+        # last frame's camera beside this one's, for the passes that bind it (motion.glsl)
+        self.motion_buffer = self._uniform(b"\0" * MOTION_BYTES, "scene.motion")
+        self.frames = CameraFrames()
+        self._camera_bytes: tuple[bytes, bytes] | None = None
         self.sun_camera_buffer = self._uniform(b"\0" * 352, "scene.sun_camera")
         self.lights_buffer = self._uniform(self._lights_bytes(), "scene.lights")
         self.linear_sampler = device.create_sampler(
@@ -202,14 +207,34 @@ class GpuScene:
     # per frame ----------------------------------------------------------------------------
     def set_viewport(self, size: tuple[int, int]) -> None:
         self.size = size
-        q = self.device.queue
-        q.write_buffer(self.camera_buffer, 0, main_camera_bytes(self.camera, size))
-        q.write_buffer(self.sun_camera_buffer, 0,
-                       sun_camera_bytes(self.camera, self.sun_matrix, size))
+        self._write_camera(*self.frames.still(self.camera, size))
+        self.device.queue.write_buffer(self.sun_camera_buffer, 0,
+                                       sun_camera_bytes(self.camera, self.sun_matrix, size))
+
+    def begin_frame(self, index: int) -> None:
+        """Frame ``index`` begins: the main camera as it sees it (jittered where a pass asks
+        for jitter, ``frames.jitter``) and last frame's matrices (``CameraFrames``). Written
+        through the queue, so frames submitted before keep theirs."""
+        frame = self.frames.begin(self.camera, self.size, index)
+        if frame is not None:
+            self._write_camera(*frame)
+
+    def _write_camera(self, main: bytes, motion: bytes) -> None:
+        last = self._camera_bytes
+        if last is None or last[0] != main:
+            self.device.queue.write_buffer(self.camera_buffer, 0, main)
+        if last is None or last[1] != motion:
+            self.device.queue.write_buffer(self.motion_buffer, 0, motion)
+        self._camera_bytes = (main, motion)
 
     def bindings(self) -> dict[str, Any]:
+        """The camera and lights (group 1) by name, and what a pass may bind in its own
+        group: ``motion`` (motion.glsl's block) and ``prev_instances``, last frame's
+        instance rows (the same rows: instances do not move yet)."""
         return {"camera": {"buffer": self.camera_buffer},
-                "lights": {"buffer": self.lights_buffer}}
+                "lights": {"buffer": self.lights_buffer},
+                "motion": {"buffer": self.motion_buffer},
+                "prev_instances": {"buffer": self.instance_buffer}}
 
     def _material_group(self, layout: Any, k: int) -> Any:
         key = ("material", id(layout), k)

@@ -148,6 +148,34 @@ def _counters(doc: Doc, rfw: list[VariantSummary]) -> None:
         doc.table(["variant", "rays"], [[v.label, str(v.get("rays"))] for v in rays])
 
 
+def _temporal(doc: Doc, rfw: list[VariantSummary]) -> None:
+    """The flicker index of the runs along a camera path or with a jittered camera."""
+    rows = []
+    for v in rfw:
+        runs = [r["temporal"] for r in v.records if r.get("temporal")]
+        if not runs:
+            continue
+        values = sorted(t["flicker"] for t in runs if t.get("flicker") is not None)
+        shares = [t.get("still_share") for t in runs if t.get("still_share") is not None]
+        why = next((t["why"] for t in runs if t.get("why")), "")
+        rows.append([v.label, f"{values[len(values) // 2]:.5f}" if values else "-",
+                     f"{values[0]:.5f}-{values[-1]:.5f}" if len(values) > 1 else "-",
+                     f"{100 * sum(shares) / len(shares):.1f}%" if shares else "-",
+                     f"{len(runs)} x {runs[0].get('frames', '-')}", why or
+                     runs[0].get("still", "")])
+    if not rows:
+        return
+    doc.h(2, "Temporal stability")
+    doc.p("Flicker index: the mean absolute change of linear luminance (display range 0-1) "
+          "between consecutive timed frames, over the pixels that do not move (along a "
+          "camera path: the G-buffer's motion vectors and depth say which; on a still camera "
+          "every pixel), from an untimed replay of each run (`rfw.bench.temporal`). 0 is a "
+          "still image; a temporal resolve's first frames, while its history fills, count "
+          "too.")
+    doc.table(["variant", "flicker (median)", "range over runs", "still pixels",
+               "runs x frames", "pixels counted"], rows)
+
+
 def _num(x: Any) -> str:
     return "-" if x is None else f"{x:,}" if isinstance(x, int) else str(x)
 

@@ -17,7 +17,14 @@ from .document import Doc, Img
 from .images import _images
 from .method import _method
 from .peers import _peers
-from .tables import _counters, _environment, _failures, _frame_table, _pass_tables
+from .tables import (
+    _counters,
+    _environment,
+    _failures,
+    _frame_table,
+    _pass_tables,
+    _temporal,
+)
 
 
 def write_report(out_dir: Path, *, reference: str | int | None = None,
@@ -49,6 +56,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     _pass_tables(doc, rfw)
     _images(doc, out_dir, rfw, reference, pooled, diff_scale=diff_scale, parts=parts)
     _counters(doc, rfw)
+    _temporal(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
     _devices(doc, pooled, parts=parts)
     _failures(doc, variants)
