@@ -531,8 +531,12 @@ def start(frame_plan: FramePlan, sides: dict[str, Side], *, scene: Any = None,
                 uploaded = side.backend.scene(side.device, scene, camera,
                                               size or frame_plan.plan.size)
                 frame.scenes.append(uploaded)
-            if uploaded is not None:
-                uploaded.frames.jitter = jitter
+            frames = getattr(uploaded, "frames", None)  # a third-party scene may have none
+            if frames is not None:
+                frames.jitter = jitter
+            elif uploaded is not None and jitter:
+                raise RfwError(f"backend '{s}': its scene has no per-frame cameras "
+                               "(CameraFrames), so no pass can have a jittered camera on it")
             frame.executors[s] = side.backend.executor(
                 side.device, side.plan, side.passes, frame_plan.slots, uploaded,
                 readback=side.outputs, fitted=side.fitted, options=options)

@@ -45,6 +45,7 @@ VK_ONLY = {
     "deferred_meshlet": ("cull", "VK_EXT_mesh_shader"),
     "deferred_vis": ("vis", "geometry_shader"),
     "meshlet": ("cull", "VK_EXT_mesh_shader"),
+    "pathtrace": ("accel", "VK_KHR_acceleration_structure"),
     "rt_primary": ("accel", "VK_KHR_acceleration_structure"),
 }
 

@@ -36,7 +36,11 @@ from .conftest import ROOT
 from .golden_util import check_golden
 
 SIZE = (192, 108)
-CONFIGS = sorted(p.stem for p in (ROOT / "configs").glob("*.toml"))
+# the path tracer's references are judged by closed forms and by Mitsuba 3
+# (tests/passes/test_pathtrace.py, tests/truth/), not by pixels: another CPU's float
+# rounding sends a path another way, so its noise is not a golden's to keep
+NOT_GOLDEN = {"pathtrace"}
+CONFIGS = sorted(p.stem for p in (ROOT / "configs").glob("*.toml") if p.stem not in NOT_GOLDEN)
 SCENES = ("courtyard", "tiny")
 
 

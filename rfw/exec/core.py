@@ -199,8 +199,9 @@ class ExecutorCore(FrameExecutor):
         learns which frame begins (``begin_frame``: its jittered camera and last frame's
         matrices, written so that frames in flight keep theirs)."""
         self._before_frame()
-        if self.scene is not None:
-            self.scene.begin_frame(self.frame_index)
+        begin = getattr(self.scene, "begin_frame", None)  # a third-party scene may have none
+        if begin is not None:
+            begin(self.frame_index)
         slot = self._frame_slot = self.in_flight.slot(self.frame_index)
         if self.frame_index:
             for copy, name in self.history:

@@ -157,10 +157,10 @@ def test_variant_buttons_and_groups_listed(tmp_path):
             click(*centre("variant:shadows=off"), "pointer_up")
     """, config=config, sets=["size=640x480"], frames=8)
     assert [x for x in lines if x.startswith("variants:")] == [
-        "variants: ao=on, >shadows=off, view=final"]  # the clicked group is V's now
+        "variants: ao=on, >shadows=off, aa=fxaa, view=final"]  # the clicked group is V's now
     listed = [x for x in result["lines"] if x[:2] in ("> ", "  ") and "[" in x]
     # every group is on screen with its options, the one in force in brackets
-    assert listed == ["  ao: [on] off", "> shadows: on [off]",
+    assert listed == ["  ao: [on] off", "> shadows: on [off]", "  aa: [fxaa] none taa",
                       "  view: [final] ao normals depth overdraw"]
 
 

@@ -84,17 +84,18 @@ def test_refused_toggle_rolls_back_and_later_toggles_work(tmp_path):
 
 
 def test_every_variant_group_is_reachable(tmp_path):
-    # v: ao=off; V: next group (shadows); v: shadows=off; V: next group (view);
+    # v: ao=off; V: next group (shadows); v: shadows=off; V, V: past aa to the view group;
     # v: view=ao, refused (its source, ssao, is off); v: the option after it, view=normals
     seen, out = shot(tmp_path, SSAO, "variants.png", "--frames", "8",
-                     "--keys", "v,V,v,V,v,v")
+                     "--keys", "v,V,v,V,V,v,v")
     lines = out.splitlines()
     assert [x for x in lines if x.startswith(("variants:", "variant group:"))] == [
-        "variants: >ao=off, shadows=on, view=final",
-        "variant group: ao=off, >shadows=on, view=final",
-        "variants: ao=off, >shadows=off, view=final",
-        "variant group: ao=off, shadows=off, >view=final",
-        "variants: ao=off, shadows=off, >view=normals"]
+        "variants: >ao=off, shadows=on, aa=fxaa, view=final",
+        "variant group: ao=off, >shadows=on, aa=fxaa, view=final",
+        "variants: ao=off, >shadows=off, aa=fxaa, view=final",
+        "variant group: ao=off, shadows=off, >aa=fxaa, view=final",
+        "variant group: ao=off, shadows=off, aa=fxaa, >view=final",
+        "variants: ao=off, shadows=off, aa=fxaa, >view=normals"]
     [refused] = [x for x in lines if x.startswith("refused")]
     assert refused.startswith("refused view=ao:") and "ssao" in refused
     assert max_diff(seen, run_png(tmp_path, SSAO, "ao=off", "shadows=off", "view=normals")) <= 1
