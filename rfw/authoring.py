@@ -67,7 +67,7 @@ __all__ = [
     "RayTracingContext", "RenderPass", "SceneError", "SceneView", "Settings",
     "SettingsError", "SetupContext", "SizeRule", "Slot", "Step", "Storage", "Tex2D",
     "Texture", "VkSceneView", "did_you_mean", "format_info", "instance_blocks",
-    "material_bytes", "register_pass", "scene_tables", "storage_format", "texture_lists",
+    "material_bytes", "register_pass", "scene_table_bindings", "scene_tables", "storage_format", "texture_lists",
     "triangle_bits",
 ]
 
@@ -228,6 +228,17 @@ def scene_tables(vk_scene: Any) -> dict[str, np.ndarray]:
                  _or(m.base_color_texture, default_sampler), 0, 0]
         materials[k] = (np.frombuffer(material_bytes(m), np.uint8), slots)
     return {"meshes": meshes, "instances": instances, "materials": materials}
+
+
+def scene_table_bindings(ctx: Any, label: str) -> tuple[dict[str, Any], dict[str, int]]:
+    """What a shader that reaches any triangle binds (``scene_tables`` uploaded as storage
+    buffers labelled ``label:<table>``, ``textures`` and ``samplers``), and the array sizes
+    it is compiled with (``MAX_TEXTURES``, ``MAX_SAMPLERS``): for ``setup(ctx)``."""
+    textures, samplers = texture_lists(ctx.scene)
+    bindings = {name: ctx.buffer(f"{label}:{name}", data)
+                for name, data in scene_tables(ctx.scene).items()}
+    return ({**bindings, "textures": textures, "samplers": samplers},
+            {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers)})
 
 
 def _or(index: int | None, fallback: int) -> int:

@@ -308,6 +308,18 @@ PathSample trace_path(vec3 o, vec3 d, float spread) {
     return out_;
 }
 
+#if defined(MODE_AO) || defined(MODE_VISIBILITY)
+// the point a camera ray sees, for the per-effect modes: false on the sky
+bool camera_point(vec3 o, vec3 d, float spread, uint seed, out Shading sh) {
+    Hit h = trace_closest(o, d, 1e30, seed);
+    if (h.instance < 0) {
+        return false;
+    }
+    sh = shade_hit(h, d, spread * h.t);
+    return true;
+}
+#endif
+
 #if defined(MODE_AO)
 // ambient occlusion at the point a camera ray sees, as rt_ao defines it: the fraction of
 // cosine-distributed rays about the shading normal that travel ao_radius unoccluded by
@@ -315,11 +327,10 @@ PathSample trace_path(vec3 o, vec3 d, float spread) {
 PathSample trace_ao(vec3 o, vec3 d, float spread) {
     PathSample out_ = PathSample(vec3(0.0), 0.0);
     uint seed = hash_combine(g_pixel_seed, g_sample);
-    Hit h = trace_closest(o, d, 1e30, seed);
-    if (h.instance < 0) {
+    Shading sh;
+    if (!camera_point(o, d, spread, seed, sh)) {
         return out_;
     }
-    Shading sh = shade_hit(h, d, spread * h.t);
     vec3 l = cosine_sample(sh.s.normal, sample4(1u).xy);
     vec3 origin = offset_origin(sh.p, sh.ng);
     bool open = dot(l, sh.ng) <= 0.0 ? false :
@@ -337,11 +348,10 @@ PathSample trace_ao(vec3 o, vec3 d, float spread) {
 PathSample trace_visibility(vec3 o, vec3 d, float spread) {
     PathSample out_ = PathSample(vec3(0.0), 0.0);
     uint seed = hash_combine(g_pixel_seed, g_sample);
-    Hit h = trace_closest(o, d, 1e30, seed);
-    if (h.instance < 0) {
+    Shading sh;
+    if (!camera_point(o, d, spread, seed, sh)) {
         return out_;
     }
-    Shading sh = shade_hit(h, d, spread * h.t);
     out_.hit = 1.0;
     uint i = u_params.light < 0 ? lights.count.y : uint(u_params.light);
     if (i >= lights.count.x) {

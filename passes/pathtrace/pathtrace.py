@@ -12,8 +12,7 @@ from rfw.authoring import (
     Tex2D,
     did_you_mean,
     register_pass,
-    scene_tables,
-    texture_lists,
+    scene_table_bindings,
 )
 
 MODES = ("full", "ao", "visibility")
@@ -120,14 +119,10 @@ class PathTracePass(RayTracedPass):
         self.tables = None
         if ctx.scene is None:
             return
-        scene = ctx.scene
-        tables = {name: ctx.buffer(f"{self.name}:{name}", data)
-                  for name, data in scene_tables(scene).items()}
-        textures, samplers = texture_lists(scene)
-        self.defines = {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers)}
+        self.tables, self.defines = scene_table_bindings(ctx, self.name)
         if self.params.mode != "full":
             self.defines[f"MODE_{self.params.mode.upper()}"] = 1
-        self.tables = {**tables, "textures": textures, "samplers": samplers,
+        self.tables = {**self.tables,
                        "sobol_directions": ctx.buffer(f"{self.name}:sobol", sobol_directions())}
 
     def record(self, ctx) -> None:

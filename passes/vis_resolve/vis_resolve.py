@@ -7,8 +7,7 @@ from rfw.authoring import (
     SettingsError,
     Tex2D,
     register_pass,
-    scene_tables,
-    texture_lists,
+    scene_table_bindings,
     triangle_bits,
 )
 
@@ -67,13 +66,8 @@ class VisResolvePass(ComputePass):
         self.tables = None
         if ctx.scene is None:
             return
-        scene = ctx.scene
-        tables = {name: ctx.buffer(f"{self.name}:{name}", data)
-                  for name, data in scene_tables(scene).items()}
-        textures, samplers = texture_lists(scene)
-        self.defines = {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers),
-                        "TRIANGLE_BITS": triangle_bits(scene.scene)}
-        self.tables = {**tables, "textures": textures, "samplers": samplers}
+        self.tables, self.defines = scene_table_bindings(ctx, self.name)
+        self.defines["TRIANGLE_BITS"] = triangle_bits(ctx.scene.scene)
 
     def record(self, ctx) -> None:
         ids = {"t_ids": ctx.sampled("ids")} if self.params.ids == "image" else \
