@@ -113,16 +113,16 @@ def test_resolve_matches_the_raster_gbuffer(vk_device, courtyard, raster):
 
 
 def _tables_with(monkeypatch, change) -> None:
-    from passes.vis_resolve import vis_resolve
+    import rfw.authoring as authoring
 
-    tables = vis_resolve.scene_tables
+    tables = authoring.scene_tables
 
     def changed(vk_scene):
         t = tables(vk_scene)
         change(t)
         return t
 
-    monkeypatch.setattr(vis_resolve, "scene_tables", changed)
+    monkeypatch.setattr(authoring, "scene_tables", changed)  # what vis_resolve's setup binds
 
 
 def _next_material(t) -> None:
