@@ -111,6 +111,7 @@ READERS: dict[str, Callable[[], Any]] = {
     "RFW_CACHE": lambda: folder("RFW_CACHE"),
     "RFW_CACHE_SPIRV": lambda: folder("RFW_CACHE_SPIRV"),
     "RFW_CACHE_MESHLETS": lambda: folder("RFW_CACHE_MESHLETS"),
+    "RFW_CACHE_TRUTH": lambda: folder("RFW_CACHE_TRUTH"),
     "RFW_GPU": lambda: integer("RFW_GPU", 0, what="a device index"),
     "RFW_FRAMES_IN_FLIGHT": lambda: integer("RFW_FRAMES_IN_FLIGHT", 1, MAX_FRAMES_IN_FLIGHT),
     "RFW_ORDER_SEED": lambda: integer("RFW_ORDER_SEED", 0, MAX_SEED, what="a seed"),

@@ -56,7 +56,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--peer-frames", type=int,
                    help="timed frames of a peer run (default: --frames)")
     p.add_argument("--reference", help="variant the images are compared against: index or "
-                   "label (default: the first)")
+                   "label (default: the first); or pathtrace[:SPP] (default SPP 256): the "
+                   "path tracer's ground truth of every view, each variant's error against "
+                   "it and the error-versus-GPU-ms fronts (Vulkan; cached in "
+                   "$RFW_CACHE_TRUTH, else ~/.cache/rfw/truth)")
     p.add_argument("--diff-scale", choices=["own", "shared"], default="own",
                    help="difference images: each from 0 to its own largest difference "
                         "(own, default), or all on the largest of the report (shared) to "
@@ -149,7 +152,16 @@ def run(args: argparse.Namespace) -> int:
                      warmup=args.warmup, repeat=args.repeat, backends=args.backend,
                      sets=args.set, vary=args.vary, peers=peers, order=args.order,
                      seed=args.seed, timeout=args.timeout, peer_frames=args.peer_frames)
-    _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
+    from .truth import parse as parse_truth
+
+    truth = parse_truth(args.reference)  # pathtrace[:SPP], checked before any run
+    if truth is None:
+        _check_reference(args.reference, [j.label for j in plan.jobs if j.kind == "rfw"])
+    elif args.executor != "local":
+        raise RfwError("--reference pathtrace runs with --executor local only (the runs' "
+                       "linear images stay on the node that rendered them)",
+                       element="--reference")
+    plan.truth = truth
     if peers:  # a config's own [camera] table is a camera the peers do not render either
         _check_config_camera(plan)
     if args.ray_address is not None and args.executor != "ray":
@@ -174,12 +186,19 @@ def run(args: argparse.Namespace) -> int:
     # the runs and the report are staged: the folder's earlier bench is replaced only by a
     # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
     folder = OutputFolder(out)
-    for name in ("results.jsonl", "results.csv", REPORT_MD, REPORT_HTML):
+    for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", REPORT_MD,
+                 REPORT_HTML):
         folder.target(name)  # a FIFO or device there is refused before any run
     with folder:
         try:
             results = run_plan(plan, folder.staging, progress=not args.no_progress,
                                executor=executor)
+            if truth is not None:
+                from .runner import load_results
+                from .truth import render_references
+
+                render_references(folder.staging, load_results(results), truth,
+                                  timeout=plan.timeout, progress=not args.no_progress)
             code, written = _finish(folder.staging, results, args.reference, args.diff_scale)
         except BaseException as e:
             _keep_partial(folder, len(plan.schedule()), e)

@@ -63,6 +63,7 @@ class Plan:
     timeout: float = 600.0
     notes: list[str] = field(default_factory=list)
     peer_frames: int | None = None  # frames of a peer run (default: frames)
+    truth: Any = None  # rfw.bench.truth.TruthSpec: first runs write their linear image too
 
     def schedule(self) -> list[tuple[int, int, Job]]:
         """``(repeat, position, job)`` in run order."""
@@ -156,6 +157,15 @@ def _accepts(path: Path, key: str, value: str) -> bool:
     return True
 
 
+def _inert(cfg: Any, combo: tuple[str, ...]) -> list[str]:
+    """The ``--vary`` choices of ``combo`` that set a pass ``cfg`` (the config with the whole
+    combo applied) leaves disabled: ``ssao.samples=8`` beside ``ao=off``."""
+    disabled = {p.name for p in cfg.passes if not p.enabled}
+    return [c for c in combo if "." in c.partition("=")[0]
+            and c.partition("=")[0].partition(".")[0] in disabled
+            and c.partition("=")[0].split(".")[1] != "enabled"]
+
+
 def make_plan(configs: list[str], *, scenes: list[str] | None = None,
               size: tuple[int, int] | None = None, frames: int = 10, warmup: int = 2,
               repeat: int = 3, backends: list[str] | None = None, sets: list[str] | None = None,
@@ -212,19 +222,32 @@ def make_plan(configs: list[str], *, scenes: list[str] | None = None,
             notes.append(f"--vary {key} applies to {', '.join(p.stem for p in used[key])} "
                          f"only ({', '.join(skipped)} have no '{key}')")
     jobs: list[Job] = []
+    dropped = 0
     multi_scene = len(scenes) > 1
     for path in paths:
         mine = [(k, opts) for k, opts in axes if path in used[k]]
         for scene, backend in itertools.product(scenes, on[path]):
             for combo in itertools.product(*[[f"{k}={o}" for o in opts] for k, opts in mine]):
                 run_sets = [*sets, *combo]
+                inert: list[str] = []
                 if combo:
-                    _check(path, run_sets)
+                    # a choice setting a pass the others disable changes nothing: that
+                    # variant is the one without it (ao=off with any ssao.samples)
+                    inert = _inert(_check(path, run_sets), combo)
+                    if inert:
+                        combo = tuple(c for c in combo if c not in inert)
+                        run_sets = [*sets, *combo]
                 label = path.stem + (f"[{','.join(combo)}]" if combo else "") + f"@{backend}"
                 if multi_scene:
                     label += f" {Path(scene).stem if scene else 'default'}"
+                if inert and any(j.label == label for j in jobs):
+                    dropped += 1  # the same run as one listed already
+                    continue
                 jobs.append(Job("rfw", label, _slug(label), str(path), tuple(run_sets),
                                 tuple(combo), scene, backend))
+    if dropped:
+        notes.append(f"{dropped} combination(s) of --vary set a pass their other choices "
+                     "disable: each runs once, as the variant without that setting")
     for peer in peers or []:
         jobs.append(Job("peer", f"peer:{peer}", _slug(f"peer_{peer}"), peer=peer,
                         scene=scenes[0]))
@@ -321,7 +344,7 @@ def _cpu_name() -> str:
     return platform.processor() or platform.machine()
 
 
-def _command(job: Job, plan: Plan, out: Path) -> list[str]:
+def _command(job: Job, plan: Plan, out: Path, *, truth: str | None = None) -> list[str]:
     w, h = plan.size
     if job.kind == "peer":
         return [sys.executable, str(PEERS_RUN), job.peer, "--scene", job.scene or "default",
@@ -335,27 +358,31 @@ def _command(job: Job, plan: Plan, out: Path) -> list[str]:
         cmd += ["--scene", job.scene]
     for s in job.sets:
         cmd += ["--set", s]
+    if truth:
+        cmd += ["--truth", truth]
     return cmd
 
 
 def clear_run_files(folder: Path) -> None:
     """Delete a run folder's record, image and log, so a failed run shows no old image."""
-    for stale in ("record.json", "image.png", "log.txt"):
+    for stale in ("record.json", "image.png", "log.txt", "hdr.exr", "display.png"):
         (folder / stale).unlink(missing_ok=True)
 
 
 def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
-            env: dict[str, str] | None = None) -> dict[str, Any]:
+            env: dict[str, str] | None = None, truth: str | None = None) -> dict[str, Any]:
     """Run one job in a fresh process, in the caller's working directory (relative paths in
     ``--set`` mean what they mean to ``rfw run``) or ``cwd``, with this process's environment
-    plus ``env``; its record (``error`` set when it failed)."""
+    plus ``env``; its record (``error`` set when it failed). ``truth``: the run also writes
+    the image that component of ``--reference pathtrace`` judges (``hdr.exr``)."""
     out.mkdir(parents=True, exist_ok=True)
     clear_run_files(out)
     t = time.perf_counter()
     env = {**os.environ, **(env or {}), "PYTHONPATH": os.pathsep.join(
         [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
     try:
-        done = _worker(_command(job, plan, out), timeout=plan.timeout, env=env, cwd=cwd)
+        done = _worker(_command(job, plan, out, truth=truth), timeout=plan.timeout, env=env,
+                       cwd=cwd)
     except subprocess.TimeoutExpired:
         (out / "image.png").unlink(missing_ok=True)
         return {"error": f"timed out after {plan.timeout:g} s",
@@ -422,7 +449,10 @@ def _local_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path)
     """``(seq, run folder, record)`` of each scheduled run, one process after another."""
     for seq, (r, _, job) in enumerate(schedule):
         run_dir = inside(out_dir, Path("runs") / job.id / f"r{r}")
-        yield seq, run_dir, run_one(job, plan, run_dir)
+        # against the truth: each rfw variant's first run writes its linear image too
+        truth = plan.truth.component if plan.truth is not None and job.kind == "rfw" \
+            and r == 0 else None
+        yield seq, run_dir, run_one(job, plan, run_dir, truth=truth)
 
 
 def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
@@ -467,12 +497,19 @@ def run_plan(plan: Plan, out_dir: Path, *, progress: bool = True,
                 "kind": job.kind, "variant": job.label, "variant_id": job.id, "repeat": r,
                 "sequence": seq, "position": pos, **env, **meta,
                 "config_path": job.config or None, "settings": list(job.sets),
-                "varied": list(job.varied), "requested_backend": job.backend
+                "varied": list(job.varied), "scene_arg": job.scene,
+                "requested_backend": job.backend
                 if job.kind == "rfw" else None,
                 "image": str(image.relative_to(out_dir)) if image.exists() else None,
                 "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
             if job.kind == "peer":
                 record["peer"] = job.peer
+            judged = record.get("hdr")
+            if isinstance(judged, dict):  # --reference pathtrace: the files, from out_dir
+                for key in ("file", "display"):
+                    path = run_dir / str(judged.get(key, ""))
+                    if key in judged:
+                        judged[key] = str(path.relative_to(out_dir)) if path.is_file() else None
             _write_line(f, json.dumps(record) + "\n")
             if bar is not None:
                 bar.update(1)

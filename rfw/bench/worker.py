@@ -76,9 +76,12 @@ def _samples(frame: Any) -> dict[str, dict[str, list[float]]]:
 
 
 def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int] | None,
-        backend: str, options: Any) -> tuple[dict[str, Any], Any]:
+        backend: str, options: Any, truth: str | None = None
+        ) -> tuple[dict[str, Any], Any, Any]:
     """Render once as ``options`` (:class:`rfw.options.RunOptions`, ``frames`` and
-    ``warmup`` given) say; returns the record and the first output as 8-bit RGBA."""
+    ``warmup`` given) say; returns the record, the first output as 8-bit RGBA and, with
+    ``truth`` (a component of ``--reference pathtrace``), the image it judges
+    (:func:`truth_image`; None where the run has none)."""
     from ..backends.base import FrameExecutor
     from ..config import apply_overrides, load_config
     from ..frame import Frame
@@ -149,7 +152,102 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     formats = {r.name: r.format for r in plan.resources}
     first = next(iter(result.images))
     record["output"] = first
-    return record, to_png_array(result.images[first], formats[first])
+    judged = None
+    if truth:
+        judged = truth_image(cfg, truth, backend=backend, options=options)
+        record["hdr"] = {"component": truth, "file": HDR_FILE} if judged[2] is None else \
+            {"component": truth, "missing": judged[2]}
+        if judged[1] is not None:
+            record["hdr"]["display"] = DISPLAY_FILE
+    return record, to_png_array(result.images[first], formats[first]), judged
+
+
+HDR_FILE, DISPLAY_FILE = "hdr.exr", "display.png"
+
+
+def tonemap_input(cfg: Any) -> str | None:
+    """The resource the enabled tonemap pass reads as its ``hdr`` input: the linear image
+    before tone mapping (None without a tonemap pass)."""
+    for p in cfg.passes:
+        if p.enabled and p.use == "tonemap":
+            return p.inputs.get("hdr")
+    return None
+
+
+def ao_input(cfg: Any) -> tuple[str | None, bool]:
+    """``(resource, lit)``: what the enabled lighting pass reads as its ``ao`` input, None
+    where its producer is disabled (the input is dropped: no occlusion); ``lit`` False
+    without a lighting pass that has an ``ao`` input."""
+    enabled = {p.name for p in cfg.passes if p.enabled}
+    for p in cfg.passes:
+        if p.enabled and "ao" in p.inputs:
+            res = p.inputs["ao"]
+            return (res if res.partition(".")[0] in enabled else None), True
+    return None, False
+
+
+def truth_image(cfg: Any, component: str, *, backend: str, options: Any
+                ) -> tuple[Any, Any, str | None]:
+    """The run's image the truth's ``component`` (:mod:`rfw.bench.truth`) judges, from an
+    untimed replay of the same frames (histories and a camera path end where the timed
+    run's did; the timed run reads nothing it would not read in any bench): ``full`` and
+    ``direct*`` the tonemap pass's linear input (``direct*``: with the lighting pass's
+    ambient term off), ``ao*`` the lighting pass's ambient occlusion at full size (ones
+    where nothing occludes). ``(image, displayed, None)`` (``displayed``: the replay's
+    first output as 8-bit RGBA, for ``direct*``, whose displayed image is not the run's) or
+    ``(None, None, why not)``."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from ..config import apply_overrides
+    from ..errors import RfwError
+    from ..render import render
+
+    kind = component.partition("=")[0]
+    if kind == "ao":
+        name, lit = ao_input(cfg)
+        if not lit:
+            return None, None, "no lighting pass with an ao input"
+        if name is None:
+            return np.ones((cfg.size[1], cfg.size[0], 4), np.float32), None, None
+    else:
+        name = tonemap_input(cfg)
+        if name is None:
+            return None, None, "no tonemap pass"
+        if kind.startswith("direct"):
+            from ..registry import get_pass
+
+            # the passes that light with the sky's ambient term (deferred_lighting, forward)
+            lighting = [p.name for p in cfg.passes if p.enabled and p.use != "flat"
+                        and "ambient" in getattr(get_pass(p.use).Params, "__annotations__", {})]
+            try:
+                cfg = apply_overrides(cfg, [f"{n}.ambient=0" for n in lighting])
+            except RfwError as e:
+                return None, None, f"the ambient term cannot be turned off ({e})"
+    outputs = cfg.outputs if name in cfg.outputs else [*cfg.outputs, name]
+    result = render(replace(cfg, outputs=outputs), backend=backend, options=options)
+    image = np.asarray(result.images[name], np.float32)
+    if image.shape[:2] != (cfg.size[1], cfg.size[0]):  # a half-size ao: as lighting reads it
+        image = _resize(image, cfg.size)
+    displayed = None
+    if kind.startswith("direct"):
+        from ..render import to_png_array
+
+        first = cfg.outputs[0]
+        fmt = {r.name: r.format for r in result.frame.plan.resources}[first]
+        displayed = to_png_array(result.images[first], fmt)
+    return image, displayed, None
+
+
+def _resize(image: Any, size: tuple[int, int]) -> Any:
+    """Bilinear, channel by channel (as a sampler reads a smaller texture)."""
+    import numpy as np
+    from PIL import Image
+
+    return np.stack([np.asarray(Image.fromarray(np.ascontiguousarray(image[..., c]), "F")
+                                .resize(size, Image.Resampling.BILINEAR))
+                     for c in range(image.shape[2])], axis=2)
 
 
 def check_times(record: dict[str, Any]) -> None:
@@ -198,6 +296,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--backend", default="wgpu", help="an installed backend (rfw.backends)")
+    ap.add_argument("--truth", help="also write the image this component of the truth "
+                    "judges as hdr.exr (full, ao[=R], direct, direct_centre)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -207,8 +307,9 @@ def main(argv: list[str] | None = None) -> int:
 
         # this process is its own edge: its options from its arguments and environment
         options = RunOptions.from_env(frames=args.frames, warmup=max(1, args.warmup))
-        record, rgba = run(args.config, args.set, scene=args.scene, size=args.size,
-                           backend=args.backend, options=options)
+        record, rgba, judged = run(args.config, args.set, scene=args.scene,
+                                   size=args.size, backend=args.backend, options=options,
+                                   truth=args.truth)
     except Exception as e:
         message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         _write_json(out / "record.json", {"error": f"{type(e).__name__}: {message}",
@@ -218,6 +319,13 @@ def main(argv: list[str] | None = None) -> int:
     from PIL import Image
 
     atomic_write(out / "image.png", lambda f: Image.fromarray(rgba, "RGBA").save(f, "PNG"))
+    if judged is not None and judged[0] is not None:
+        from ..fileio import write_exr
+
+        write_exr(out / HDR_FILE, judged[0])
+        if judged[1] is not None:
+            atomic_write(out / DISPLAY_FILE,
+                         lambda f: Image.fromarray(judged[1], "RGBA").save(f, "PNG"))
     _write_json(out / "record.json", record)  # last: a record means the run is complete
     return 0
 

@@ -25,6 +25,7 @@ from .tables import (
     _pass_tables,
     _temporal,
 )
+from .truth import _truth, csv_rows, write_truth_csv
 
 
 def write_report(out_dir: Path, *, reference: str | int | None = None,
@@ -54,7 +55,14 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
-    _images(doc, out_dir, rfw, reference, pooled, diff_scale=diff_scale, parts=parts)
+    from ..truth import parse as parse_truth
+
+    # --reference pathtrace[:SPP]: the images are compared with the first variant, as without
+    # one, and against the truth in a section of their own
+    truth_given = parse_truth(reference) is not None
+    _images(doc, out_dir, rfw, None if truth_given else reference, pooled,
+            diff_scale=diff_scale, parts=parts)
+    truth_rows = _truth(doc, out_dir, pooled)
     _counters(doc, rfw)
     _temporal(doc, rfw)
     _peers(doc, out_dir, rfw, peers)
@@ -65,7 +73,9 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     # whole or not at all: 'rfw bench report' rewrites them in place
     atomic_write(md, lambda f: f.write(doc.markdown().encode("utf-8")))
     atomic_write(page, lambda f: f.write(doc.html("rfw benchmark", out_dir).encode("utf-8")))
-    write_csv(out_dir / "results.csv", [*rfw, *peers])
+    write_csv(out_dir / "results.csv", [*rfw, *peers], extra=csv_rows(truth_rows))
+    if truth_rows:
+        write_truth_csv(out_dir / "truth.csv", truth_rows)
     return md, page
 
 
@@ -73,9 +83,11 @@ CSV_FIELDS = ("variant", "kind", "device", "backend", "pass", "metric", "n", "ru
               "ci_lo", "ci_hi", "p5", "p95", "mean")
 
 
-def write_csv(path: Path, variants: list[VariantSummary]) -> Path:
+def write_csv(path: Path, variants: list[VariantSummary],
+              extra: list[list[Any]] | None = None) -> Path:
     """One row per variant, device, pass (``frame`` for whole frames) and metric: the
-    summary numbers of the report (ms), for plotting elsewhere."""
+    summary numbers of the report (ms), for plotting elsewhere; then ``extra`` rows (the
+    errors against the truth: pass ``truth``)."""
     rows = []
     for v in variants:
         for dev, part in _by_device(v):
@@ -90,6 +102,7 @@ def write_csv(path: Path, variants: list[VariantSummary]) -> Path:
         w = csv.writer(f)
         w.writerow(CSV_FIELDS)
         w.writerows(rows)
+        w.writerows(extra or [])
     return path
 
 
