@@ -5,7 +5,10 @@ metal sphere on a plane under a sun. Their materials are the two the two rendere
 exactly (``rfw.truth.mitsuba`` says why): pure Lambert (``specular = 0``, no dielectric lobe)
 and metals (``metallic = 1``); there are no textures, no spot lights and no emissive
 surfaces, and every surface a ray can reach is seen from its front. They are computed, never
-random, so every call gives identical arrays. Units are metres, +Y is up.
+random, so every call gives identical arrays. Units are metres, +Y is up. The third
+agreement scene is a glTF file read by rfw's loader, ``tests/data/agreement/still_life.gltf``
+(written by ``scripts/make_still_life.py``): a textured floor, a metal, mirrored instances and
+KHR_lights_punctual lights.
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ rfw's conventions, ``render`` renders it to linear radiance, ``depth`` gives the
 the first hit through each pixel centre (for checking that the two cameras agree).
 
 What maps (exactly, but for the metal's shadowing term, measured below; the agreement scenes,
-``rfw.scene.agreement``, use only this):
+``rfw.scene.agreement`` and the glTF file ``tests/data/agreement/still_life.gltf``, use only
+this):
 
 - **Lambert** (``metallic = 0``, ``specular = 0``): ``pbr.glsl``'s diffuse term is then
   base / pi, Mitsuba's ``diffuse`` BSDF.
@@ -38,10 +39,22 @@ What maps (exactly, but for the metal's shadowing term, measured below; the agre
   the transform, normals through its inverse transpose, winding flipped for mirrored ones),
   with its vertex normals (smooth shading) and uvs.
 
+- **Base colour textures**: a ``bitmap`` texture of the image's linear values (the sRGB
+  curve taken off in float64 where the texture is sRGB, as the GPU's sRGB formats do before
+  they filter) times the base colour factor, in Mitsuba's ``raw`` mode (no further
+  conversion); ``nearest`` or ``bilinear`` from the texture's magnification filter, and its
+  wrap mode. Mitsuba has no mipmaps, so this is exact where rfw's ray cones read the finest
+  level (magnified textures: the glTF agreement scene's floor); a minified texture is
+  filtered by rfw and point-sampled by Mitsuba, which agree in the mean over a pixel where
+  rfw's mip levels keep the linear mean. Its sRGB ones do not (``mip_chain`` averages the
+  stored sRGB values), which darkens what rays read coarse: docs/ground-truth.md.
+
 What is approximate, each said in one warning line: other materials (``0 < metallic < 1``,
 or a dielectric with ``specular > 0``) become ``principled`` with Mitsuba's ``specular =
 0.5 * specular`` (its f0 is 0.08 * specular, rfw's 0.04 * specular) but Mitsuba's dielectric
-Fresnel and Disney diffuse; textures, normal maps and alpha modes are not converted; spot
+Fresnel and Disney diffuse; the other textures (metallic-roughness, normal, occlusion,
+emissive), a base colour texture's alpha and alpha modes are not converted, nor two wrap
+modes (Mitsuba has one per texture: u's is used); spot
 lights become Mitsuba's ``spot`` (its falloff is not rfw's smoothstep); a point light's range
 is ignored (Mitsuba has no cut-off); points and lines are left out. Emissive materials get an
 ``area`` emitter of radiance ``emissive`` on their meshes; Mitsuba's ``hide_emitters`` would
@@ -63,7 +76,7 @@ import numpy as np
 
 from ..backends.scene_data import AMBIENT, DEFAULT_SUN, MAX_LIGHTS
 from ..errors import RfwError, warn
-from ..scene.model import Light, Material, Scene
+from ..scene.model import Light, Material, Scene, Texture
 
 VARIANT = "llvm_ad_rgb"
 # samples per pixel in one Mitsuba pass: its wavefront holds width * height * this many lanes
@@ -86,17 +99,47 @@ def _rgb(value) -> dict[str, Any]:
     return {"type": "rgb", "value": [float(v) for v in value[:3]]}
 
 
-def bsdf_dict(m: Material) -> tuple[dict[str, Any], bool]:
+# Mitsuba's bitmap filters and wrap modes for rfw's (WebGPU's) sampler names
+_FILTERS = {"nearest": "nearest", "linear": "bilinear"}
+_WRAPS = {"repeat": "repeat", "mirror-repeat": "mirror", "clamp-to-edge": "clamp"}
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """The sRGB curve taken off values in 0..1 (IEC 61966-2-1), in float64."""
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def texture_dict(texture: Texture, factor) -> dict[str, Any]:
+    """Mitsuba's ``bitmap`` of ``texture``'s linear RGB times ``factor`` (module
+    docstring)."""
+    if texture.pixels is None:
+        raise RfwError(f"rfw.truth.mitsuba: texture {texture.name!r} has no pixels (they go "
+                       "once uploaded: Scene.keep_pixels); load the scene again")
+    mi = load_mitsuba()
+    rgb = texture.pixels[..., :3] / 255.0
+    linear = (srgb_to_linear(rgb) if texture.srgb else rgb) * np.asarray(factor[:3])
+    return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(linear, np.float32)),
+            "raw": True, "filter_type": _FILTERS[texture.mag_filter],
+            "wrap_mode": _WRAPS[texture.address_u]}
+
+
+def bsdf_dict(m: Material, textures: list[Texture] | tuple = ()) -> tuple[dict[str, Any], bool]:
     """Mitsuba's BSDF for ``m``, and whether it is one of the two that match rfw's model
-    (Lambert exactly, metals but for the shadowing term: module docstring)."""
+    (Lambert exactly, metals but for the shadowing term: module docstring). ``textures``
+    are the scene's, which ``m``'s base colour texture indexes (without them, factors
+    only)."""
+    base: dict[str, Any] = _rgb(m.base_color)
+    if m.base_color_texture is not None and m.base_color_texture < len(textures):
+        base = texture_dict(textures[m.base_color_texture], m.base_color)
     if m.metallic == 1.0:
-        out = {"type": "principled", "base_color": _rgb(m.base_color), "metallic": 1.0,
+        out = {"type": "principled", "base_color": base, "metallic": 1.0,
                "roughness": float(m.roughness)}
         exact = True
     elif m.metallic == 0.0 and m.specular == 0.0:
-        out, exact = {"type": "diffuse", "reflectance": _rgb(m.base_color)}, True
+        out, exact = {"type": "diffuse", "reflectance": base}, True
     else:
-        out = {"type": "principled", "base_color": _rgb(m.base_color),
+        out = {"type": "principled", "base_color": base,
                "metallic": float(m.metallic), "roughness": float(m.roughness),
                "specular": 0.5 * float(m.specular)}
         exact = False
@@ -163,7 +206,7 @@ def _meshes(scene: Scene, *, emitters: bool) -> tuple[dict[str, Any], list[str]]
             continue
         material = scene.materials[mesh.material]
         if mesh.material not in bsdfs:
-            d, exact = bsdf_dict(material)
+            d, exact = bsdf_dict(material, scene.textures)
             bsdfs[mesh.material] = mi.load_dict(d)
             if not exact:
                 approximate.append(material.name)
@@ -213,10 +256,16 @@ def scene_dict(scene: Scene, size: tuple[int, int], *, camera: int = 0, sky: flo
     if approximate:
         notes.append(f"materials {', '.join(approximate)} are approximated by Mitsuba's "
                      "principled BSDF (exact: Lambert with specular 0, and metals)")
-    if any(m.base_color_texture is not None or m.normal_texture is not None
-           or m.metallic_roughness_texture is not None or m.emissive_texture is not None
-           or m.alpha_mode != "OPAQUE" for m in scene.materials):
-        notes.append("textures and alpha modes are not converted (factors only, opaque)")
+    used = {scene.meshes[i.mesh].material for i in scene.drawable().instances}
+    if any(m.normal_texture is not None or m.metallic_roughness_texture is not None
+           or m.occlusion_texture is not None or m.emissive_texture is not None
+           or m.alpha_mode != "OPAQUE" for k, m in enumerate(scene.materials) if k in used):
+        notes.append("textures other than base colour and alpha modes are not converted "
+                     "(factors only, opaque)")
+    based = [scene.textures[m.base_color_texture] for k, m in enumerate(scene.materials)
+             if k in used and m.base_color_texture is not None]
+    if any(t.address_u != t.address_v for t in based):
+        notes.append("base colour textures wrap in v as in u (Mitsuba has one wrap mode)")
     lights = scene.lights[:MAX_LIGHTS] or [DEFAULT_SUN]
     if any(li.kind == "spot" for li in lights):
         notes.append("spot lights fall off as Mitsuba's spot, not rfw's smoothstep")

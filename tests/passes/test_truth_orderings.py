@@ -1,7 +1,8 @@
 """The path tracer as ground truth ranks what is known: more rt_ao samples and a matching
-radius lower the AO error; a larger shadow map lowers the error of the sun's shadows, and
-ray-traced shadows beat every shadow map. Errors are RMSE of linear values against the
-pathtrace pass's per-effect reference at the same camera and size."""
+radius lower the AO error; more SSAO samples and a radius grown toward the truth's lower
+SSAO's; a larger shadow map lowers the error of the sun's shadows, and ray-traced shadows
+beat every shadow map. Errors are RMSE of linear values against the pathtrace pass's
+per-effect reference at the same camera and size."""
 
 from __future__ import annotations
 
@@ -55,12 +56,21 @@ def configs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("truth")
     return {"rt": with_outputs(tmp, "rt_shadows", ["lighting.hdr", "rt_ao.ao"]),
             "shadows": with_outputs(tmp, "rt_shadows", ["lighting.hdr"]),
+            "ssao": with_outputs(tmp, "deferred_ssao_shadows", ["ssao.ao"]),
             "pt": f"{ROOT}/configs/pathtrace.toml"}
 
 
-def test_more_rt_ao_samples_and_the_matching_radius_lower_the_ao_error(configs):
-    ref = images(configs["pt"], "pt.mode=ao", "pt.spp=32", "pt.ao_radius=1.0",
-                 frames=4)["pt.hdr"]
+@pytest.fixture(scope="module")
+def ao_truth(configs):
+    """The AO truth of radius 1 (pt.hdr: the open fraction in rgb, coverage in alpha), and
+    the same at another seed."""
+    sets = ("pt.mode=ao", "pt.spp=32", "pt.ao_radius=1.0")
+    return (images(configs["pt"], *sets, frames=4)["pt.hdr"],
+            images(configs["pt"], *sets, "pt.seed=5", frames=4)["pt.hdr"])
+
+
+def test_more_rt_ao_samples_and_the_matching_radius_lower_the_ao_error(configs, ao_truth):
+    ref, second = ao_truth
     seen = ref[..., 3] == 1  # pixels wholly on the scene (rt_ao: 1 on the sky, truth 0)
     truth = ref[..., 0][seen]
     errors = {}
@@ -73,9 +83,49 @@ def test_more_rt_ao_samples_and_the_matching_radius_lower_the_ao_error(configs):
                         "rt_ao.radius=0.25")["rt_ao.ao"][..., 0][seen].astype(np.float32)
     assert rmse(mismatched, truth) > 1.5 * errors[16]  # the radius the truth was made with
     # negative control: the error measure does not rank two seeds of one count apart
-    other = images(configs["pt"], "pt.mode=ao", "pt.spp=32", "pt.ao_radius=1.0", "pt.seed=5",
-                   frames=4)["pt.hdr"][..., 0][seen]
-    assert rmse(other, truth) < 0.5 * errors[16]
+    assert rmse(second[..., 0][seen], truth) < 0.5 * errors[16]
+
+
+def test_more_ssao_samples_and_a_radius_grown_toward_the_truths_lower_the_ao_error(
+        configs, ao_truth):
+    """SSAO against the AO truth, compared where SSAO looks: its half-resolution texels
+    stand for the full-resolution pixel at their top-left (ssao_common.glsl), so the truth
+    is read there; pixels on the scene only; every occluder of the sun scene is in view.
+    SSAO is set to estimate the truth's quantity, the open fraction: power 1 (its default
+    1.5 is a contrast curve), intensity 1.
+
+    What holds, blur off (its depth-aware blur trades noise for bias): 1, 4 and 16 samples
+    at the truth's radius lower the error (48x48 on lavapipe: RMSE 0.099, 0.067, 0.056; 64
+    samples 0.052, where the bias dominates); at 16 samples a radius of 0.25, 0.5 and 1
+    (the truth's) lowers it (0.082, 0.073, 0.056); at 4 samples the blur lowers it (0.059
+    against 0.067), at 16 it does not (0.057 against 0.056: not asserted).
+
+    What does not hold, so is not asserted: the truth's radius is not SSAO's best. SSAO
+    tests points at 0.1 to 1 radius (a mean of 0.4), not rays that reach the radius, so it
+    misses occluders the truth counts, and its error is least at 1.5 to 2 times the truth's
+    radius (64 samples: 0.050 and 0.048 at 1.5 and 2, 0.052 at 1, 0.054 at 4).
+    """
+    ref, second = ao_truth
+    seen = ref[::2, ::2, 3] == 1
+    truth = ref[::2, ::2, 0][seen]
+
+    def error(*sets: str) -> float:
+        ao = images(configs["ssao"], "ssao.power=1", "ssao.intensity=1", *sets)["ssao.ao"]
+        return rmse(ao[..., 0][seen].astype(np.float32), truth)
+
+    samples = {n: error(f"ssao.samples={n}", "ssao.radius=1.0", "ssao.blur_radius=0")
+               for n in (1, 4, 16)}
+    assert samples[1] > samples[4] > samples[16], samples
+    radii = {r: error("ssao.samples=16", f"ssao.radius={r}", "ssao.blur_radius=0")
+             for r in (0.25, 0.5)}
+    radii[1.0] = samples[16]
+    assert radii[0.25] > radii[0.5] > 1.15 * radii[1.0], radii
+    blurred = error("ssao.samples=4", "ssao.radius=1.0", "ssao.blur_radius=2")
+    assert blurred < 0.95 * samples[4], (blurred, samples[4])
+    # negative controls: the pixels compared hold occlusion SSAO finds (SSAO off, every
+    # pixel open, is far worse), and two seeds of the truth are far nearer than SSAO
+    assert error("ssao.intensity=0") > 1.4 * samples[16]
+    assert rmse(second[::2, ::2, 0][seen], truth) < 0.5 * samples[16]
 
 
 def test_larger_shadow_maps_lower_the_shadow_error_and_ray_tracing_beats_them(configs):

@@ -14,7 +14,17 @@ import pytest
 
 from rfw.config import load_config
 from rfw.render import render as rfw_render
-from rfw.scene import Camera, Instance, Light, Material, Scene, cornell, spheres
+from rfw.scene import (
+    Camera,
+    Instance,
+    Light,
+    Material,
+    Scene,
+    Texture,
+    cornell,
+    load_scene,
+    spheres,
+)
 from rfw.scene.agreement import METAL, _quads, lambert
 
 mi = pytest.importorskip("mitsuba")
@@ -178,6 +188,96 @@ def test_seeds():
         tm.render(box, (8, 8), spp=1, seed=70_000)
 
 
+def test_base_colour_texture_is_linear_upright_and_scaled():
+    """A 2x2 sRGB texture (nearest) on the wall under a directional light: each quarter of
+    the wall is base factor * the texel's linear value / pi * irradiance, the image's top
+    row at the wall's top (the wall's uv v = 0 there, as glTF's), exactly; the texel
+    bytes taken as linear, or the image upside down, would not match."""
+    texels = np.array([[[200, 40, 10, 255], [30, 180, 60, 255]],
+                       [[90, 90, 220, 255], [250, 250, 250, 255]]], np.uint8)
+    factor = (0.8, 0.9, 0.7, 1.0)
+    scene = replace(wall_scene(replace(GREY, base_color=factor, base_color_texture=0),
+                               [Light("directional", (1.0, 1.0, 1.0), 2.0,
+                                      direction=(0.0, 0.0, -1.0))]),
+                    textures=[Texture("quarters", texels, srgb=True, mag_filter="nearest")])
+    img = tm.render(scene, (16, 16), spp=4, sky=0.0, max_depth=2)
+    linear = tm.srgb_to_linear(texels[..., :3] / 255.0) * np.array(factor[:3]) / np.pi * 2.0
+    # the wall spans pixels 2.3 to 13.7 of 16: rows and columns 5 and 10 are well inside
+    # its quarters
+    for (row, col), (ty, tx) in {(5, 5): (0, 0), (5, 10): (0, 1), (10, 5): (1, 0),
+                                 (10, 10): (1, 1)}.items():
+        np.testing.assert_allclose(img[row, col], linear[ty, tx], rtol=1e-4)
+    assert not np.allclose(img[5, 5], linear[1, 0], rtol=0.05)  # upside down
+    raw = texels[0, 0, :3] / 255.0 * np.array(factor[:3]) / np.pi * 2.0
+    assert not np.allclose(img[5, 5], raw, rtol=0.05)  # bytes taken as linear
+
+
+# ---------------------------------------------------------------------------------------------
+# the glTF agreement scene
+
+
+STILL_LIFE = ROOT / "tests" / "data" / "agreement"
+
+
+def still_life() -> Scene:
+    return load_scene(STILL_LIFE / "still_life.gltf")
+
+
+def test_the_still_life_files_are_what_the_script_writes(tmp_path):
+    """tests/data/agreement is scripts/make_still_life.py's output: the same JSON and
+    buffer bytes and the same texels."""
+    import importlib.util
+
+    from PIL import Image
+
+    spec = importlib.util.spec_from_file_location("make_still_life",
+                                                  ROOT / "scripts" / "make_still_life.py")
+    make = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make)
+    written = make.write(tmp_path)
+    assert sorted(p.name for p in written) == sorted(p.name for p in STILL_LIFE.iterdir())
+    for name in ("still_life.gltf", "still_life.bin"):
+        assert (tmp_path / name).read_bytes() == (STILL_LIFE / name).read_bytes(), name
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "checker.png")),
+                          np.asarray(Image.open(STILL_LIFE / "checker.png")))
+
+
+def test_the_still_life_converts_from_the_loaded_scene():
+    """The loaded glTF converts as it loads: four instances (one box mesh placed twice),
+    world-space meshes whose windings agree with their normals (the mirrored small box's
+    flipped back), the floor's texture as a bitmap, the point and directional lights; the
+    mirrored box's triangles left as they were would face inward."""
+    import drjit as dr
+
+    scene = still_life()
+    d = tm.scene_dict(scene, (8, 8))
+    meshes = [v for k, v in d.items() if k.startswith("mesh_")]
+    assert len(meshes) == 4
+    facing = {}
+    for m in meshes:
+        params = mi.traverse(m)
+        p = np.array(dr.unravel(mi.Point3f, params["vertex_positions"])).T
+        n = np.array(dr.unravel(mi.Normal3f, params["vertex_normals"])).T
+        f = np.array(dr.unravel(mi.Vector3u, params["faces"])).T
+        face = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+        facing[m.id()] = np.sum(face * n[f].sum(axis=1), axis=1)
+    assert all(np.all(v > 0) for v in facing.values()), {k: v.min() for k, v in facing.items()}
+    small = next(i for i in scene.instances if i.name == "small box")
+    assert np.linalg.det(small.transform[:3, :3]) < 0  # mirrored: the flip was needed
+    mesh = scene.meshes[small.mesh]
+    t = small.transform.astype(np.float64)
+    p = mesh.positions @ t[:3, :3].T
+    n = mesh.normals @ np.linalg.inv(t[:3, :3])
+    tri = mesh.indices.reshape(-1, 3)
+    unflipped = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    assert np.all(np.sum(unflipped * n[tri].sum(axis=1), axis=1) < 0)
+    floor = scene.materials[0]
+    bsdf, exact = tm.bsdf_dict(floor, scene.textures)
+    assert exact and bsdf["reflectance"]["type"] == "bitmap"
+    assert bsdf["reflectance"]["filter_type"] == "nearest"
+    assert sorted(d[k]["type"] for k in d if k.startswith("light_")) == ["directional", "point"]
+
+
 # ---------------------------------------------------------------------------------------------
 # the camera against rfw's raster
 
@@ -202,10 +302,11 @@ def raster_distance(scene: Scene, size: tuple[int, int]) -> np.ndarray:
     return np.where(z < 1.0, dist, np.nan)
 
 
-@pytest.mark.parametrize("make", [cornell, spheres])
+@pytest.mark.parametrize("make", [cornell, spheres, still_life])
 def test_camera_agrees_with_rfws_raster(make):
     """The hit mask and the distance to the first hit through every pixel centre agree with
-    rfw's raster; the images flipped left-right or up-down (a sensor built the wrong way
+    rfw's raster (the still life's camera is a glTF node's, turned and tilted); the images
+    flipped left-right or up-down (a sensor built the wrong way
     round) do not."""
     scene = make()
     size = (40, 30)
