@@ -42,7 +42,8 @@ HDR_FILE, LDR_FILE, ERROR_FILE, META_FILE = "hdr.exr", "ldr.png", "error.exr", "
 # what shapes a reference besides scene, camera, size and samples: a change to any of these
 # renders it anew rather than reusing the cached one
 SOURCES = ("passes/pathtrace", "passes/accel_build", "passes/tonemap", "shaders/common",
-           "configs/pathtrace.toml", "rfw/scene", "vkext/scene.py", "vkext/accel")
+           "configs/pathtrace.toml", "rfw/scene", "rfw/backends/scene_data.py", "vkext/scene.py",
+           "vkext/accel")
 
 
 COMPONENTS = ("full", "ao", "direct", "direct_centre")
