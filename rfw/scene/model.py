@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import RfwError, warn
+from .animation import Animation, Node
 
 
 @dataclass
@@ -89,6 +90,9 @@ class Instance:
     mesh: int  # index into Scene.meshes
     transform: np.ndarray  # (4, 4) float32, column vectors: world = T @ local
     name: str = ""
+    # the node of Scene.nodes that places it, where the scene is animated (None: it is
+    # placed by its transform alone); its transform is that node's rest world matrix
+    node: int | None = None
 
 
 def transform_problem(transform: np.ndarray) -> str | None:
@@ -226,6 +230,10 @@ class Scene:
     # wide by the points_lines pass; stroke_instances place them (Instance.mesh: a stroke)
     strokes: list[Mesh] = field(default_factory=list)
     stroke_instances: list[Instance] = field(default_factory=list)
+    # node animations (rfw.scene.animation): the node hierarchy instances are placed by
+    # (Instance.node) and the clips that move it; both empty for a still scene
+    nodes: list[Node] = field(default_factory=list)
+    animations: list[Animation] = field(default_factory=list)
 
     @property
     def triangle_count(self) -> int:
