@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..scene.animation import Animator
 from ..scene.limits import check_texture_size
 from ..scene.model import Camera, Light, Material, Mesh, Scene, SceneError, Texture
 
@@ -167,6 +168,21 @@ def instance_blocks(models: Any) -> np.ndarray:
                            np.linalg.inv(m).reshape(-1, 16)], axis=1).astype(np.float32)
 
 
+def pose_blocks(models: Any) -> np.ndarray:
+    """``instance_blocks`` of transforms an animation made, where a scale may reach zero:
+    a singular transform's row is all zeros (its mesh collapses to nothing drawn)."""
+    m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    a = m[:, :3, :3]
+    scale = np.abs(a).max(axis=(1, 2))
+    ok = np.isfinite(m).all(axis=(1, 2)) & (scale > 0.0)
+    with np.errstate(all="ignore"):
+        ok[ok] = np.abs(np.linalg.det(a[ok] / scale[ok, None, None])) >= 1e-12
+    out = np.zeros((len(m), 32), np.float32)
+    if ok.any():
+        out[ok] = instance_blocks(m[ok])
+    return out
+
+
 def mirrored_mask(models: Any) -> np.ndarray:
     """``is_mirrored`` of every model at once (one batched determinant): bool per model."""
     m = np.asarray(models, np.float64).reshape(-1, 4, 4)
@@ -304,6 +320,78 @@ class CameraFrames:
                           for m in (before[0], before[1], vp))
         motion += struct.pack("<4f", *offset, *before[2])
         return main, motion, now
+
+
+class InstanceFrames:
+    """Every placed instance's row (``instance_blocks``: the instances', then the stroke
+    instances') as each frame sees it, where the scene's animations move them: the twin of
+    :class:`CameraFrames`.
+
+    ``time`` is the scene's time in seconds (its animations' timeline), set between frames
+    by the frame driver (:mod:`rfw.timeline`) and read when a frame begins.
+    ``begin(index)`` gives frame ``index``'s rows and last frame's (for motion vectors):
+    the frame after the one begun last takes that frame's rows as its previous ones; any
+    other frame has none and gets its own (zero motion), as does an instance whose last
+    transform was singular. ``pose`` counts the frames whose rows differ from the frame
+    begun before them (a path tracer restarts its sums when it changes). A scene without
+    animations never moves (``moves`` False): ``begin`` then gives nothing to write."""
+
+    def __init__(self, scene: Scene):
+        placed = [*scene.instances, *scene.stroke_instances]
+        animator = Animator(scene.nodes, scene.animations) if scene.animations else None
+        self.animator = animator
+        self.nodes = [i.node for i in placed]
+        # the rows that move: those of instances placed by a node an animation moves
+        self.moving = np.array([k for k, n in enumerate(self.nodes) if animator is not None
+                                and n in animator.moving], np.int64)
+        self.rest = np.asarray([i.transform for i in placed], np.float32).reshape(-1, 4, 4)
+        self.time = 0.0
+        self.index: int | None = None  # the frame begun last
+        self.pose = 0
+        self._ran: tuple[np.ndarray, np.ndarray] | None = None  # its transforms and rows
+
+    @property
+    def moves(self) -> bool:
+        return len(self.moving) > 0
+
+    @property
+    def last_rows(self) -> np.ndarray | None:
+        """The rows of the frame begun last (None before the first, or when nothing
+        moves): for a copy of the rows made mid-run."""
+        return None if self._ran is None else self._ran[1]
+
+    def transforms(self, t: float) -> np.ndarray:
+        """Every placed instance's (4, 4) float32 transform at ``t`` seconds."""
+        out = self.rest.copy()
+        if self.moves:
+            world = self.animator.world(t)
+            out[self.moving] = np.asarray([world[self.nodes[k]] for k in self.moving],
+                                          np.float32)
+        return out
+
+    def rows(self, transforms: np.ndarray) -> np.ndarray:
+        """``pose_blocks`` of ``transforms``: (n, 32) float32."""
+        return pose_blocks(transforms)
+
+    def begin(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Frame ``index``'s transforms, rows and last frame's rows; None when that frame
+        has begun already, or nothing moves."""
+        if not self.moves or index == self.index:
+            return None
+        now = self.transforms(self.time)
+        before = self._ran if self.index is not None and index == self.index + 1 else None
+        rows = self.rows(now)
+        if before is None:
+            prev = rows
+        else:
+            prev = before[1].copy()
+            lost = ~prev.any(axis=1)  # singular last frame: no motion to measure
+            prev[lost] = rows[lost]
+        if self._ran is not None and not np.array_equal(rows, self._ran[1]):
+            self.pose += 1
+        self.index = index
+        self._ran = (now, rows)
+        return now, rows, prev
 
 
 def sun_camera_bytes(camera: Camera, sun: np.ndarray, size: tuple[int, int]) -> bytes:
