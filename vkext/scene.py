@@ -43,7 +43,15 @@ from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import copy_into_uniforms, one_time, record_image_bands, record_upload
+from .commands import (
+    COPY_WRITE,
+    BufferBarrier,
+    barrier,
+    copy_into_uniforms,
+    one_time,
+    record_image_bands,
+    record_upload,
+)
 from .consts import (
     const,
     ffi,
@@ -73,8 +81,11 @@ _SCENE_READ = State(None, frozenset({"VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "V
                                "SHADER_STORAGE_READ"}))
 # the cameras' uniforms: read by any stage of any pass (written by a frame's copy_camera)
 CAMERA_READ = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"UNIFORM_READ"}))
-# the instance rows animations move: read as storage by any stage (written by copy_pose)
+# the instance rows animations move: read as storage by any stage (written by copy_pose),
+# and before a frame's copy, also the last write (the upload's, or last frame's copy)
 POSE_READ = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"SHADER_STORAGE_READ"}))
+POSE_BEFORE = State(None, frozenset({"ALL_COMMANDS"}),
+                    frozenset({"SHADER_STORAGE_READ", "TRANSFER_WRITE"}))
 MESHLET_ROW_BYTES = 144  # meshlet.glsl's MInstance
 _SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                  frozenset({"SHADER_SAMPLED_READ"}))
@@ -403,7 +414,8 @@ class VkScene:
         parts = self._pose_parts(self.poses.rest, rest, rest)
         offset = 0
         for (dst, _), data in zip(self._pose_targets(), parts, strict=True):
-            up.buffer(dst, data)
+            if dst is not self.instance_buffer:  # uploaded already (_instances)
+                up.buffer(dst, data)
             region = ffi.new("VkBufferCopy*", {"srcOffset": offset, "dstOffset": 0,
                                                "size": data.nbytes})
             self._pose_copies.append((dst, region))
@@ -585,8 +597,15 @@ class VkScene:
         it into ``source``, its slot's own) into the buffers passes bind, as
         :meth:`copy_camera` copies the cameras: after every read of the frames before it,
         before every read after it. Nothing where no animation moves an instance."""
+        if not self._pose_copies:
+            return
+        span = [(dst, region.dstOffset, region.size) for dst, region in self._pose_copies]
+        barrier(cmd, buffer_barriers=[BufferBarrier(d, POSE_BEFORE, COPY_WRITE, o, n)
+                                      for d, o, n in span])
         for dst, region in self._pose_copies:
-            copy_into_uniforms(cmd, source, dst, region, POSE_READ)
+            lib.vkCmdCopyBuffer(cmd, source.handle, dst.handle, 1, region)
+        barrier(cmd, buffer_barriers=[BufferBarrier(d, COPY_WRITE, POSE_READ, o, n)
+                                      for d, o, n in span])
 
     def camera_range(self, camera: str = "main") -> BufferRange:
         k = 1 if camera == "sun" else 0
