@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -124,8 +125,9 @@ def texture_views(scene: Scene, limit: int | None, key: str,
 
 
 def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
-    """An orthographic light camera that encloses the scene's bounds along ``direction``."""
-    lo, hi = scene.bounds()
+    """An orthographic light camera that encloses the scene's bounds along ``direction``
+    (where animations move instances, wherever their keys take them: ``posed_bounds``)."""
+    lo, hi = posed_bounds(scene)
     if not np.all(np.isfinite(lo)):  # nothing drawable: any box will do
         lo, hi = np.zeros(3), np.ones(3)
     center = (lo + hi) / 2
@@ -144,6 +146,30 @@ def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
 
 
 
+def posed_bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """``scene.bounds()``, and where animations move instances, theirs at every key time of
+    the clips too (``Animator.key_times``: a linear path lies between its keys)."""
+    lo, hi = scene.bounds()
+    if not scene.animations:
+        return lo, hi
+    frames = InstanceFrames(replace(scene, stroke_instances=[]))
+    if not frames.moves:
+        return lo, hi
+    parts = [np.stack([lo, hi])] if np.all(np.isfinite(lo)) else []
+    keep = [k for k in frames.moving if len(scene.meshes[scene.instances[k].mesh].positions)]
+    if not keep:
+        return lo, hi
+    boxes = [scene.meshes[scene.instances[k].mesh].bounds() for k in keep]
+    corners = np.array([[[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1])
+                         for z in (a[2], b[2])] for a, b in boxes])  # (n, 8, 4)
+    for t in frames.animator.key_times(limit=64):
+        world = frames.transforms(float(t))[keep].astype(np.float64)
+        pts = np.einsum("nij,nkj->nki", world, corners)[..., :3].reshape(-1, 3)
+        parts.append(pts[np.isfinite(pts).all(axis=1)])
+    pts = np.concatenate(parts)
+    return pts.min(axis=0), pts.max(axis=0)
+
+
 def material_bytes(m: Material) -> bytes:
     """material.glsl's MaterialFactors: flags x alpha mode, y double-sided, z the specular
     factor's float bits (uintBitsToFloat)."""
@@ -160,12 +186,17 @@ def instance_bytes(model: np.ndarray) -> bytes:
 
 def instance_blocks(models: Any) -> np.ndarray:
     """``instance_bytes`` of every model at once: one float32 row of 32 per instance (one
-    batched inverse instead of one per instance)."""
+    batched inverse instead of one per instance). A singular model (an animated node's
+    rest pose may scale it to zero) gets ``pose_blocks``' zero row."""
     m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    try:
+        inverse = np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        return pose_blocks(m)
     # GLSL matrices are column-major: the model's columns, then those of inv(model).T,
     # which are inv(model)'s rows
     return np.concatenate([m.transpose(0, 2, 1).reshape(-1, 16),
-                           np.linalg.inv(m).reshape(-1, 16)], axis=1).astype(np.float32)
+                           inverse.reshape(-1, 16)], axis=1).astype(np.float32)
 
 
 def pose_blocks(models: Any) -> np.ndarray:
@@ -179,7 +210,8 @@ def pose_blocks(models: Any) -> np.ndarray:
         ok[ok] = np.abs(np.linalg.det(a[ok] / scale[ok, None, None])) >= 1e-12
     out = np.zeros((len(m), 32), np.float32)
     if ok.any():
-        out[ok] = instance_blocks(m[ok])
+        out[ok] = np.concatenate([m[ok].transpose(0, 2, 1).reshape(-1, 16),
+                                  np.linalg.inv(m[ok]).reshape(-1, 16)], axis=1)
     return out
 
 

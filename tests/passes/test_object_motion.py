@@ -5,7 +5,8 @@ depth, projected where it was last frame), the still slab under it gives exactly
 cube moves in the rendered image. Negative controls: the same file without its animation
 has no motion at all, and its cube stays put. On vk the ray-traced passes see the move too:
 ``rt_primary``'s albedo follows the cube (the TLAS is built from the moved transforms; a
-TLAS that keeps the rest pose fails the check) and the path tracer restarts its sums."""
+TLAS that keeps the rest pose fails the check), the visibility-buffer and meshlet
+G-buffers draw it moving, and the path tracer restarts its sums."""
 
 from __future__ import annotations
 
@@ -29,9 +30,14 @@ CAMERA = ["camera.position=[3, 2.5, 4]", "camera.target=[0, 0.3, 0]", "camera.zn
 TOLERANCE = 0.01  # pixels: float16 motion vectors (tests/passes/test_velocity.py)
 
 
-def write_scene(folder: Path, *, animated: bool = True) -> Path:
+SLIDE = ("translation", "LINEAR", [0.0, 1.0], [[0, 0.5, 0], [2, 0.5, 0]])
+
+
+def write_scene(folder: Path, *, animated: bool = True, channel: tuple = SLIDE,
+                cube: dict | None = None, name: str | None = None) -> Path:
     """A grey slab and a red unit cube on it (glTF, one embedded buffer); the cube's node
-    slides from x = 0 to x = 2 over the first second."""
+    (rest TRS ``cube``) is moved by ``channel`` (path, interpolation, times, values):
+    by default it slides from x = 0 to x = 2 over the first second."""
     blob, views, accessors = bytearray(), [], []
 
     def add(array: np.ndarray, ctype: int, kind: str) -> int:
@@ -53,21 +59,21 @@ def write_scene(folder: Path, *, animated: bool = True) -> Path:
             "indices": add(mesh.indices.astype(np.uint32), 5125, "SCALAR"), "material": k}]})
     doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
            "nodes": [{"name": "slab", "mesh": 0, "translation": [0, -0.1, 0]},
-                     {"name": "cube", "mesh": 1, "translation": [0, 0.5, 0]}],
+                     {"name": "cube", "mesh": 1, "translation": [0, 0.5, 0], **(cube or {})}],
            "meshes": meshes,
            "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1]}},
                          {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.1, 0.1, 1]}}]}
     if animated:
-        times = add(np.array([0.0, 1.0], np.float32), 5126, "SCALAR")
-        values = add(np.array([[0, 0.5, 0], [2, 0.5, 0]], np.float32), 5126, "VEC3")
-        doc["animations"] = [{"name": "slide", "samplers": [{"input": times,
-                                                              "output": values}],
-                              "channels": [{"sampler": 0, "target": {"node": 1,
-                                                                     "path": "translation"}}]}]
+        path, interpolation, times, values = channel
+        times = add(np.array(times, np.float32), 5126, "SCALAR")
+        values = add(np.array(values, np.float32), 5126, "VEC3")
+        doc["animations"] = [{"name": "slide", "samplers": [{
+            "input": times, "output": values, "interpolation": interpolation}],
+            "channels": [{"sampler": 0, "target": {"node": 1, "path": path}}]}]
     doc.update(bufferViews=views, accessors=accessors,
                buffers=[{"byteLength": len(blob), "uri": "data:application/octet-stream;"
                          "base64," + base64.b64encode(bytes(blob)).decode()}])
-    path = folder / ("slide.gltf" if animated else "still.gltf")
+    path = folder / (name or ("slide.gltf" if animated else "still.gltf"))
     path.write_text(json.dumps(doc))
     return path
 
@@ -191,6 +197,36 @@ def test_the_cube_moves_in_the_image(backend, tmp_path):
     assert shift > 4.0
     assert abs(moved - shift) < 1.0, (moved, shift)
     assert stayed == 0.0 and abs(stayed - shift) > 1.0
+
+
+def test_a_cube_scaled_up_from_zero_pops_in_without_motion(backend, tmp_path):
+    """A node at scale 0 (valid glTF: the loader would skip it were it still) that a STEP
+    channel scales to 1 at 0.25 s: nothing red in frame 0, the cube in frame 1 with no
+    motion (last frame it had no shape to move from); the same file with the cube at
+    scale 1 throughout (the control) shows it in frame 0."""
+    pop = ("scale", "STEP", [0.0, 0.25, 1.0], [[0, 0, 0], [1, 1, 1], [1, 1, 1]])
+    frames, _ = _frames(backend, write_scene(tmp_path, channel=pop, cube={"scale": [0, 0, 0]}))
+    assert not _red(frames[0]["gbuffer.albedo"]).any()
+    cube = _red(frames[1]["gbuffer.albedo"])
+    assert cube.sum() > 40 and np.all(frames[1]["gbuffer.velocity"] == 0.0)
+    still = ("scale", "STEP", [0.0, 0.25, 1.0], [[1, 1, 1]] * 3)
+    control, _ = _frames(backend, write_scene(tmp_path, channel=still, name="still.gltf"))
+    assert _red(control[0]["gbuffer.albedo"]).sum() == cube.sum()
+
+
+@pytest.mark.parametrize("config", ["deferred_vis.toml", "meshlet.toml"])
+def test_the_visibility_buffer_and_the_meshlets_follow_too(vk_device, tmp_path, config):
+    """vk's other G-buffers read their own copies of the instance rows (the scene tables'
+    and the meshlets'): the cube moves in their images as in the raster one's; the still
+    file (the control) keeps it put."""
+    backend = ("vk", vk_device)
+    shifts = []
+    for animated in (True, False):
+        got, _ = _frames(backend, write_scene(tmp_path, animated=animated), config=config,
+                         outputs=("tonemap.ldr",), sets=())
+        shifts.append(_centroid_x(_red(got[2]["tonemap.ldr"]))
+                      - _centroid_x(_red(got[0]["tonemap.ldr"])))
+    assert abs(shifts[0] - _center_shift()) < 1.0 and shifts[1] == 0.0, shifts
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from rfw.backends.scene_data import InstanceFrames
+from rfw.backends.scene_data import InstanceFrames, posed_bounds
 from rfw.config import apply_overrides, load_config
 from rfw.errors import RfwError
 from rfw.scene import SceneError, load_gltf
@@ -215,3 +215,14 @@ def test_the_timeline_plays_frame_k_at_start_plus_k_over_fps(tmp_path):
     with pytest.raises(RfwError, match=r"--set animation\.fsp: unknown key 'fsp' \(did you "
                                        r"mean 'fps'\?\)"):
         apply_overrides(cfg, ["animation.fsp=3"])
+
+
+def test_the_shadow_box_encloses_every_key_pose(tmp_path):
+    """The sun's box (``posed_bounds``) reaches where the keys take the quad (x 0..1 moved
+    by up to 4): 5, against the rest pose's 1 (the still file, the control)."""
+    g, _ = animated([("translation", "LINEAR", [0, 1, 2], [[0, 0, 0], [4, 0, 0], [1, 0, 0]])])
+    lo, hi = posed_bounds(load_gltf(g.write(tmp_path)))
+    np.testing.assert_allclose([lo[0], hi[0]], [0.0, 5.0], atol=1e-6)
+    del g.doc["animations"]
+    np.testing.assert_allclose(posed_bounds(load_gltf(g.write(tmp_path, "still.gltf")))[1][0],
+                               1.0)

@@ -124,7 +124,8 @@ class Animations:
         the rest pose's throughout (said once)."""
         if channel.path != "scale":
             return
-        rest = np.sign(np.prod(self.scene.nodes[channel.node].scale))
+        # a zero scale at rest is drawn unmirrored
+        rest = np.sign(np.prod(self.scene.nodes[channel.node].scale)) or 1.0
         keys = channel.values[:, 1] if channel.interpolation == "CUBICSPLINE" \
             else channel.values
         signs = np.sign(np.prod(keys, axis=-1))
