@@ -636,9 +636,9 @@ class VkScene:
             acc = SceneAccel(self.device, self.scene, label="scene.accel",
                              moves=self.poses.moves, **options)
             cache[key] = self._own(acc)
-            rows = self.poses._ran  # made mid-run: the frame begun last's transforms
-            if rows is not None:
-                acc.move(rows[0][:len(self.scene.instances)])
+            moved = self.poses.last_transforms  # made mid-run: the frame begun last's
+            if moved is not None:
+                acc.move(moved[:len(self.scene.instances)])
         return cache[key]
 
     def bindings(self) -> dict[str, Any]:

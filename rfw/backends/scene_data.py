@@ -392,6 +392,11 @@ class InstanceFrames:
         moves): for a copy of the rows made mid-run."""
         return None if self._ran is None else self._ran[1]
 
+    @property
+    def last_transforms(self) -> np.ndarray | None:
+        """The (n, 4, 4) transforms of the frame begun last (None as ``last_rows``)."""
+        return None if self._ran is None else self._ran[0]
+
     def transforms(self, t: float) -> np.ndarray:
         """Every placed instance's (4, 4) float32 transform at ``t`` seconds."""
         out = self.rest.copy()

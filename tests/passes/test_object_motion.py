@@ -238,14 +238,17 @@ def rt_device(vk_device):
     return "vk", vk_device
 
 
-def test_the_tlas_follows_the_animation(rt_device, tmp_path, monkeypatch):
-    """``rt_primary``'s albedo (primary rays through the TLAS) shows the cube where the
-    raster G-buffer does, frame by frame; a TLAS left at the rest pose (the negative
-    control) keeps it at frame 0's place."""
+@pytest.mark.parametrize("refit", [False, True])
+def test_the_tlas_follows_the_animation(rt_device, tmp_path, monkeypatch, refit):
+    """``rt_primary``'s albedo (primary rays through the TLAS, rebuilt or refit each frame)
+    shows the cube where the raster G-buffer does, frame by frame; a TLAS left at the rest
+    pose (the negative control) keeps it at frame 0's place."""
     scene = write_scene(tmp_path)
     raster, _ = _frames(rt_device, scene, outputs=("gbuffer.albedo",), sets=())
-    traced, _ = _frames(rt_device, scene, config="rt_primary.toml",
-                        outputs=("primary.albedo",), sets=())
+    traced, timings = _frames(rt_device, scene, config="rt_primary.toml",
+                              outputs=("primary.albedo",),
+                              sets=(f"accel.allow_update={str(refit).lower()}",))
+    assert timings["accel"]["frame_builds"]["update" if refit else "build"] >= 3
     for r, t in zip(raster, traced, strict=True):
         a, b = _red(r["gbuffer.albedo"]), _red(t["primary.albedo"])
         assert abs(_centroid_x(a) - _centroid_x(b)) < 0.25 and (a != b).mean() < 0.02
@@ -254,7 +257,8 @@ def test_the_tlas_follows_the_animation(rt_device, tmp_path, monkeypatch):
 
     monkeypatch.setattr(SceneAccel, "move", lambda self, transforms: None)
     frozen, _ = _frames(rt_device, scene, config="rt_primary.toml",
-                        outputs=("primary.albedo",), sets=())
+                        outputs=("primary.albedo",),
+                        sets=(f"accel.allow_update={str(refit).lower()}",))
     last = _red(raster[2]["gbuffer.albedo"])
     assert abs(_centroid_x(last) - _centroid_x(_red(frozen[2]["primary.albedo"]))) > 4.0
 
