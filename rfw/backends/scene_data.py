@@ -369,13 +369,15 @@ class InstanceFrames:
     animations never moves (``moves`` False): ``begin`` then gives nothing to write."""
 
     def __init__(self, scene: Scene):
-        placed = [*scene.instances, *scene.stroke_instances]
         animator = Animator(scene.nodes, scene.animations) if scene.animations else None
         self.animator = animator
+        # a still scene keeps nothing: 100,000 instances cost no copy of their transforms
+        placed = [*scene.instances, *scene.stroke_instances] if animator is not None else []
         self.nodes = [i.node for i in placed]
         # the rows that move: those of instances placed by a node an animation moves
-        self.moving = np.array([k for k, n in enumerate(self.nodes) if animator is not None
-                                and n in animator.moving], np.int64)
+        self.moving = np.array([k for k, n in enumerate(self.nodes)
+                                if n in animator.moving], np.int64) if placed else \
+            np.zeros(0, np.int64)
         self.rest = np.asarray([i.transform for i in placed], np.float32).reshape(-1, 4, 4)
         self.time = 0.0
         self.index: int | None = None  # the frame begun last
