@@ -130,6 +130,10 @@ class VkSceneView(SceneView, Protocol):
 
     mesh_buffers: list[Any]  # per mesh: positions, normals, uvs, tangents, indices
     camera_blob: bytes  # the cameras' bytes of the frame being recorded (camera paths move it)
+    # the instances' rows of each frame where animations move them (the scene tables'
+    # ``instances``), else None; ``poses.pose`` changes with the frame's transforms
+    instance_table: Any
+    poses: Any
 
     def accel(self, *, prefer: str | None = None, allow_update: bool = False,
               compact: bool = False) -> Any:
@@ -237,6 +241,9 @@ def scene_table_bindings(ctx: Any, label: str) -> tuple[dict[str, Any], dict[str
     textures, samplers = texture_lists(ctx.scene)
     bindings = {name: ctx.buffer(f"{label}:{name}", data)
                 for name, data in scene_tables(ctx.scene).items()}
+    moving = getattr(ctx.scene, "instance_table", None)
+    if moving is not None:  # animations move instances: the scene's rows of each frame
+        bindings["instances"] = moving
     return ({**bindings, "textures": textures, "samplers": samplers},
             {"MAX_TEXTURES": len(textures), "MAX_SAMPLERS": len(samplers)})
 

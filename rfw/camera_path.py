@@ -371,17 +371,26 @@ def set_frame_camera(frame: Any, camera: Any) -> None:
 
 
 def run_path(frame: Any, path: CameraPath | None, *, warmup: int, frames: int,
-             each_frame: Callable[[int, Any], None] | None = None) -> list[dict[str, Any]]:
+             each_frame: Callable[[int, Any], None] | None = None,
+             timeline: Any = None) -> list[dict[str, Any]]:
     """``warmup`` untimed frames from the path's first camera, then ``frames`` timed ones,
     frame ``k`` from ``path.camera(k, frames)``; ``each_frame(k, frame)`` after frame k.
+    A ``timeline`` (:class:`rfw.timeline.Timeline`) shows the scene's animations at
+    ``timeline.time(k)`` in timed frame ``k`` (the warm-up frames at frame 0's time).
     Returns each timed frame's camera (:func:`describe`, with ``write_ms``: the host time of
     writing it, waits for frames in flight included), empty without a path."""
+    from .timeline import set_frame_time
+
     if path is not None:
         set_frame_camera(frame, path.camera(0, frames))
+    if timeline is not None:
+        set_frame_time(frame, timeline.time(0))
     frame.run(warmup)
     frame.clear_timings()
     cameras = []
     for k in range(frames):
+        if timeline is not None and k:
+            set_frame_time(frame, timeline.time(k))
         if path is not None:
             cam = path.camera(k, frames)
             start = time.perf_counter()

@@ -12,6 +12,9 @@ use = "deferred_lighting"
 inputs = { albedo = "gbuffer.albedo", shadow = "shadow.depth" }
 settings = { ambient = 0.5 }
 
+[animation]                       # the scene's node animations (rfw.timeline)
+fps = 60                          # frame k at start + k / fps seconds
+
 [variants.shadows]                # --set shadows=off applies these overrides
 default = "on"
 on = {}
@@ -44,7 +47,7 @@ from .passes import SCENE_NEEDS, Pass
 from .registry import get_pass
 
 _KEYS = ("name", "scene", "size", "camera", "outputs", "pass", "variants", "frames",
-         "async_compute", "frames_in_flight")
+         "async_compute", "frames_in_flight", "animation")
 _PASS_KEYS = ("name", "use", "enabled", "inputs", "settings", "backend")
 _CAMERA_KEYS = ("position", "target", "up", "yfov", "znear", "zfar", "gltf", "path")
 MAX_FRAMES = 100_000  # timed frames of one run; more is a typo, not an experiment
@@ -77,6 +80,8 @@ class Config:
     explicit: list[tuple[str, Any]] = field(default_factory=list)  # --set pass.key=value
     async_compute: str = "auto"  # compute beside raster on a second queue (rfw.graph.queues)
     frames_in_flight: int | None = None  # None: RunOptions.default_in_flight (rfw.options)
+    # [animation]: the timeline the scene's node animations play on (rfw.timeline)
+    animation: dict[str, Any] | None = None
 
     def entry(self, name: str) -> PassEntry:
         for p in self.passes:
@@ -301,7 +306,7 @@ def _check_variant(vname: str, v: Any, source: str) -> None:
                                 "or a list of options")
 
 
-_RUN_ONLY_KEYS = ("scene", "camera", "variants", "frames")
+_RUN_ONLY_KEYS = ("scene", "camera", "variants", "frames", "animation")
 
 
 def is_run_config(path: str | Path) -> bool:
@@ -356,6 +361,10 @@ def _config_from(data: dict[str, Any], source: str, base_dir: Path | None) -> Co
                  frames_in_flight=None if "frames_in_flight" not in data else check_number(
                      data["frames_in_flight"], "frames_in_flight", kind=int, lo=1,
                      hi=MAX_FRAMES_IN_FLIGHT, file=source, element="frames_in_flight"))
+    if data.get("animation") is not None:
+        from .timeline import check_animation
+
+        cfg = replace(cfg, animation=check_animation(data["animation"], source))
     for vname, v in variants.items():
         default = v.get("default")
         if isinstance(default, bool):  # a switch: default = true
@@ -541,11 +550,14 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
         elif key == "camera" or key.startswith("camera."):
             cfg = _set_camera(cfg, key, value)
             camera_set = True
+        elif key.startswith("animation."):
+            cfg = _set_animation(cfg, key, value)
         else:
             head = key.partition(".")[0]
             if head not in [p.name for p in cfg.passes]:
                 known = [p.name for p in cfg.passes] + list(cfg.variants) + [
-                    "size", "scene", "frames", "async_compute", "frames_in_flight", "camera"]
+                    "size", "scene", "frames", "async_compute", "frames_in_flight", "camera",
+                    "animation"]
                 raise _fail(cfg.source, f"--set '{key}': no pass or variant '{head}'"
                             + did_you_mean(head, known))
             cfg = _set(cfg, key, value)  # fails here on a bad key, before it is kept
@@ -553,6 +565,23 @@ def apply_overrides(cfg: Config, sets: list[str]) -> Config:
     if camera_set:  # the whole camera table: a path's keys may come in any order
         cfg = replace(cfg, camera=_camera(cfg.camera, cfg.source, "--set "))
     return cfg
+
+
+def _set_animation(cfg: Config, key: str, text: str) -> Config:
+    """``--set animation.KEY=VALUE`` (``animation.fps=30``, ``animation.clip=walk``),
+    checked with the whole ``[animation]`` table."""
+    from .timeline import ANIMATION_KEYS, check_animation
+
+    name = key.partition(".")[2]
+    if name not in ANIMATION_KEYS:
+        raise _fail(cfg.source, f"unknown key '{name}'" + did_you_mean(name, ANIMATION_KEYS),
+                    f"--set {key}")
+    value = _camera_value(text)
+    table = {**(cfg.animation or {}), name: value}
+    try:
+        return replace(cfg, animation=check_animation(table, cfg.source, "--set animation"))
+    except RfwError as e:
+        raise _fail(cfg.source, e.message, e.element) from None
 
 
 def _async_compute(value: Any, source: str, element: str) -> str:

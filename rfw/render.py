@@ -24,6 +24,7 @@ from .frame import (
     start,
 )
 from .options import RunOptions, check_options
+from .timeline import timeline_for
 
 # timings.json's fields a backend adds, in this order after the ones every run has
 EXTRAS = ("memory", "culling", "techniques", "accel", "validation")
@@ -64,7 +65,9 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
 
     A camera path (``camera.path``, :mod:`rfw.camera_path`) gives each timed frame its
     camera (``timings["camera_path"]`` lists them); ``each_frame(k, frame)`` runs after timed
-    frame ``k`` (e.g. to read its images)."""
+    frame ``k`` (e.g. to read its images). A scene with node animations plays them on the
+    config's timeline (``animation``, :mod:`rfw.timeline`: timed frame ``k`` at
+    ``start + k / fps`` seconds; ``timings["animation"]`` lists the times)."""
     run = get_backend(backend, file=cfg.source)
     check_outputs(cfg)
     if frames is not None:
@@ -96,16 +99,19 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
         frame_plan, sides = prepare(built, backend, devs, options=options, mix=mix)
         camera = camera_for(cfg, scene)
         path = path_for(cfg, camera)
+        timeline = timeline_for(cfg, scene)  # None: a still scene
+        if timeline is not None:
+            scene = timeline.scene(scene)
         frame = start(frame_plan, sides, scene=scene, camera=camera, size=cfg.size,
                       options=options)
         n = options.frames or cfg.frames
-        if path is None and each_frame is None:
+        if path is None and each_frame is None and timeline is None:
             frame.run(options.warmup)
             frame.clear_timings()
             frame.run(n)
-        else:  # a camera per frame: rfw.camera_path drives the frames
+        else:  # a camera or a time per frame: rfw.camera_path drives the frames
             cameras = run_path(frame, path, warmup=options.warmup, frames=n,
-                               each_frame=each_frame)
+                               each_frame=each_frame, timeline=timeline)
         frame.drain()  # run() has; said again for what reads results below
         images = {name: frame.read(name) for name in frame.plan.outputs}
         extras = {k: v for s in sides.values()  # e.g. what the frame allocated
@@ -127,6 +133,8 @@ def render(cfg: Config, *, scene: Any = None, frames: int | None = None,
     timings["frames_in_flight"] = in_flight
     if path is not None:
         timings["camera_path"] = {"kind": path.kind, "frames": cameras}
+    if timeline is not None:
+        timings["animation"] = timeline.describe(n)
     known = sorted(extras, key=lambda k: EXTRAS.index(k) if k in EXTRAS else len(EXTRAS))
     timings.update({k: extras[k] for k in known if extras[k] is not None})
     return Result(cfg, images, timings, frame)

@@ -144,6 +144,9 @@ class FrameSlot:
     # camera buffer at the frame's start: VkScene.copy_camera), and the bytes it holds
     camera: Buffer | None = None
     camera_data: bytes | None = None
+    # the same for the instance rows animations move (VkScene.copy_pose); None: none move
+    pose: Buffer | None = None
+    pose_data: bytes | None = None
 
     def destroy(self, device: VkDevice) -> None:
         if device.alive:
@@ -151,9 +154,18 @@ class FrameSlot:
                 vk.vkDestroyFence(device.device, f, None)
         self.fence = self.own_fence = self.submit_info = None
         self.keep.clear()
-        for obj in (self.descriptors, self.timestamps, self.pool, self.camera):
+        for obj in (self.descriptors, self.timestamps, self.pool, self.camera, self.pose):
             if obj is not None:
                 obj.destroy()
+
+
+def _copy_frame(scene: Any, cmd: Any, slot: FrameSlot) -> None:
+    """Record the copies of a frame's own bytes (its slot's) into what the passes bind: the
+    cameras (``VkScene.copy_camera``) and the instance rows animations move
+    (``copy_pose``)."""
+    scene.copy_camera(cmd, slot.camera)
+    if slot.pose is not None:
+        scene.copy_pose(cmd, slot.pose)
 
 
 def _chained(b: Any) -> Any:
@@ -244,7 +256,7 @@ class VkExecutor(ExecutorCore):
         self.queues = async_queues(device, plan, (self._barriers, self._frame_barriers),
                                    span=options.frame_span)
         if self.queues is not None and scene is not None:  # the cameras' copy: its own batch
-            self.queues.prologue = lambda cmd, slot: scene.copy_camera(cmd, slot.camera)
+            self.queues.prologue = lambda cmd, slot: _copy_frame(scene, cmd, slot)
         try:
             self._allocate()
             self.programs = Programs(device, scene)
@@ -408,6 +420,10 @@ class VkExecutor(ExecutorCore):
             slot.camera = self.allocator.create_buffer(
                 self.scene.camera_span, ("transfer_src",), host_visible=True,
                 label=f"rfw:camera{k}")
+            if getattr(self.scene, "pose_span", 0):  # animations move instances
+                slot.pose = self.allocator.create_buffer(
+                    self.scene.pose_span, ("transfer_src",), host_visible=True,
+                    label=f"rfw:pose{k}")
         return slot
 
     # a frame driven pass by pass (mixed-backend frames: rfw.frame) -----------------------
@@ -433,6 +449,9 @@ class VkExecutor(ExecutorCore):
             # its last frame is finished (slot() waited for it): no copy reads these bytes
             slot.camera_data = self.scene.camera_blob
             slot.camera.write(np.frombuffer(slot.camera_data, np.uint8))
+        if slot.pose is not None and slot.pose_data != self.scene.pose_blob:
+            slot.pose_data = self.scene.pose_blob  # its last frame is finished, as above
+            slot.pose.write(np.frombuffer(slot.pose_data, np.uint8))
         self.pool, self.cmd, self.timestamps = slot.pool, slot.cmd, slot.timestamps
         self.descriptors, self.ring = slot.descriptors, slot.ring
         dev, ts = self.device, self.timestamps
@@ -499,7 +518,7 @@ class VkExecutor(ExecutorCore):
         if len(self.in_flight) > 1:  # the last frame may still run: wait for it here
             lib.vkCmdPipelineBarrier2(cmd, self._frame_start[0])
         if self._frame_slot.camera is not None:  # the frame's own cameras, before any pass
-            self.scene.copy_camera(cmd, self._frame_slot.camera)
+            _copy_frame(self.scene, cmd, self._frame_slot)
 
     def _prefix(self, name: str) -> int:
         # a pass's barriers and begin timestamp; its position

@@ -165,8 +165,11 @@ class MeshletScene:
         for name, arrays in parts.items():
             data = np.concatenate(arrays) if arrays else np.zeros(4, np.uint32)
             self._upload(name, data)
-        inst = b"".join(_instance_rows(i.transform) for i in scene.instances) or bytes(144)
-        self._upload("instances", np.frombuffer(inst, np.uint8))
+        if vscene.meshlet_instances is not None:  # moved by animations: the scene's rows
+            self.buffers["instances"] = vscene.meshlet_instances
+        else:
+            inst = b"".join(_instance_rows(i.transform) for i in scene.instances) or bytes(144)
+            self._upload("instances", np.frombuffer(inst, np.uint8))
 
         # the draws: opaque and masked instances with meshlets, sorted by material (stable)
         spheres = [_bounding_sphere(m.positions) if len(m.indices) else (0.0, 0.0, 0.0, 0.0)

@@ -20,10 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from rfw.authoring import INSTANCE_DTYPE as TABLE_DTYPE
 from rfw.backends.scene_data import (
+    INSTANCE_BYTES,
     MOTION_BYTES,
     SCENE_GROUPS,
     CameraFrames,
+    InstanceFrames,
     check_instance_limits,
     instance_blocks,
     lights_bytes,
@@ -40,7 +43,15 @@ from rfw.scene.sides import with_back_faces
 from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
-from .commands import copy_into_uniforms, one_time, record_image_bands, record_upload
+from .commands import (
+    COPY_WRITE,
+    BufferBarrier,
+    barrier,
+    copy_into_uniforms,
+    one_time,
+    record_image_bands,
+    record_upload,
+)
 from .consts import (
     const,
     ffi,
@@ -70,6 +81,12 @@ _SCENE_READ = State(None, frozenset({"VERTEX_ATTRIBUTE_INPUT", "INDEX_INPUT", "V
                                "SHADER_STORAGE_READ"}))
 # the cameras' uniforms: read by any stage of any pass (written by a frame's copy_camera)
 CAMERA_READ = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"UNIFORM_READ"}))
+# the instance rows animations move: read as storage by any stage (written by copy_pose),
+# and before a frame's copy, also the last write (the upload's, or last frame's copy)
+POSE_READ = State(None, frozenset({"ALL_COMMANDS"}), frozenset({"SHADER_STORAGE_READ"}))
+POSE_BEFORE = State(None, frozenset({"ALL_COMMANDS"}),
+                    frozenset({"SHADER_STORAGE_READ", "TRANSFER_WRITE"}))
+MESHLET_ROW_BYTES = 144  # meshlet.glsl's MInstance
 _SAMPLED = State("SHADER_READ_ONLY_OPTIMAL", frozenset({"FRAGMENT_SHADER", "COMPUTE_SHADER"}),
                  frozenset({"SHADER_SAMPLED_READ"}))
 
@@ -93,6 +110,22 @@ def scene_set_layout(device: VkDevice, index: int) -> DescriptorSetLayout:
 # what one storage descriptor of the instance rows must reach
 # (rfw.backends.scene_data.check_instance_limits)
 INSTANCE_LIMIT_KEYS = ("maxStorageBufferRange",)
+
+
+def meshlet_rows(transforms: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """meshlet.glsl's MInstance of each instance (``vkext.meshlet``'s rows, all at once):
+    its ``instance_blocks`` row (``rows``: model and normal matrices), then its largest
+    column scale (sphere radii), 1 where the scale is uniform, -1 where it mirrors."""
+    m = np.asarray(transforms, np.float64).reshape(-1, 4, 4)
+    cols = np.linalg.norm(m[:, :3, :3], axis=1)
+    scale = cols.max(axis=1)
+    uniform = np.all(np.isclose(cols, scale[:, None], rtol=1e-4), axis=1)
+    out = np.zeros((len(m), MESHLET_ROW_BYTES // 4), np.float32)
+    out[:, :INSTANCE_BYTES // 4] = rows
+    out[:, 32] = scale
+    out[:, 33] = uniform
+    out[:, 34] = np.where(np.linalg.det(m[:, :3, :3]) < 0.0, -1.0, 1.0)
+    return out
 
 
 class _SameSet:
@@ -238,6 +271,11 @@ class VkScene:
         self.camera = camera or scene.default_camera()
         self.size = (1, 1)
         self.frames = CameraFrames()
+        # the instances' rows as each frame sees them, where animations move them
+        self.poses = InstanceFrames(scene)
+        self.pose_blob = b""  # what the frame begun last copies into the moving rows
+        self.pose_span = 0
+        self._pose_copies: list[tuple[Buffer, Any]] = []
         self._sun = b""
         self._objects: list[Any] = []
         self.meshlets: Any = None  # vkext.meshlet.MeshletScene, made by the first meshlet pass
@@ -353,6 +391,53 @@ class VkScene:
         placed = [*self._transforms, *(i.transform for i in self.scene.stroke_instances)]
         if placed:
             up.buffer(self.instance_buffer, instance_blocks(placed))
+        self.prev_instance_buffer = self.instance_buffer
+        self.instance_table = self.meshlet_instances = None
+        if self.poses.moves:
+            self._pose_buffers(up)
+
+    def _pose_buffers(self, up: _Upload) -> None:
+        """Where animations move instances: last frame's rows (``prev_instances``), and
+        the rows the scene tables and the meshlets read (``instance_table``,
+        ``meshlet_instances``: their own copies on a still scene), each written by every
+        frame from its slot's bytes (``copy_pose``), as the cameras are."""
+        n = len(self.scene.instances)
+        rest = self.poses.rows(self.poses.rest)
+        self.prev_instance_buffer = self.allocator.create_buffer(
+            self.instances_size, ("storage", "transfer_dst"), label="scene:prev_instances")
+        self.instance_table = self.allocator.create_buffer(
+            max(1, n) * TABLE_DTYPE.itemsize, ("storage", "transfer_dst"),
+            label="scene:instance_table")
+        self.meshlet_instances = self.allocator.create_buffer(
+            max(1, n) * MESHLET_ROW_BYTES, ("storage", "transfer_dst"),
+            label="scene:meshlet_instances")
+        parts = self._pose_parts(self.poses.rest, rest, rest)
+        offset = 0
+        for (dst, _), data in zip(self._pose_targets(), parts, strict=True):
+            if dst is not self.instance_buffer:  # uploaded already (_instances)
+                up.buffer(dst, data)
+            region = ffi.new("VkBufferCopy*", {"srcOffset": offset, "dstOffset": 0,
+                                               "size": data.nbytes})
+            self._pose_copies.append((dst, region))
+            offset = align_up(offset + data.nbytes, 16)
+        self.pose_span = offset
+
+    def _pose_targets(self) -> list[tuple[Buffer, str]]:
+        return [(self.instance_buffer, "rows"), (self.prev_instance_buffer, "prev"),
+                (self.instance_table, "table"), (self.meshlet_instances, "meshlets")]
+
+    def _pose_parts(self, transforms: np.ndarray, rows: np.ndarray,
+                    prev: np.ndarray) -> list[np.ndarray]:
+        """The bytes of each pose target (``_pose_targets``) for a frame."""
+        n = len(self.scene.instances)
+        table = np.zeros(max(1, n), TABLE_DTYPE)
+        meshlet = np.zeros((max(1, n), MESHLET_ROW_BYTES // 4), np.float32)
+        if n:
+            table["matrices"] = rows[:n]
+            table["mesh"][:, 0] = [i.mesh for i in self.scene.instances]
+            table["mesh"][:, 1] = self.mirrored
+            meshlet[:] = meshlet_rows(transforms[:n], rows[:n])
+        return [rows, prev, table, meshlet]
 
     def _strokes(self, up: _Upload) -> None:
         # points and lines (GpuScene's twin): their fourth stream is COLOR_0 (mesh.glsl);
@@ -480,6 +565,16 @@ class VkScene:
         frame = self.frames.begin(self.camera, self.size, index)
         if frame is not None:
             self._blob(*frame)
+        pose = self.poses.begin(index)  # None: nothing moves, or the frame has begun
+        if pose is not None:
+            blob = np.zeros(self.pose_span, np.uint8)
+            for (_, region), data in zip(self._pose_copies, self._pose_parts(*pose),
+                                         strict=True):
+                raw = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+                blob[region.srcOffset:region.srcOffset + raw.size] = raw
+            self.pose_blob = blob.tobytes()
+            for acc in self.__dict__.get("_accels", {}).values():
+                acc.move(pose[0][:len(self.scene.instances)])
 
     def _blob(self, main: bytes, motion: bytes) -> None:
         blob = bytearray(self.camera_span)
@@ -496,6 +591,21 @@ class VkScene:
         ordered before it), before every read after it."""
         copy_into_uniforms(cmd, source, self.dynamic_uniforms, self._camera_region,
                            CAMERA_READ)
+
+    def copy_pose(self, cmd: Any, source: Buffer) -> None:
+        """Record the copies of a frame's instance rows (``pose_blob`` as the frame wrote
+        it into ``source``, its slot's own) into the buffers passes bind, as
+        :meth:`copy_camera` copies the cameras: after every read of the frames before it,
+        before every read after it. Nothing where no animation moves an instance."""
+        if not self._pose_copies:
+            return
+        span = [(dst, region.dstOffset, region.size) for dst, region in self._pose_copies]
+        barrier(cmd, buffer_barriers=[BufferBarrier(d, POSE_BEFORE, COPY_WRITE, o, n)
+                                      for d, o, n in span])
+        for dst, region in self._pose_copies:
+            lib.vkCmdCopyBuffer(cmd, source.handle, dst.handle, 1, region)
+        barrier(cmd, buffer_barriers=[BufferBarrier(d, COPY_WRITE, POSE_READ, o, n)
+                                      for d, o, n in span])
 
     def camera_range(self, camera: str = "main") -> BufferRange:
         k = 1 if camera == "sun" else 0
@@ -523,19 +633,24 @@ class VkScene:
         cache = self.__dict__.setdefault("_accels", {})
         key = tuple(sorted(options.items()))
         if key not in cache:
-            cache[key] = self._own(SceneAccel(self.device, self.scene, label="scene.accel",
-                                              **options))
+            acc = SceneAccel(self.device, self.scene, label="scene.accel",
+                             moves=self.poses.moves, **options)
+            cache[key] = self._own(acc)
+            moved = self.poses.last_transforms  # made mid-run: the frame begun last's
+            if moved is not None:
+                acc.move(moved[:len(self.scene.instances)])
         return cache[key]
 
     def bindings(self) -> dict[str, Any]:
         """Set 1 by name, as ``GpuScene.bindings()``: the main camera and the lights; and
         what a pass may bind in its own set: ``motion`` (motion.glsl's block, copied in with
-        the cameras) and ``prev_instances``, last frame's instance rows (the same rows:
-        instances do not move yet)."""
+        the cameras) and ``prev_instances``, last frame's instance rows (the same rows
+        where no animation moves them)."""
         return {"camera": self.camera_range("main"), "lights": self.lights_range,
                 "motion": BufferRange(self.dynamic_uniforms.handle, self._motion_offset,
                                       MOTION_BYTES),
-                "prev_instances": self.instances_range}
+                "prev_instances": BufferRange(self.prev_instance_buffer.handle, 0,
+                                              self.instances_size)}
 
     def draw(self, cmd: Any, layout: Any, *, camera: str = "main",
              alpha: tuple[str, ...] = ("OPAQUE", "MASK"),

@@ -61,8 +61,9 @@ class PathTracePass(RayTracedPass):
     so a run is deterministic for a seed. Each frame adds ``spp`` samples to ``sums`` (rgb:
     radiance, a: samples) and ``half`` (the even samples' radiance, a: camera-ray hits),
     history pairs carried from frame to frame, which restart on the first frame and when the
-    camera moves. ``hdr`` is their mean (linear radiance; alpha: the share of samples whose
-    camera ray hit the scene, 0 on the sky, as the raster passes leave the background) and
+    camera or an instance moves (a camera path, the scene's animations). ``hdr`` is their
+    mean (linear radiance; alpha: the share of samples whose camera ray hit the scene, 0 on
+    the sky, as the raster passes leave the background) and
     ``error`` the convergence estimate: half the difference of the even and odd samples'
     means, per channel (alpha: samples). ``mode`` ``ao`` and ``visibility`` make per-effect
     references instead: the ambient occlusion rt_ao computes (radius ``ao_radius``) and the
@@ -126,7 +127,8 @@ class PathTracePass(RayTracedPass):
                        "sobol_directions": ctx.buffer(f"{self.name}:sobol", sobol_directions())}
 
     def record(self, ctx) -> None:
-        camera = ctx.scene.camera_blob
+        # the cameras and the instances' pose (animations move them) the sums are of
+        camera = (ctx.scene.camera_blob, getattr(getattr(ctx.scene, "poses", None), "pose", 0))
         restart = ctx.frame == 0 or camera != self._camera
         if restart:
             self._next, self._camera = 0, camera

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from ..scene.animation import Animator
 from ..scene.limits import check_texture_size
 from ..scene.model import Camera, Light, Material, Mesh, Scene, SceneError, Texture
 
@@ -123,8 +125,9 @@ def texture_views(scene: Scene, limit: int | None, key: str,
 
 
 def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
-    """An orthographic light camera that encloses the scene's bounds along ``direction``."""
-    lo, hi = scene.bounds()
+    """An orthographic light camera that encloses the scene's bounds along ``direction``
+    (where animations move instances, wherever their keys take them: ``posed_bounds``)."""
+    lo, hi = posed_bounds(scene)
     if not np.all(np.isfinite(lo)):  # nothing drawable: any box will do
         lo, hi = np.zeros(3), np.ones(3)
     center = (lo + hi) / 2
@@ -143,6 +146,30 @@ def sun_view_proj(scene: Scene, direction: np.ndarray) -> np.ndarray:
 
 
 
+def posed_bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """``scene.bounds()``, and where animations move instances, theirs at every key time of
+    the clips too (``Animator.key_times``: a linear path lies between its keys)."""
+    lo, hi = scene.bounds()
+    if not scene.animations:
+        return lo, hi
+    frames = InstanceFrames(replace(scene, stroke_instances=[]))
+    if not frames.moves:
+        return lo, hi
+    parts = [np.stack([lo, hi])] if np.all(np.isfinite(lo)) else []
+    keep = [k for k in frames.moving if len(scene.meshes[scene.instances[k].mesh].positions)]
+    if not keep:
+        return lo, hi
+    boxes = [scene.meshes[scene.instances[k].mesh].bounds() for k in keep]
+    corners = np.array([[[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1])
+                         for z in (a[2], b[2])] for a, b in boxes])  # (n, 8, 4)
+    for t in frames.animator.key_times(limit=64):
+        world = frames.transforms(float(t))[keep].astype(np.float64)
+        pts = np.einsum("nij,nkj->nki", world, corners)[..., :3].reshape(-1, 3)
+        parts.append(pts[np.isfinite(pts).all(axis=1)])
+    pts = np.concatenate(parts)
+    return pts.min(axis=0), pts.max(axis=0)
+
+
 def material_bytes(m: Material) -> bytes:
     """material.glsl's MaterialFactors: flags x alpha mode, y double-sided, z the specular
     factor's float bits (uintBitsToFloat)."""
@@ -159,12 +186,33 @@ def instance_bytes(model: np.ndarray) -> bytes:
 
 def instance_blocks(models: Any) -> np.ndarray:
     """``instance_bytes`` of every model at once: one float32 row of 32 per instance (one
-    batched inverse instead of one per instance)."""
+    batched inverse instead of one per instance). A singular model (an animated node's
+    rest pose may scale it to zero) gets ``pose_blocks``' zero row."""
     m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    try:
+        inverse = np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        return pose_blocks(m)
     # GLSL matrices are column-major: the model's columns, then those of inv(model).T,
     # which are inv(model)'s rows
     return np.concatenate([m.transpose(0, 2, 1).reshape(-1, 16),
-                           np.linalg.inv(m).reshape(-1, 16)], axis=1).astype(np.float32)
+                           inverse.reshape(-1, 16)], axis=1).astype(np.float32)
+
+
+def pose_blocks(models: Any) -> np.ndarray:
+    """``instance_blocks`` of transforms an animation made, where a scale may reach zero:
+    a singular transform's row is all zeros (its mesh collapses to nothing drawn)."""
+    m = np.asarray(models, np.float64).reshape(-1, 4, 4)
+    a = m[:, :3, :3]
+    scale = np.abs(a).max(axis=(1, 2))
+    ok = np.isfinite(m).all(axis=(1, 2)) & (scale > 0.0)
+    with np.errstate(all="ignore"):
+        ok[ok] = np.abs(np.linalg.det(a[ok] / scale[ok, None, None])) >= 1e-12
+    out = np.zeros((len(m), 32), np.float32)
+    if ok.any():
+        out[ok] = np.concatenate([m[ok].transpose(0, 2, 1).reshape(-1, 16),
+                                  np.linalg.inv(m[ok]).reshape(-1, 16)], axis=1)
+    return out
 
 
 def mirrored_mask(models: Any) -> np.ndarray:
@@ -304,6 +352,85 @@ class CameraFrames:
                           for m in (before[0], before[1], vp))
         motion += struct.pack("<4f", *offset, *before[2])
         return main, motion, now
+
+
+class InstanceFrames:
+    """Every placed instance's row (``instance_blocks``: the instances', then the stroke
+    instances') as each frame sees it, where the scene's animations move them: the twin of
+    :class:`CameraFrames`.
+
+    ``time`` is the scene's time in seconds (its animations' timeline), set between frames
+    by the frame driver (:mod:`rfw.timeline`) and read when a frame begins.
+    ``begin(index)`` gives frame ``index``'s rows and last frame's (for motion vectors):
+    the frame after the one begun last takes that frame's rows as its previous ones; any
+    other frame has none and gets its own (zero motion), as does an instance whose last
+    transform was singular. ``pose`` counts the frames whose rows differ from the frame
+    begun before them (a path tracer restarts its sums when it changes). A scene without
+    animations never moves (``moves`` False): ``begin`` then gives nothing to write."""
+
+    def __init__(self, scene: Scene):
+        animator = Animator(scene.nodes, scene.animations) if scene.animations else None
+        self.animator = animator
+        # a still scene keeps nothing: 100,000 instances cost no copy of their transforms
+        placed = [*scene.instances, *scene.stroke_instances] if animator is not None else []
+        self.nodes = [i.node for i in placed]
+        # the rows that move: those of instances placed by a node an animation moves
+        self.moving = np.array([k for k, n in enumerate(self.nodes)
+                                if n in animator.moving], np.int64) if placed else \
+            np.zeros(0, np.int64)
+        self.rest = np.asarray([i.transform for i in placed], np.float32).reshape(-1, 4, 4)
+        self.time = 0.0
+        self.index: int | None = None  # the frame begun last
+        self.pose = 0
+        self._ran: tuple[np.ndarray, np.ndarray] | None = None  # its transforms and rows
+
+    @property
+    def moves(self) -> bool:
+        return len(self.moving) > 0
+
+    @property
+    def last_rows(self) -> np.ndarray | None:
+        """The rows of the frame begun last (None before the first, or when nothing
+        moves): for a copy of the rows made mid-run."""
+        return None if self._ran is None else self._ran[1]
+
+    @property
+    def last_transforms(self) -> np.ndarray | None:
+        """The (n, 4, 4) transforms of the frame begun last (None as ``last_rows``)."""
+        return None if self._ran is None else self._ran[0]
+
+    def transforms(self, t: float) -> np.ndarray:
+        """Every placed instance's (4, 4) float32 transform at ``t`` seconds."""
+        out = self.rest.copy()
+        if self.moves:
+            world = self.animator.world(t)
+            out[self.moving] = np.asarray([world[self.nodes[k]] for k in self.moving],
+                                          np.float32)
+        return out
+
+    def rows(self, transforms: np.ndarray) -> np.ndarray:
+        """``pose_blocks`` of ``transforms``: (n, 32) float32."""
+        return pose_blocks(transforms)
+
+    def begin(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Frame ``index``'s transforms, rows and last frame's rows; None when that frame
+        has begun already, or nothing moves."""
+        if not self.moves or index == self.index:
+            return None
+        now = self.transforms(self.time)
+        before = self._ran if self.index is not None and index == self.index + 1 else None
+        rows = self.rows(now)
+        if before is None:
+            prev = rows
+        else:
+            prev = before[1].copy()
+            lost = ~prev.any(axis=1)  # singular last frame: no motion to measure
+            prev[lost] = rows[lost]
+        if self._ran is not None and not np.array_equal(rows, self._ran[1]):
+            self.pose += 1
+        self.index = index
+        self._ran = (now, rows)
+        return now, rows, prev
 
 
 def sun_camera_bytes(camera: Camera, sun: np.ndarray, size: tuple[int, int]) -> bytes:

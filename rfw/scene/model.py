@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import RfwError, warn
+from .animation import Animation, Animator, Node
 
 
 @dataclass
@@ -89,6 +90,9 @@ class Instance:
     mesh: int  # index into Scene.meshes
     transform: np.ndarray  # (4, 4) float32, column vectors: world = T @ local
     name: str = ""
+    # the node of Scene.nodes that places it, where the scene is animated (None: it is
+    # placed by its transform alone); its transform is that node's rest world matrix
+    node: int | None = None
 
 
 def transform_problem(transform: np.ndarray) -> str | None:
@@ -226,6 +230,10 @@ class Scene:
     # wide by the points_lines pass; stroke_instances place them (Instance.mesh: a stroke)
     strokes: list[Mesh] = field(default_factory=list)
     stroke_instances: list[Instance] = field(default_factory=list)
+    # node animations (rfw.scene.animation): the node hierarchy instances are placed by
+    # (Instance.node) and the clips that move it; both empty for a still scene
+    nodes: list[Node] = field(default_factory=list)
+    animations: list[Animation] = field(default_factory=list)
 
     @property
     def triangle_count(self) -> int:
@@ -318,6 +326,12 @@ class Scene:
                 why = f"it reaches {far:.3g} from the origin (more than {WORLD_LIMIT:g})"
         return why
 
+    def _moving(self) -> frozenset[int]:
+        """The nodes the scene's animations move (``rfw.scene.animation.Animator``)."""
+        if not self.animations:
+            return frozenset()
+        return Animator(self.nodes, self.animations).moving
+
     def default_camera(self) -> Camera:
         """The scene's first camera, else one framing its bounds."""
         if self.cameras:
@@ -339,16 +353,19 @@ class Scene:
         instances or every one was skipped (for a scene built in code without instances,
         nothing is said)."""
         keep = []
+        # an instance an animation moves is drawn as each frame poses it (a zero scale
+        # draws nothing): only a rest pose that is not finite leaves it out
+        moving = self._moving()
         for k, (inst, why) in enumerate(zip(self.instances, self._instance_checks()[0],
                                             strict=True)):
-            if why is None:
+            if why is None or (inst.node in moving and np.isfinite(inst.transform).all()):
                 keep.append(inst)
             else:
                 warn(f"{self.source or self.name}: instance {inst.name or k!r} skipped: {why}")
         strokes = []
         for k, inst in enumerate(self.stroke_instances):
             why = self.stroke_problem(inst)
-            if why is None:
+            if why is None or (inst.node in moving and np.isfinite(inst.transform).all()):
                 strokes.append(inst)
             else:
                 warn(f"{self.source or self.name}: points or lines {inst.name or k!r} "

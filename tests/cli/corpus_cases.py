@@ -124,6 +124,28 @@ def _glb_doc() -> dict:
     return doc
 
 
+def anim_doc(times: list[float], values: list[list[float]], *, sampler: int = 0,
+             output: int = 3) -> dict:
+    """The triangle's node moved by one translation channel, its keyframes in a second
+    (embedded) buffer."""
+    data = struct.pack(f"<{len(times)}f", *times)
+    data += struct.pack(f"<{3 * len(values)}f", *(x for v in values for x in v))
+    doc = gltf_doc()
+    doc["buffers"].append({"byteLength": len(data), "uri": "data:application/octet-stream;"
+                           "base64," + base64.b64encode(data).decode()})
+    doc["bufferViews"] += [{"buffer": 1, "byteOffset": 0, "byteLength": 4 * len(times)},
+                           {"buffer": 1, "byteOffset": 4 * len(times),
+                            "byteLength": 12 * len(values)}]
+    doc["accessors"] += [{"bufferView": 2, "componentType": 5126, "count": len(times),
+                          "type": "SCALAR"},
+                         {"bufferView": 3, "componentType": 5126, "count": len(values),
+                          "type": "VEC3"}]
+    doc["animations"] = [{"name": "slide", "samplers": [{"input": 2, "output": output}],
+                          "channels": [{"sampler": sampler,
+                                        "target": {"node": 0, "path": "translation"}}]}]
+    return doc
+
+
 TRI_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 NAN_BIN = struct.pack("<9f", float("nan"), 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<3H", 0, 1, 2) \
     + b"\0\0"
@@ -209,6 +231,17 @@ GLTF_CASES: list[tuple[str, object, str]] = [
         textures=[{"source": 0}],
         images=[{"uri": "data:image/png;base64," + base64.b64encode(b"not a png").decode()}]),
      "images[0]"),
+    # node animations: each line names the animation
+    ("animation-sampler-out-of-range", anim_doc([0, 1], [[0, 0, 0], [1, 0, 0]], sampler=2),
+     'animations[0] ("slide").channels[0]'),
+    ("animation-accessor-out-of-range", anim_doc([0, 1], [[0, 0, 0], [1, 0, 0]], output=9),
+     'output of animations[0] ("slide").samplers[0]'),
+    ("animation-count-mismatch", anim_doc([0, 1, 2], [[0, 0, 0], [1, 0, 0]]),
+     'animations[0] ("slide").samplers[0]'),
+    ("animation-times-not-increasing", anim_doc([0, 2, 1], [[0, 0, 0]] * 3),
+     'animations[0] ("slide").samplers[0]'),
+    ("animation-nan", anim_doc([0, 1], [[0, 0, 0], [float("nan"), 0, 0]]),
+     'animations[0] ("slide").samplers[0]'),
 ]
 
 GLB_CASES: list[tuple[str, bytes, str]] = [
@@ -935,6 +968,10 @@ ACCEPTED = [
              {"m.gltf": _node_scene(scale=[-1, 1, 1], translation=[2, 0, 0])}),
     Accepted("gltf-zero-scale-node", ("run", FORWARD, "--scene", "z.gltf"),
              {"z.gltf": _node_scene(scale=[0, 0, 0])}),
+    # the bad animation cases' document with good keyframes: played, nothing to say
+    Accepted("gltf-animated-node", ("run", DEFERRED, "--scene", "a.gltf", "--set",
+                                    "gbuffer.velocity=true"),
+             {"a.gltf": json.dumps(anim_doc([0, 1], [[0, 0, 0], [1, 0, 0]])).encode()}),
     Accepted("obj-without-normals", ("run", FORWARD, "--scene", "t.obj"),
              {"t.obj": TRI_OBJ}),
     Accepted("scene-relative-to-config", ("run", "sub/c.toml"),

@@ -1,6 +1,6 @@
 """What real files need, on small files made here and run through the CLI: triangles seen
 from behind in mesh files, points and lines among triangles, and one warning line for each
-thing a file holds that is not drawn as it means (skins, morphs, animations, a missing
+thing a file holds that is not drawn as it means (skins, morphs, a missing
 TEXCOORD set, unknown extensions); KHR_texture_transform, TEXCOORD_1 and COLOR_0 read."""
 
 from __future__ import annotations
@@ -171,7 +171,6 @@ def test_textured_primitive_without_texcoord_warns_once(tmp_path):
 @pytest.mark.parametrize("what,expected", [
     ("skin", "nodes[0]: skins not read: skinned meshes are drawn unposed"),
     ("morph", "meshes[0].primitives[0]: morph targets not read"),
-    ("animation", "animations: animations not read"),
     ("extension", "extensionsUsed: EXT_made_up ignored"),
 ])
 def test_unread_features_warn_once(tmp_path, capfd, what, expected):
@@ -185,8 +184,6 @@ def test_unread_features_warn_once(tmp_path, capfd, what, expected):
     g.node(**node)
     if what == "skin":
         g.node(root=False)
-    if what == "animation":
-        g.doc["animations"] = [{"channels": [], "samplers": []}]
     if what == "extension":
         g.doc["extensionsUsed"] = ["EXT_made_up"]
     path = g.write(tmp_path)

@@ -60,6 +60,10 @@ class SceneAccel:
         number of hit records a table must hold.
     scratch_budget
         The most scratch memory BLAS builds use at once; more BLAS are built in batches.
+    moves
+        The scene's animations move its instances: :meth:`move` sets each frame's
+        transforms, and a frame's TLAS build records its instance records in its own
+        commands (not a host write a frame in flight could still be reading).
 
     ``blas[m]`` is mesh ``m``'s structure (None for a mesh without triangles), shared by
     every instance of the mesh; ``tlas`` the top level; ``transforms`` the instances' current
@@ -71,7 +75,7 @@ class SceneAccel:
     def __init__(self, device: VkDevice, scene: Scene, *, prefer: str | None = "fast_trace",
                  allow_update: bool = False, compact: bool = False,
                  hit_groups: Mapping[str, int] | None = None, scratch_budget: int = 64 * MiB,
-                 label: str = "accel"):
+                 label: str = "accel", moves: bool = False):
         device.require("VK_KHR_acceleration_structure", "buffer_device_address")
         if prefer not in PREFER:
             raise ValueError(f"prefer is one of {', '.join(map(repr, PREFER))}, not {prefer!r}")
@@ -81,6 +85,7 @@ class SceneAccel:
                              f"(known: {', '.join(ALPHA_MASK)})")
         self.device, self.scene, self.label = device, scene, label
         self.prefer, self.allow_update, self.compact = prefer, allow_update, compact
+        self.moves = moves
         self.hit_groups = {m: int((hit_groups or {}).get(m, 0)) for m in ALPHA_MASK}
         self.hit_records = max(self.hit_groups.values()) + 1
         self.scratch_budget = int(scratch_budget)
@@ -143,7 +148,8 @@ class SceneAccel:
         groups = batches(jobs, self.scratch_budget, align)
         self.blas_batches = len(groups)
         self.top = TopLevel(dev, scene, self.blas, self.allocator, prefer=self.prefer,
-                            allow_update=self.allow_update, align=align, label=self.label)
+                            allow_update=self.allow_update, align=align, label=self.label,
+                            moves=self.moves)
         compact = self.compact and bool(jobs)
         self.build_plan = compiled(build_graph(len(groups), compact=compact))
         plan = PlanRecorder(self.build_plan)
@@ -242,10 +248,18 @@ class SceneAccel:
         if self._frame_scratch is None:
             self._frame_scratch = scratch_buffer(self.device, self.top.frame_scratch,
                                                  self.top.align, f"{self.label}:frame scratch")
-        self.top.record(cmd, self._instance_records(), self._frame_scratch, update=update)
+        self.top.record(cmd, self._instance_records(), self._frame_scratch, update=update,
+                        inline=self.moves)
         mode = "update" if update else "build"
         self.frame_builds[mode] += 1
         return mode
+
+    def move(self, transforms: Any) -> None:
+        """The instances' (N, 4, 4) transforms of the frame to come (``moves``: the
+        scene's animations): the next :meth:`record_tlas` builds from them."""
+        if not self.moves:
+            raise ValueError(f"'{self.label}' was made for a still scene (moves=False)")
+        self.transforms = np.asarray(transforms, np.float32).reshape(-1, 4, 4).copy()
 
     # refit -------------------------------------------------------------------------------------
 

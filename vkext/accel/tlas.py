@@ -15,12 +15,14 @@ from typing import Any
 
 import numpy as np
 
+from rfw.graph.sync import State
 from rfw.scene.model import Scene
 from rfw.units import align_up
 
 from ..blocks import BlockAllocator
 from ..buffers import Buffer
-from ..consts import const, new
+from ..commands import COPY_WRITE, BufferBarrier, barrier
+from ..consts import const, ffi, lib, new
 from ..device import VkDevice
 from .structure import (
     AccelerationStructure,
@@ -65,6 +67,26 @@ def instance_records(scene: Scene, blas: Sequence[AccelerationStructure | None],
     return records, kept
 
 
+# a TLAS build reads its instance records as VK_ACCESS_2_SHADER_READ in the build stage
+RECORDS_READ = State(None, frozenset({"ACCELERATION_STRUCTURE_BUILD_KHR"}),
+                     frozenset({"SHADER_READ"}))
+UPDATE_LIMIT = 65536  # bytes one vkCmdUpdateBuffer may write
+
+
+def record_inline(cmd: Any, buffer: Buffer, records: np.ndarray) -> None:
+    """Record ``records`` into ``buffer`` from ``cmd`` (in pieces of ``UPDATE_LIMIT``
+    bytes): after the builds before it read the buffer, before the next build reads it."""
+    data = np.ascontiguousarray(records).reshape(-1).view(np.uint8)
+    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, RECORDS_READ, COPY_WRITE, 0,
+                                                data.size)])
+    for start in range(0, data.size, UPDATE_LIMIT):
+        piece = data[start:start + UPDATE_LIMIT]
+        lib.vkCmdUpdateBuffer(cmd, buffer.handle, start, piece.size,
+                              ffi.from_buffer("char[]", piece))
+    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, COPY_WRITE, RECORDS_READ, 0,
+                                                data.size)])
+
+
 class TopLevel:
     """The TLAS of a scene: a host-visible buffer of instance records, the geometry that
     points at it, the structure, and with ``allow_update`` the scratch of refits.
@@ -76,13 +98,16 @@ class TopLevel:
 
     def __init__(self, device: VkDevice, scene: Scene, blas: Sequence[AccelerationStructure | None],
                  allocator: BlockAllocator, *, prefer: str | None, allow_update: bool,
-                 align: int, label: str):
+                 align: int, label: str, moves: bool = False):
         self.device, self.allow_update, self.label = device, allow_update, label
         self.flags = build_flags(prefer, *(("VK_BUILD_ACCELERATION_STRUCTURE_ALLOW_UPDATE_BIT_KHR",)
                                            if allow_update else ()))
-        # host-visible: records are written from the host before each build
+        # host-visible: records are written from the host before each build; where
+        # instances move (``moves``), a frame's build writes them in its own commands
+        self.moves = moves
         self.instance_buffer = allocator.create_buffer(
-            max(64, 64 * len(scene.instances)), ("acceleration_structure_input",),
+            max(64, 64 * len(scene.instances)),
+            ("acceleration_structure_input", *(("transfer_dst",) if moves else ())),
             host_visible=True, label=f"{label}.instances")
         g = self.geometry = new("VkAccelerationStructureGeometryKHR")
         g.geometryType = const("VK_GEOMETRY_TYPE_INSTANCES_KHR")
@@ -105,12 +130,17 @@ class TopLevel:
             self.update_scratch = scratch_buffer(device, update, align, f"{label}:update scratch")
 
     def record(self, cmd: Any, records: np.ndarray, scratch: Buffer, *,
-               update: bool = False) -> None:
+               update: bool = False, inline: bool = False) -> None:
         """Write ``records`` from the host and record a build (or refit in place) of the
         TLAS with ``scratch``. Records no barrier: the caller's plan orders it. The host
         write needs the TLAS's last build to be done with the records (frames and one-time
-        submits are waited for)."""
-        if len(records):
+        submits are waited for). ``inline`` (a frame's build where instances move): the
+        records travel in ``cmd`` itself (``vkCmdUpdateBuffer``), so a frame in flight
+        keeps the ones its build reads; the update's own barriers order it after the last
+        build's reads and before this one."""
+        if len(records) and inline:
+            record_inline(cmd, self.instance_buffer, records)
+        elif len(records):
             self.instance_buffer.write(records)  # host writes: the submit makes them visible
         _rng, ranges = build_range(len(records))  # ranges points into _rng
         info = build_info("top", self.geometry, self.flags, update=update)

@@ -21,6 +21,7 @@ from ..scene_data import (
     MOTION_BYTES,
     SCENE_GROUPS,
     CameraFrames,
+    InstanceFrames,
     check_instance_limits,
     instance_blocks,
     lights_bytes,
@@ -78,7 +79,12 @@ class GpuScene:
         self._upload_meshes()
         self._upload_textures()
         self.material_data = [material_bytes(m) for m in scene.materials]
+        # the instances' rows as each frame sees them, where animations move them
+        self.poses = InstanceFrames(scene)
         self.instance_buffer = self._instances()
+        # last frame's rows (prev_instances): the same buffer while nothing moves
+        self.prev_instance_buffer = self._instances(prev=True) if self.poses.moves \
+            else self.instance_buffer
         self._instance_uniforms: Any = None  # made for a WGSL program's own group 3 only
         self.camera_buffer = self._uniform(b"\0" * 352, "scene.camera")
         # last frame's camera beside this one's, for the passes that bind it (motion.glsl)
@@ -112,14 +118,18 @@ class GpuScene:
         self._buffers.append(buf)
         return buf
 
-    def _instances(self) -> Any:
-        # one storage buffer, one 128-byte row per instance: written once, bound once
+    def _instances(self, *, prev: bool = False) -> Any:
+        # one storage buffer, one 128-byte row per instance: bound once, written once (or,
+        # where animations move instances, as each frame begins: begin_frame)
         check_instance_limits(self.scene, self.device.limits, INSTANCE_LIMIT_KEYS)
         placed = [*self.scene.instances, *self.scene.stroke_instances]
         rows = np.zeros((max(1, len(placed)), INSTANCE_BYTES // 4), np.float32)
         if placed:
             rows[:] = instance_blocks([i.transform for i in placed])
-        return self._buffer(rows, wgpu.BufferUsage.STORAGE, "scene.instances")
+        usage = wgpu.BufferUsage.STORAGE
+        if self.poses.moves:
+            usage |= wgpu.BufferUsage.COPY_DST
+        return self._buffer(rows, usage, "scene.prev_instances" if prev else "scene.instances")
 
     def _upload_meshes(self) -> None:
         v = wgpu.BufferUsage.VERTEX
@@ -218,6 +228,21 @@ class GpuScene:
         frame = self.frames.begin(self.camera, self.size, index)
         if frame is not None:
             self._write_camera(*frame)
+        pose = self.poses.begin(index)  # None: nothing moves, or the frame has begun
+        if pose is not None:
+            self._write_rows(pose[1], pose[2])
+
+    def _write_rows(self, rows: np.ndarray, prev: np.ndarray) -> None:
+        """This frame's instance rows and last frame's, through the queue (frames submitted
+        before keep theirs); the uniform copy of the rows too where one was made."""
+        queue = self.device.queue
+        queue.write_buffer(self.instance_buffer, 0, rows)
+        queue.write_buffer(self.prev_instance_buffer, 0, prev)
+        if self._instance_uniforms is not None:
+            stride = self._uniform_rows()
+            data = np.zeros((len(rows), stride), np.uint8)
+            data[:, :INSTANCE_BYTES] = rows.view(np.uint8).reshape(len(rows), -1)
+            queue.write_buffer(self._instance_uniforms, 0, data)
 
     def _write_camera(self, main: bytes, motion: bytes) -> None:
         last = self._camera_bytes
@@ -230,11 +255,11 @@ class GpuScene:
     def bindings(self) -> dict[str, Any]:
         """The camera and lights (group 1) by name, and what a pass may bind in its own
         group: ``motion`` (motion.glsl's block) and ``prev_instances``, last frame's
-        instance rows (the same rows: instances do not move yet)."""
+        instance rows (the same rows where no animation moves them)."""
         return {"camera": {"buffer": self.camera_buffer},
                 "lights": {"buffer": self.lights_buffer},
                 "motion": {"buffer": self.motion_buffer},
-                "prev_instances": {"buffer": self.instance_buffer}}
+                "prev_instances": {"buffer": self.prev_instance_buffer}}
 
     def _material_group(self, layout: Any, k: int) -> Any:
         key = ("material", id(layout), k)
@@ -280,10 +305,14 @@ class GpuScene:
             placed = [*self.scene.instances, *self.scene.stroke_instances]
             rows = np.zeros((max(1, len(placed)), stride), np.uint8)
             if placed:
-                blocks = instance_blocks([i.transform for i in placed])
+                blocks = self.poses.last_rows
+                if blocks is None:
+                    blocks = instance_blocks([i.transform for i in placed])
                 rows[:, :INSTANCE_BYTES] = blocks.view(np.uint8)
-            self._instance_uniforms = self._buffer(rows, wgpu.BufferUsage.UNIFORM,
-                                                   "scene.instances:uniform")
+            usage = wgpu.BufferUsage.UNIFORM
+            if self.poses.moves:
+                usage |= wgpu.BufferUsage.COPY_DST
+            self._instance_uniforms = self._buffer(rows, usage, "scene.instances:uniform")
         return stride
 
     def _scene_group(self, layout: Any, camera: str) -> Any:

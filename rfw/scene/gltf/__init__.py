@@ -13,9 +13,11 @@ primitive's textures use (with KHR_texture_transform), a constant COLOR_0 (folde
 material; one that varies per vertex is drawn with its mean and a warning), metallic-roughness
 materials with their five textures and samplers, KHR_materials_specular's specularFactor
 (its texture and colour are not read, with a warning), perspective cameras and
-KHR_lights_punctual. Normals and tangents are computed where the file has none.
+KHR_lights_punctual, and node animations (translation, rotation and scale channels, with
+the node hierarchy they move: :mod:`~.animations`, :mod:`rfw.scene.animation`). Normals and
+tangents are computed where the file has none.
 
-Not read: skins and morph targets (meshes appear in their bind pose), animations, texture
+Not read: skins and morph targets (meshes appear in their bind pose), texture
 coordinate sets past TEXCOORD_1 (TEXCOORD_0 is used, with a warning). Orthographic cameras
 are approximated by a narrow perspective camera (warning).
 
@@ -24,7 +26,8 @@ document, checked reads and errors naming the element) that makes what it reads 
 :mod:`~.container` (GLB, JSON, version, extensions), :mod:`~.accessors` (buffers, views,
 accessors), :mod:`~.textures` (images, samplers), :mod:`~.materials`, :mod:`~.meshes`
 (primitives, strokes, the geometry limit), :mod:`~.nodes` (the hierarchy, instances,
-cameras, lights) and :mod:`~.loader`, which ties them together.
+cameras, lights), :mod:`~.animations` (the clips) and :mod:`~.loader`, which ties them
+together.
 """
 
 from .container import SUPPORTED_EXTENSIONS

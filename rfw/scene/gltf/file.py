@@ -39,7 +39,6 @@ _UNREAD = {
                        "base colour and emissive factors",
     "skins": "skins not read: skinned meshes are drawn unposed, by their nodes' transforms",
     "morphs": "morph targets not read: meshes are drawn with their base shape",
-    "animations": "animations not read: the scene is drawn as the file poses it",
     "specular": "specularTexture, specularColorFactor and specularColorTexture not read: the "
                 "specular lobe is scaled by specularFactor alone, uncoloured",
 }
@@ -173,8 +172,6 @@ class GltfFile:
 
     def say_unread(self) -> None:
         """One warning line per kind of thing read past."""
-        if self.doc.animations:
-            self.unread["animations"].append("animations")
         for kind, message in _UNREAD.items():
             where = self.unread[kind]
             if where:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..model import Scene
 from .accessors import Accessors
+from .animations import Animations
 from .container import read_document
 from .container import split_glb as _split_glb
 from .file import GltfFile
@@ -43,6 +44,7 @@ def load_gltf(path: str | Path) -> Scene:
     accessors = Accessors(file, glb_bin)
     materials = Materials(file, Textures(file, accessors, scene), scene)
     SceneGraph(file, Meshes(file, accessors, materials, scene), scene).build()
+    Animations(file, accessors, scene).read()
     file.say_unread()
     # zero-scale nodes are valid glTF: skipped with a warning that names them
     return scene.drawable()

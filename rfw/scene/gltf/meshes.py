@@ -104,7 +104,8 @@ class Meshes:
         # (mesh, primitive) -> (a stroke?, its index in scene.strokes or scene.meshes)
         self.primitives: dict[tuple[int, int], tuple[bool, int]] = {}
 
-    def instance(self, node: Any, index: int, world: np.ndarray) -> None:
+    def instance(self, node: Any, index: int, world: np.ndarray, *,
+                 placed_by: int | None = None) -> None:
         mesh = self.file.item("meshes", node.mesh, f"nodes[{index}].mesh")
         prims = mesh.primitives or []
         if not prims:
@@ -123,7 +124,7 @@ class Meshes:
             stroke, k = self.primitives[key]
             instances = self.scene.stroke_instances if stroke else self.scene.instances
             instances.append(Instance(k, np.ascontiguousarray(world, np.float32),
-                                      node.name or f"nodes[{index}]"))
+                                      node.name or f"nodes[{index}]", placed_by))
 
     def primitive(self, mi: int, pi: int) -> Mesh:
         """The primitive as a Mesh: triangles, or a stroke (points or lines)."""

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ..animation import Node
 from ..model import WORLD_LIMIT, Camera, Light, Material, Scene
 from ..util import normalize
 from .file import GltfFile
@@ -45,21 +46,29 @@ class SceneGraph:
             children = {c for n in doc.nodes or [] for c in n.children or []}
             roots = [i for i in range(len(doc.nodes or [])) if i not in children]
             where = "nodes"
-        stack = [(self.file.item("nodes", r, f"{where}.nodes[{k}]"), r, np.identity(4))
+        stack = [(self.file.item("nodes", r, f"{where}.nodes[{k}]"), r, np.identity(4), -1)
                  for k, r in enumerate(roots)][::-1]
         seen: set[int] = set()
         open_zfar: list[int] = []
+        # an animated file keeps its hierarchy: animations pose nodes, instances follow
+        keep = bool(doc.animations)
+        if keep:
+            self.scene.nodes = [Node(name=n.name or f"nodes[{k}]")
+                                for k, n in enumerate(doc.nodes or [])]
         while stack:
-            node, index, parent = stack.pop()
+            node, index, parent, parent_index = stack.pop()
             nwhere = f"nodes[{index}]"
             if index in seen:
                 self.file.fail(nwhere, "reached twice (the node hierarchy has a cycle or a node "
                                        "with two parents)")
             seen.add(index)
             with self.file.element(nwhere):
-                world = parent @ self.local(node, nwhere)
+                local = self.local(node, nwhere)
+                world = parent @ local
+                if keep:
+                    self.keep(node, index, parent_index, local, world, nwhere)
                 if node.mesh is not None:
-                    self.meshes.instance(node, index, world)
+                    self.meshes.instance(node, index, world, placed_by=index if keep else None)
                 if node.camera is not None:
                     cam, infinite = self.camera(node.camera, nwhere, world)
                     if infinite:
@@ -70,7 +79,8 @@ class SceneGraph:
                 if ext is not None:
                     self.light(ext, nwhere, world)
                 for k, c in reversed(list(enumerate(node.children or []))):
-                    stack.append((self.file.item("nodes", c, f"{nwhere}.children[{k}]"), c, world))
+                    stack.append((self.file.item("nodes", c, f"{nwhere}.children[{k}]"), c, world,
+                                  index))
         if not self.scene.materials:
             self.scene.materials.append(Material())
         if open_zfar:
@@ -81,6 +91,22 @@ class SceneGraph:
                 far = max(far, 10.0 * float(np.linalg.norm(hi - lo)))
             for i in open_zfar:
                 self.scene.cameras[i].zfar = far
+
+    def keep(self, node: Any, index: int, parent: int, local: np.ndarray, world: np.ndarray,
+             where: str) -> None:
+        """Node ``index`` of the hierarchy as animations need it: parent, rest TRS (or
+        matrix) and rest matrices."""
+        kept = self.scene.nodes[index]
+        kept.parent, kept.local, kept.world = parent, local, world
+        if node.matrix is not None:
+            kept.matrix = local
+            return
+        kept.translation = self.file.numbers(node.translation, 3, where, "translation",
+                                             (0.0, 0.0, 0.0))
+        q = self.file.numbers(node.rotation, 4, where, "rotation", (0.0, 0.0, 0.0, 1.0))
+        qn = math.sqrt(sum(c * c for c in q))
+        kept.rotation = tuple(c / qn for c in q)
+        kept.scale = self.file.numbers(node.scale, 3, where, "scale", (1.0, 1.0, 1.0))
 
     def local(self, node: Any, where: str) -> np.ndarray:
         if node.matrix is not None:
