@@ -36,7 +36,8 @@ class Bounds:
     llvmpipe compiles shaders for the host CPU, so the same driver on another processor
     rounds differently. Measured at 192x108 (20736 pixels) with
     ``tests/data/golden-other-cpu/`` (every golden re-rendered on an AMD EPYC) against the
-    committed goldens (an Intel Xeon), worst image per measure
+    committed goldens (an Intel Xeon; those since regenerated kept in its ``intel/``), worst
+    image per measure
     (``test_golden_scheme.py`` checks every file):
 
     - FLIP mean 0.00173 (deferred, meshlet courtyard); 16 of 22 images identical;

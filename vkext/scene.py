@@ -500,7 +500,7 @@ class VkScene:
         img = self.allocator.create_image(w, h, "rgba8unorm-srgb" if srgb else "rgba8unorm",
                                           ("sampled", "transfer_dst"),
                                           mips=max(w, h).bit_length(), label=label)
-        up.image(img, mip_levels(np.ascontiguousarray(pixels, np.uint8)))
+        up.image(img, mip_levels(np.ascontiguousarray(pixels, np.uint8), srgb=srgb))
         return image_view(img, label=f"{label}:view")
 
     def _descriptor_sets(self) -> None:

@@ -37,45 +37,85 @@ AMBIENT = (0.03, 0.035, 0.045)
 _ALPHA = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
 
 
-def mip_chain(pixels: np.ndarray) -> list[np.ndarray]:
-    """A box-filtered chain on the CPU, each level the rounded mean of 2x2 (or 2x1) texels.
-    Sums are taken in uint16 (half a float32 level's bytes): the same bytes as averaging in
-    float32 and rounding half up, since every partial mean is exact there."""
-    return list(mip_levels(pixels))
+def mip_chain(pixels: np.ndarray, *, srgb: bool = False) -> list[np.ndarray]:
+    """A box-filtered chain on the CPU, each level the mean of 2x2 (or 2x1) texels.
+
+    Linear textures (and every texture's alpha) take the rounded mean of the bytes: sums in
+    uint16 (half a float32 level's bytes), the same bytes as averaging in float32 and
+    rounding half up, since every partial mean is exact there. Where ``srgb`` (base colour
+    and emissive, which glTF stores sRGB-encoded) the colour channels are averaged as the
+    GPU filters them: each byte decoded to linear (``SRGB_TO_LINEAR``), the mean taken in
+    float64 and encoded back to the nearest sRGB byte (``_LINEAR_EDGES``); averaging the
+    encoded bytes instead darkens every level where texels differ (a red/white checker's
+    green and blue come out 128, linear 0.22, not 188, linear 0.50)."""
+    return list(mip_levels(pixels, srgb=srgb))
 
 
-def mip_levels(pixels: np.ndarray) -> Iterator[np.ndarray]:
+def mip_levels(pixels: np.ndarray, *, srgb: bool = False) -> Iterator[np.ndarray]:
     """``mip_chain`` one level at a time (``pixels`` first), so an uploader holds one level
-    and the next, not the whole chain; each level is built in bands of rows, so the uint16
-    sums are a few MiB however large the image."""
+    and the next, not the whole chain; each level is built in bands of rows, so the sums
+    are a few tens of MiB however large the image."""
     level = pixels
     yield level
     while max(level.shape[:2]) > 1:
-        level = _half(level)
+        level = _half(level, srgb)
         yield level
 
 
-MIP_BAND_TEXELS = 1 << 20  # output texels per band of uint16 sums (16 MiB of RGBA sums in)
+MIP_BAND_TEXELS = 1 << 20  # output texels per band (32 MiB of RGBA uint16 sums in, or 48
+# MiB of float64 RGB sums of an sRGB texture: one output-sized array and one lookup)
 
 
-def _half(src: np.ndarray) -> np.ndarray:
+def _srgb_decode(c: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function taken off values in [0, 1], in float64."""
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+# every sRGB byte's linear value, and the linear values halfway (in sRGB) between
+# neighbouring bytes: a linear mean m encodes to the byte of the edges at or below it,
+# which is round-half-up of 255 * encode(m) without evaluating the encoding's power
+SRGB_TO_LINEAR = _srgb_decode(np.arange(256) / 255.0)
+_LINEAR_EDGES = _srgb_decode((np.arange(255) + 0.5) / 255.0)
+
+
+def _half(src: np.ndarray, srgb: bool = False) -> np.ndarray:
     h, w = src.shape[:2]
     rows, cols = (2 if h >= 2 else 1), (2 if w >= 2 else 1)
     out = np.empty((max(h // 2, 1), max(w // 2, 1), *src.shape[2:]), np.uint8)
-    n = rows * cols
     step = max(1, MIP_BAND_TEXELS // out.shape[1])
     for y in range(0, out.shape[0], step):
         end = min(y + step, out.shape[0])
         # an odd last row or column is dropped, as the whole-level chain did
-        p = src[y * rows:end * rows, :out.shape[1] * cols].astype(np.uint16)
-        if rows == 2:
-            p = p[0::2] + p[1::2]
-        if cols == 2:
-            p = p[:, 0::2] + p[:, 1::2]
-        p += n // 2
-        p //= n
-        out[y:end] = p
+        band = src[y * rows:end * rows, :out.shape[1] * cols]
+        if srgb:  # colour in linear light, alpha as a linear texture's
+            out[y:end, :, :3] = _srgb_mean(band[..., :3], rows, cols)
+            out[y:end, :, 3:] = _byte_mean(band[..., 3:], rows, cols)
+        else:
+            out[y:end] = _byte_mean(band, rows, cols)
     return out
+
+
+def _byte_mean(band: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """The rounded (half up) means of ``band``'s ``rows`` x ``cols`` blocks, in uint16."""
+    n = rows * cols
+    p = band.astype(np.uint16)
+    if rows == 2:
+        p = p[0::2] + p[1::2]
+    if cols == 2:
+        p = p[:, 0::2] + p[:, 1::2]
+    p += n // 2
+    p //= n
+    return p
+
+
+def _srgb_mean(band: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """The sRGB bytes nearest the linear means of ``band``'s ``rows`` x ``cols`` blocks."""
+    total = SRGB_TO_LINEAR[band[0::rows, 0::cols]]
+    for dy, dx in ((0, 1), (1, 0), (1, 1)):
+        if dy < rows and dx < cols:
+            total += SRGB_TO_LINEAR[band[dy::rows, dx::cols]]
+    total /= rows * cols
+    return np.searchsorted(_LINEAR_EDGES, total, side="right")
 
 
 def check_instance_limits(scene: Scene, limits: dict[str, Any], keys: tuple[str, ...]) -> int:

@@ -46,8 +46,8 @@ this):
   wrap mode. Mitsuba has no mipmaps, so this is exact where rfw's ray cones read the finest
   level (magnified textures: the glTF agreement scene's floor); a minified texture is
   filtered by rfw and point-sampled by Mitsuba, which agree in the mean over a pixel where
-  rfw's mip levels keep the linear mean. Its sRGB ones do not (``mip_chain`` averages the
-  stored sRGB values), which darkens what rays read coarse: docs/ground-truth.md.
+  rfw's mip levels keep the linear mean (``mip_chain`` averages sRGB textures in linear
+  light, to the nearest byte).
 
 What is approximate, each said in one warning line: other materials (``0 < metallic < 1``,
 or a dielectric with ``specular > 0``) become ``principled`` with Mitsuba's ``specular =

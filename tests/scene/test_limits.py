@@ -249,37 +249,119 @@ def test_textures_sharing_an_image_render_as_two_copies(tmp_path):
         assert np.abs(a.astype(int) - c).max() > 20, backend
 
 
+def _srgb_decode(c):
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _srgb_encode(x):
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.maximum(x, 0) ** (1 / 2.4) - 0.055)
+
+
+def _float_chain(pixels, srgb=False):
+    """The whole-level chain: each level from the last at once, in float32 means rounded
+    half up (sRGB colour: decoded by the formula, averaged and encoded back in float64)."""
+    levels = [pixels]
+    while max(levels[-1].shape[:2]) > 1:
+        h, w = levels[-1].shape[:2]
+        last = levels[-1][: h - h % 2 or 1, : w - w % 2 or 1]
+        p = last.astype(np.float32)
+        if srgb:
+            p = np.concatenate([_srgb_decode(last[..., :3] / 255.0), p[..., 3:]], axis=-1)
+        if p.shape[0] >= 2:
+            p = (p[0::2] + p[1::2]) / 2
+        if p.shape[1] >= 2:
+            p = (p[:, 0::2] + p[:, 1::2]) / 2
+        if srgb:
+            p[..., :3] = 255 * _srgb_encode(p[..., :3])
+        levels.append(np.clip(np.floor(p + 0.5), 0, 255).astype(np.uint8))
+    return levels
+
+
+@pytest.mark.parametrize("srgb", [False, True])
 @pytest.mark.parametrize("band", [None, 3])
-def test_mip_chain_is_the_float_chain(band, monkeypatch):
+def test_mip_chain_is_the_float_chain(band, srgb, monkeypatch):
     if band is not None:  # levels built in bands of 3 output texels: the same bytes
         import rfw.backends.scene_data as scene_data
         monkeypatch.setattr(scene_data, "MIP_BAND_TEXELS", band)
-    # sums in uint16, the same bytes as the float32 means rounded half up it replaced
-    def float_chain(pixels):
-        levels = [pixels]
-        while max(levels[-1].shape[:2]) > 1:
-            p = levels[-1].astype(np.float32)
-            h, w = p.shape[:2]
-            p = p[: h - h % 2 or 1, : w - w % 2 or 1]
-            if p.shape[0] >= 2:
-                p = (p[0::2] + p[1::2]) / 2
-            if p.shape[1] >= 2:
-                p = (p[:, 0::2] + p[:, 1::2]) / 2
-            levels.append(np.clip(p + 0.5, 0, 255).astype(np.uint8))
-        return levels
-
+    # linear: sums in uint16, the same bytes as the float32 means rounded half up it
+    # replaced; sRGB: the table and the edge search, the same bytes as the formulas
     rng = np.random.default_rng(1)
     for shape in ((1, 1), (1, 7), (7, 1), (5, 3), (33, 17), (2, 300)):
         for a in (rng.integers(0, 256, (*shape, 4), np.uint8), np.full((*shape, 4), 255,
                                                                           np.uint8)):
-            want, got = float_chain(a), mip_chain(a)
+            want, got = _float_chain(a, srgb), mip_chain(a, srgb=srgb)
             assert len(want) == len(got)
             assert all(np.array_equal(x, y) and y.dtype == np.uint8 for x, y in zip(want, got,
                                                                                     strict=True))
-    # the control: rounding down instead differs on random texels
+    # the controls: rounding down instead differs on random texels, and so does the other
+    # colour space's chain, in colour only (alpha is averaged as bytes in both)
     a = rng.integers(0, 256, (8, 8, 4), np.uint8)
     down = (a.reshape(4, 2, 4, 2, 4).astype(int).sum((1, 3)) // 4).astype(np.uint8)
-    assert not np.array_equal(mip_chain(a)[1], down)
+    assert not np.array_equal(mip_chain(a, srgb=srgb)[1], down)
+    other = mip_chain(a, srgb=not srgb)[1]
+    assert not np.array_equal(mip_chain(a, srgb=srgb)[1][..., :3], other[..., :3])
+    assert np.array_equal(mip_chain(a, srgb=srgb)[1][..., 3], other[..., 3])
+
+
+def test_srgb_mips_keep_the_linear_mean():
+    # every byte maps to its own linear value and back; a red/white checker's level 1 is
+    # the linear mean (0.5 in green and blue) within one 8-bit step, where the mean of the
+    # stored bytes (the linear chain, as sRGB textures were built) is 60 steps darker
+    every = np.arange(256, dtype=np.uint8).reshape(16, 16, 1).repeat(4, 2)
+    blocks = every.repeat(2, 0).repeat(2, 1)  # 2x2 texels of each byte
+    assert np.array_equal(mip_chain(blocks, srgb=True)[1], every)
+    checker = _checker(8)
+    want = 255 * _srgb_encode(_srgb_decode(checker[..., :3] / 255).mean((0, 1)))
+    for level in mip_chain(checker, srgb=True)[1:]:
+        assert np.abs(level[..., :3] - want).max() <= 1
+    assert np.abs(mip_chain(checker)[1][..., :3] - want).max() > 50
+
+
+def _checker(n: int) -> np.ndarray:
+    """An n x n red/white checker of single texels, opaque."""
+    c = np.full((n, n, 4), 255, np.uint8)
+    odd = (np.add.outer(np.arange(n), np.arange(n)) % 2).astype(bool)
+    c[odd, 1:3] = 0
+    return c
+
+
+def test_minified_srgb_textures_keep_the_linear_mean(tmp_path, monkeypatch):
+    # a 64x64 red/white checker as base colour and emission, drawn ~20 pixels across (mip
+    # levels 1 and coarser, all one colour): both backends' G-buffers read the level-0
+    # linear mean (1, 0.5, 0.5) within one 8-bit sRGB step; the control, the levels built
+    # as the bytes' mean (the linear chain), reads 60 steps darker through the same upload
+    import rfw
+    import rfw.backends.scene_data as scene_data
+    import rfw.backends.wgpu.scene as wgpu_scene
+    import vkext.scene as vk_scene
+    from rfw.render import render
+    from rfw.scene import load_scene
+
+    (tmp_path / "c.png").write_bytes(png(_checker(64)))
+    doc = textured(quad_doc(1), ["c.png"], [0])
+    doc["materials"][0].update(emissiveTexture={"index": 0}, emissiveFactor=[1, 1, 1])
+    path = write(tmp_path, doc)
+    cfg = rfw.make_config("mips", [{"name": "gbuffer"}], ["gbuffer.albedo", "gbuffer.emissive"],
+                          size=(32, 32))
+    want = 255 * _srgb_encode(np.array([1.0, 0.5, 0.5]))
+
+    def steps(backend: str) -> float:
+        """The G-buffer's largest distance from ``want``, in 8-bit sRGB steps."""
+        im = render(cfg, scene=load_scene(path), frames=1, backend=backend).images
+        albedo, emissive = im["gbuffer.albedo"], im["gbuffer.emissive"]
+        drawn = albedo[..., 3] > 0
+        assert drawn.sum() > 200, backend  # the quad, minified 3x
+        emitted = 255 * _srgb_encode(emissive[drawn][:, :3].astype(np.float64))
+        return max(np.abs(albedo[drawn][:, :3] - want).max(), np.abs(emitted - want).max())
+
+    for backend in ("wgpu", "vk"):
+        assert steps(backend) <= 1, backend
+    byte_mean = lambda pixels, srgb: scene_data.mip_levels(pixels)  # noqa: E731
+    monkeypatch.setattr(wgpu_scene, "mip_levels", byte_mean)
+    monkeypatch.setattr(vk_scene, "mip_levels", byte_mean)
+    for backend in ("wgpu", "vk"):
+        assert steps(backend) > 50, backend
 
 
 def test_textures_uploaded_in_small_chunks_render_the_same(tmp_path, monkeypatch):

@@ -1,9 +1,9 @@
 """rfw's path tracer against Mitsuba 3 on the agreement scenes (the built-in ``cornell`` and
 ``spheres``, and ``still_life``, a glTF file read by rfw's loader and converted from the
 loaded scene): the mean radiance within 1.5 % (the metal's separable shadowing in Mitsuba is
-up to 1.2 % darker at 80 degrees, rfw's mip chains of sRGB textures are averaged in sRGB and
-darken what reads them coarse, docs/ground-truth.md, and rfw's Sobol noise and Mitsuba's
-multijitter both enter), the per-pixel error no larger than 1.3 times two Mitsuba seeds' at
+up to 1.2 % darker at 80 degrees, and rfw's Sobol noise and Mitsuba's multijitter both enter;
+measured on still_life -0.06 %, -0.73 % before sRGB mips kept the linear mean,
+docs/ground-truth.md), the per-pixel error no larger than 1.3 times two Mitsuba seeds' at
 rfw's sample count. Negative controls: a light 10 % brighter is caught by the mean; a metal
 0.1 smoother, and a base colour texture read upside down, by the per-pixel error."""
 

@@ -177,7 +177,7 @@ class GpuScene:
         # write_texture stages its own copy until a submit, so unflushed writes of every
         # texture would all be held at once
         written = 0
-        for k, lv in enumerate(mip_levels(pixels)):
+        for k, lv in enumerate(mip_levels(pixels, srgb=srgb)):
             lh, lw = lv.shape[:2]
             step = max(1, TEXTURE_CHUNK // (4 * lw))
             for y in range(0, lh, step):
