@@ -1,6 +1,6 @@
 """Pack the benches of ``benchmarks/truth_fronts.sh`` for the repository (or for the trip back
 from a GPU machine, at most 16 MiB a file): every report, table and chart as written, the
-references' displayed images and metadata, and every other image shrunk to ``--thumb`` pixels
+references' displayed images and metadata, each variant's first image, every image shrunk to ``--thumb`` pixels
 wide (the report's numbers were measured on the full images before; the linear EXRs, tens of
 MiB each at 1280x720, stay behind).
 
@@ -30,6 +30,8 @@ def main() -> int:
             if not path.is_file():
                 continue
             rel = path.relative_to(args.folder.parent)
+            if "runs" in path.parts and (path.parent.name != "r0" or path.suffix != ".png"):
+                continue  # records are in results.jsonl; the report shows first runs' images
             if path.suffix in KEEP:
                 tar.add(path, arcname=str(rel))
             elif path.suffix == ".png":
