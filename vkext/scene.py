@@ -44,9 +44,7 @@ from rfw.units import MiB, align_up
 
 from .accel import SceneAccel
 from .commands import (
-    COPY_WRITE,
-    BufferBarrier,
-    barrier,
+    copy_into_buffers,
     copy_into_uniforms,
     one_time,
     record_image_bands,
@@ -599,13 +597,7 @@ class VkScene:
         before every read after it. Nothing where no animation moves an instance."""
         if not self._pose_copies:
             return
-        span = [(dst, region.dstOffset, region.size) for dst, region in self._pose_copies]
-        barrier(cmd, buffer_barriers=[BufferBarrier(d, POSE_BEFORE, COPY_WRITE, o, n)
-                                      for d, o, n in span])
-        for dst, region in self._pose_copies:
-            lib.vkCmdCopyBuffer(cmd, source.handle, dst.handle, 1, region)
-        barrier(cmd, buffer_barriers=[BufferBarrier(d, COPY_WRITE, POSE_READ, o, n)
-                                      for d, o, n in span])
+        copy_into_buffers(cmd, source, self._pose_copies, before=POSE_BEFORE, after=POSE_READ)
 
     def camera_range(self, camera: str = "main") -> BufferRange:
         k = 1 if camera == "sun" else 0

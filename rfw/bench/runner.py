@@ -378,8 +378,7 @@ def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
     out.mkdir(parents=True, exist_ok=True)
     clear_run_files(out)
     t = time.perf_counter()
-    env = {**os.environ, **(env or {}), "PYTHONPATH": os.pathsep.join(
-        [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
+    env = worker_env(env)
     try:
         done = _worker(_command(job, plan, out, truth=truth), timeout=plan.timeout, env=env,
                        cwd=cwd)
@@ -397,6 +396,13 @@ def run_one(job: Job, plan: Plan, out: Path, *, cwd: str | None = None,
         record = {"error": f"exit {done.returncode} after writing its record"}
     record["elapsed_s"] = elapsed
     return record
+
+
+def worker_env(extra: dict[str, str] | None = None) -> dict[str, str]:
+    """The environment a worker process starts with: this process's, plus ``extra``, with
+    this tree first on PYTHONPATH (the worker imports the rfw that started it)."""
+    return {**os.environ, **(extra or {}), "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])])}
 
 
 def _worker(cmd: list[str], *, timeout: float, env: dict[str, str],

@@ -243,8 +243,7 @@ def render_references(out_dir: Path, records: list[dict[str, Any]], spec: TruthS
     import sys
     import time
 
-    from .runner import ROOT as RUN_ROOT
-    from .runner import _worker
+    from .runner import _worker, worker_env
 
     views: dict[str, View] = {}
     variants: dict[str, str] = {}
@@ -265,12 +264,9 @@ def render_references(out_dir: Path, records: list[dict[str, Any]], spec: TruthS
         if source is None:
             scratch = out_dir / "reference" / f".{key}.partial"
             shutil.rmtree(scratch, ignore_errors=True)
-            env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-                [str(RUN_ROOT), *([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH")
-                                  else [])])}
             try:
                 done = _worker(reference_command(view, spec, scratch), timeout=timeout,
-                               env=env, cwd=None)
+                               env=worker_env(), cwd=None)
             except subprocess.TimeoutExpired:
                 done = None
             if done is None or done.returncode or not (scratch / META_FILE).is_file():
@@ -281,8 +277,8 @@ def render_references(out_dir: Path, records: list[dict[str, Any]], spec: TruthS
                       file=sys.stderr)
                 shutil.rmtree(scratch, ignore_errors=True)
                 continue
-            os.replace(scratch, dest) if not dest.exists() else (
-                shutil.rmtree(dest), os.replace(scratch, dest))
+            shutil.rmtree(dest, ignore_errors=True)
+            os.replace(scratch, dest)
             _store(dest, cached)
             source = "rendered"
         meta = json.loads((dest / META_FILE).read_text(encoding="utf-8"))

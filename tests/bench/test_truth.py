@@ -28,7 +28,7 @@ from rfw.bench.truth import (
 )
 from rfw.errors import RfwError
 
-from ..conftest import rfw_cli
+from ..conftest import ray_method, rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -158,7 +158,7 @@ def bench(tmp_path: Path, name: str, *args: str) -> tuple[Path, dict[str, dict]]
 @pytest.fixture(scope="module")
 def ao_bench(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("truth_ao")
-    return (tmp, *bench(tmp, "ao", "rt_shadows@vk", "--vary", "ao=off,ssao,ray_query",
+    return (tmp, *bench(tmp, "ao", "rt_shadows@vk", "--vary", f"ao=off,ssao,{ray_method()}",
                         "--vary", "ssao.samples=4,16", "--vary", "rt_ao.samples=1,16",
                         "--reference", "pathtrace:ao:64"))
 
@@ -166,7 +166,7 @@ def ao_bench(tmp_path_factory):
 def test_the_ao_front_ranks_rays_and_names_what_is_dominated(ao_bench):
     _tmp, out, rows = ao_bench
     err = {k: float(r["rmse"]) for k, r in rows.items()}
-    one, many = (f"rt_shadows[ao=ray_query,rt_ao.samples={n}]@vk" for n in (1, 16))
+    one, many = (f"rt_shadows[ao={ray_method()},rt_ao.samples={n}]@vk" for n in (1, 16))
     off = "rt_shadows[ao=off]@vk"
     assert set(rows) == {off, one, many, "rt_shadows[ao=ssao,ssao.samples=4]@vk",
                          "rt_shadows[ao=ssao,ssao.samples=16]@vk"}  # inert choices merged
@@ -207,12 +207,12 @@ def test_larger_shadow_maps_and_ray_traced_shadows_order_the_direct_light_front(
     # the spheres under the sun: the courtyard's point lights have no shadow map, and their
     # unshadowed light would be most of a shadow map's error there
     _, rows = bench(tmp_path, "shadows", "rt_shadows@vk", "--scene", "spheres", "--vary",
-                    "shadows=shadow_map,ray_query", "--vary", "shadow.resolution=128,2048",
+                    f"shadows=shadow_map,{ray_method()}", "--vary", "shadow.resolution=128,2048",
                     "--set", "ao=off", "--reference", "pathtrace:direct_centre:1")
     err = {k.partition("[")[2].partition("]")[0]: float(r["rmse"]) for k, r in rows.items()}
     small, large = err["shadows=shadow_map,shadow.resolution=128"], \
         err["shadows=shadow_map,shadow.resolution=2048"]
-    assert small > 1.3 * large and large > 1.3 * err["shadows=ray_query"], err
+    assert small > 1.3 * large and large > 1.3 * err[f"shadows={ray_method()}"], err
 
 
 def test_anti_aliasing_is_judged_on_the_displayed_image_along_a_camera_path(tmp_path):

@@ -209,12 +209,14 @@ ENV_READERS = {
     "rfw/cli.py": "check_all before any command",
     "rfw/scene/names.py": "RFW_FETCH", "rfw/scene/fetch/cache.py": "RFW_CACHE",
     "rfw/spirv.py": "RFW_CACHE_SPIRV", "rfw/meshlets.py": "RFW_CACHE_MESHLETS",
+    "rfw/bench/truth.py": "RFW_CACHE_TRUTH",
     "rfw/view.py": "RFW_VIEW_FORMAT", "rfw/bench/runner.py": "RFW_COMMIT",
     "vkext/raycast/placement.py": "RFW_RAYCAST_MAPPED",
 }
 # the edges: where a run starts and its options are built
 EDGES = {
     "rfw/cli.py", "rfw/render.py", "rfw/api.py", "rfw/bench/worker.py",
+    "rfw/bench/reference.py",  # a bench reference's own process
     "rfw/bench/runner.py",  # refuses a bad variable once, before its workers start
     "rfw/raycasting.py",  # rfw.raycast's own device
 }

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from rfw.scene.model import Camera, Instance, Light, Material, Mesh, Scene
@@ -90,3 +92,28 @@ def tiny_scene() -> Scene:
                 Light("point", (0.2, 0.5, 1.0), 20.0, position=(2, 1.5, 2))]
     s.cameras = [Camera((3, 2.5, 4), (0, 0.3, 0))]
     return s
+
+
+# a still surface's motion: last frame's clip position and this frame's are the same product,
+# which a GPU's compiler may round apart (NVIDIA H200: 2e-6 px), far below any motion that
+# counts (the tests' moves are pixels)
+STILL_PX = 1e-4
+
+
+def still(velocity) -> bool:
+    """No motion in ``velocity`` (pixels) beyond :data:`STILL_PX`; True for no pixels."""
+    return bool(np.abs(np.asarray(velocity, np.float32)).max(initial=0.0) <= STILL_PX)
+
+
+@functools.cache
+def ray_method() -> str:
+    """The ray-tracing method of this machine's Vulkan device: ``ray_query`` where it has
+    VK_KHR_ray_query (lavapipe), else ``ray_pipeline`` (NVIDIA's Hopper chips have
+    pipelines only); the tests that judge traced passes run on whichever there is."""
+    from vkext import VkDevice
+
+    device = VkDevice(label="rfw-tests:caps")
+    try:
+        return "ray_query" if "VK_KHR_ray_query" in device.caps else "ray_pipeline"
+    finally:
+        device.destroy()

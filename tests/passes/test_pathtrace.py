@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pass_scenes import box, corner_scene, quad, rotate_x, translate
+from pass_scenes import box, corner_scene, quad, ray_method, rotate_x, translate
 from pathtrace_scenes import SKY, directional_albedo, sphere_cosines, sphere_scene
 
 import rfw
@@ -107,9 +107,11 @@ def tiny_scene() -> Scene:
 
 
 def test_deterministic_for_a_seed_and_the_same_by_ray_query_and_by_pipeline():
-    a = trace(tiny_scene(), 24, 2, "pt.spp=2")["pt.hdr"]
-    b = trace(tiny_scene(), 24, 2, "pt.spp=2", "pt.method=ray_query")["pt.hdr"]
-    np.testing.assert_array_equal(a, b)  # the same samples, hits and arithmetic
+    a = trace(tiny_scene(), 24, 2, "pt.spp=2", "pt.method=ray_pipeline")["pt.hdr"]
+    # by ray query where the device has them (lavapipe; not NVIDIA's Hopper chips), else
+    # the pipeline again: the same samples, hits and arithmetic either way
+    b = trace(tiny_scene(), 24, 2, "pt.spp=2", f"pt.method={ray_method()}")["pt.hdr"]
+    np.testing.assert_array_equal(a, b)
     c = trace(tiny_scene(), 24, 2, "pt.spp=2", "pt.seed=1")["pt.hdr"]
     assert np.mean(np.abs(c - a)) > 1e-4  # negative control: another seed, other samples
     assert np.all(np.isfinite(a))

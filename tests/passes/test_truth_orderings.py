@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pass_scenes import box, translate
+from pass_scenes import box, ray_method, translate
 
 import rfw
 from rfw.render import render
@@ -75,11 +75,11 @@ def test_more_rt_ao_samples_and_the_matching_radius_lower_the_ao_error(configs, 
     truth = ref[..., 0][seen]
     errors = {}
     for samples in (1, 4, 16):
-        ao = images(configs["rt"], "ao=ray_query", f"rt_ao.samples={samples}",
+        ao = images(configs["rt"], f"ao={ray_method()}", f"rt_ao.samples={samples}",
                     "rt_ao.radius=1.0")["rt_ao.ao"][..., 0][seen].astype(np.float32)
         errors[samples] = rmse(ao, truth)
     assert errors[1] > errors[4] > errors[16], errors
-    mismatched = images(configs["rt"], "ao=ray_query", "rt_ao.samples=16",
+    mismatched = images(configs["rt"], f"ao={ray_method()}", "rt_ao.samples=16",
                         "rt_ao.radius=0.25")["rt_ao.ao"][..., 0][seen].astype(np.float32)
     assert rmse(mismatched, truth) > 1.5 * errors[16]  # the radius the truth was made with
     # negative control: the error measure does not rank two seeds of one count apart
@@ -141,7 +141,7 @@ def test_larger_shadow_maps_lower_the_shadow_error_and_ray_tracing_beats_them(co
         hdr = images(configs["shadows"], "shadows=shadow_map", f"shadow.resolution={res}",
                      *flat)["lighting.hdr"]
         errors[res] = rmse(hdr[lit][:, :3].astype(np.float32), truth[lit][:, :3])
-    traced = images(configs["shadows"], "shadows=ray_query", *flat)["lighting.hdr"]
+    traced = images(configs["shadows"], f"shadows={ray_method()}", *flat)["lighting.hdr"]
     errors["rt"] = rmse(traced[lit][:, :3].astype(np.float32), truth[lit][:, :3])
     assert errors[64] > errors[256] > errors[1024] > errors["rt"], errors
     # negative control: the same ray-traced shadows with the sun's shadows turned off

@@ -21,8 +21,8 @@ from rfw.units import align_up
 
 from ..blocks import BlockAllocator
 from ..buffers import Buffer
-from ..commands import COPY_WRITE, BufferBarrier, barrier
-from ..consts import const, ffi, lib, new
+from ..commands.transfers import record_update
+from ..consts import const, new
 from ..device import VkDevice
 from .structure import (
     AccelerationStructure,
@@ -70,21 +70,6 @@ def instance_records(scene: Scene, blas: Sequence[AccelerationStructure | None],
 # a TLAS build reads its instance records as VK_ACCESS_2_SHADER_READ in the build stage
 RECORDS_READ = State(None, frozenset({"ACCELERATION_STRUCTURE_BUILD_KHR"}),
                      frozenset({"SHADER_READ"}))
-UPDATE_LIMIT = 65536  # bytes one vkCmdUpdateBuffer may write
-
-
-def record_inline(cmd: Any, buffer: Buffer, records: np.ndarray) -> None:
-    """Record ``records`` into ``buffer`` from ``cmd`` (in pieces of ``UPDATE_LIMIT``
-    bytes): after the builds before it read the buffer, before the next build reads it."""
-    data = np.ascontiguousarray(records).reshape(-1).view(np.uint8)
-    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, RECORDS_READ, COPY_WRITE, 0,
-                                                data.size)])
-    for start in range(0, data.size, UPDATE_LIMIT):
-        piece = data[start:start + UPDATE_LIMIT]
-        lib.vkCmdUpdateBuffer(cmd, buffer.handle, start, piece.size,
-                              ffi.from_buffer("char[]", piece))
-    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, COPY_WRITE, RECORDS_READ, 0,
-                                                data.size)])
 
 
 class TopLevel:
@@ -139,7 +124,7 @@ class TopLevel:
         keeps the ones its build reads; the update's own barriers order it after the last
         build's reads and before this one."""
         if len(records) and inline:
-            record_inline(cmd, self.instance_buffer, records)
+            record_update(cmd, self.instance_buffer, records, reader=RECORDS_READ)
         elif len(records):
             self.instance_buffer.write(records)  # host writes: the submit makes them visible
         _rng, ranges = build_range(len(records))  # ranges points into _rng

@@ -50,6 +50,20 @@ def copy_into_uniforms(cmd: Any, source: Buffer, dst: Buffer, region: Any,
     barrier(cmd, buffer_barriers=[BufferBarrier(dst, COPY_WRITE, readers, *rng)])
 
 
+def copy_into_buffers(cmd: Any, source: Buffer, copies: Sequence[tuple[Buffer, Any]], *,
+                      before: State, after: State) -> None:
+    """Record the copies ``(dst, region)`` (each region a ``VkBufferCopy*``) of ``source``
+    into their buffers: after ``before``'s accesses to the ranges written, before
+    ``after``'s (a frame's instance rows into every buffer that binds them)."""
+    spans = [(dst, region.dstOffset, region.size) for dst, region in copies]
+    barrier(cmd, buffer_barriers=[BufferBarrier(d, before, COPY_WRITE, o, n)
+                                  for d, o, n in spans])
+    for dst, region in copies:
+        lib.vkCmdCopyBuffer(cmd, source.handle, dst.handle, 1, region)
+    barrier(cmd, buffer_barriers=[BufferBarrier(d, COPY_WRITE, after, o, n)
+                                  for d, o, n in spans])
+
+
 def copy_buffer_to_image(cmd: Any, buffer: Buffer, image: Image, *, mip: int = 0,
                          layer: int = 0, aspect: str | int | None = None,
                          layout: str = "TRANSFER_DST_OPTIMAL") -> None:
@@ -277,3 +291,19 @@ def read_buffer(device: VkDevice, buffer: Buffer, src: State | str | None = None
         return staging.read(dtype)
     finally:
         staging.destroy()
+
+
+UPDATE_LIMIT = 65536  # bytes one vkCmdUpdateBuffer may write
+
+
+def record_update(cmd: Any, buffer: Buffer, data: np.ndarray, *, reader: State) -> None:
+    """Record ``data`` into ``buffer`` from ``cmd`` by vkCmdUpdateBuffer (in pieces of
+    ``UPDATE_LIMIT`` bytes): after ``reader``'s earlier reads of the buffer, before its next
+    ones (a TLAS's instance records between the builds of two frames)."""
+    raw = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, reader, COPY_WRITE, 0, raw.size)])
+    for start in range(0, raw.size, UPDATE_LIMIT):
+        piece = raw[start:start + UPDATE_LIMIT]
+        lib.vkCmdUpdateBuffer(cmd, buffer.handle, start, piece.size,
+                              ffi.from_buffer("char[]", piece))
+    barrier(cmd, buffer_barriers=[BufferBarrier(buffer, COPY_WRITE, reader, 0, raw.size)])
