@@ -1,10 +1,11 @@
 """Pack the benches of ``benchmarks/truth_fronts.sh`` for the repository (or for the trip back
 from a GPU machine, at most 16 MiB a file): every report, table and chart as written, the
-references' displayed images and metadata, each variant's first image, every image shrunk to ``--thumb`` pixels
-wide (the report's numbers were measured on the full images before; the linear EXRs, tens of
-MiB each at 1280x720, stay behind).
+references' displayed images and metadata, and each variant's first image, shrunk to
+``--thumb`` pixels wide (the numbers were measured on the full images before). Left behind:
+the linear EXRs (tens of MiB each at 1280x720), the repeats' images, and the Images
+section's differences between variants (the report links them; they are not the truth's).
 
-    python benchmarks/pack_fronts.py OUT_FOLDER PACK.tgz [--thumb 320]
+    python benchmarks/pack_fronts.py OUT_FOLDER PACK.tgz [--thumb 192]
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("folder", type=Path)
     ap.add_argument("pack", type=Path)
-    ap.add_argument("--thumb", type=int, default=320)
+    ap.add_argument("--thumb", type=int, default=192)
     args = ap.parse_args()
     from PIL import Image
 
@@ -32,6 +33,8 @@ def main() -> int:
             rel = path.relative_to(args.folder.parent)
             if "runs" in path.parts and (path.parent.name != "r0" or path.suffix != ".png"):
                 continue  # records are in results.jsonl; the report shows first runs' images
+            if "images" in path.parts:
+                continue  # the Images section's differences between variants: not the truth's
             if path.suffix in KEEP:
                 tar.add(path, arcname=str(rel))
             elif path.suffix == ".png":

@@ -457,12 +457,12 @@ def errors(reference_hdr: np.ndarray | None, test_hdr: np.ndarray | None,
 
 
 def front_metric(component: str) -> str:
-    """The error a component's fronts are drawn against: HDR-FLIP for the whole image
-    (``full``), the displayed image's FLIP for ``direct`` (anti-aliasing: FXAA works on the
-    displayed image, TAA before the tone map), RMSE for a term of the shading (``ao``,
-    ``direct_centre``)."""
+    """The error a component's fronts are drawn against: HDR-FLIP for radiance (``full``,
+    ``direct_centre``: an RMSE of radiance is the few brightest pixels' error), the
+    displayed image's FLIP for ``direct`` (anti-aliasing: FXAA works on the displayed
+    image, TAA before the tone map), RMSE for the AO term (0 to 1)."""
     kind = component.partition("=")[0]
-    return {"full": "hdr_flip", "direct": "flip"}.get(kind, "rmse")
+    return {"direct": "flip", "ao": "rmse"}.get(kind, "hdr_flip")
 
 
 def noise_floor(reference_hdr: np.ndarray, error: np.ndarray) -> dict[str, float]:

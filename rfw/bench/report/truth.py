@@ -21,7 +21,8 @@ from .document import Doc, Img, ci, ms
 TRUTH_JSON = "truth.json"
 METRICS = (("hdr_flip", "HDR-FLIP"), ("hdr_flip_p99", "HDR-FLIP p99"),
            ("rel_mse", "relMSE"), ("rmse", "RMSE"), ("flip", "FLIP (display)"))
-WORDS = {"hdr_flip": "HDR-FLIP (mean)", "rmse": "RMSE", "flip": "FLIP (mean, displayed image)"}
+WORDS = {"hdr_flip": "HDR-FLIP (mean)", "hdr_flip_p99": "HDR-FLIP (99th percentile)",
+         "rel_mse": "relative MSE", "rmse": "RMSE", "flip": "FLIP (mean, displayed image)"}
 
 
 COMPONENT_WORDS = {
@@ -193,10 +194,16 @@ def _dominated_text(r: dict) -> str:
 
 def _front_chart(out_dir: Path, rows: list[dict], pts: list[Point],
                  chosen: tuple[str, str]) -> Img | None:
-    """GPU ms (median, 95% CI) against the error (95% CI), one colour per family with its
-    own front as a step line, the front of all variants dashed."""
     if not pts:
         return None
+    path = out_dir / "charts" / f"front_{chosen[0]}.png"
+    draw_front(path, pts, chosen[1])
+    return Img(str(path.relative_to(out_dir)), "error-versus-cost fronts", 720)
+
+
+def draw_front(path: Path, pts: list[Point], words: str, *, title: str | None = None) -> Path:
+    """GPU ms (median, 95% CI) against the error (95% CI), one colour per family with its
+    own front as a step line, the front of all variants dashed; written to ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -224,16 +231,30 @@ def _front_chart(out_dir: Path, rows: list[dict], pts: list[Point],
     ax.step([p.ms for p in best], [p.err for p in best], where="post", color="black",
             linestyle="--", linewidth=1.0, label="front of all")
     ax.set_xlabel("frame GPU ms (median, 95% CI)")
-    ax.set_ylabel(chosen[1] + " vs path-traced reference (95% CI)")
-    ax.set_title("error against the truth vs cost: lower left is better")
+    ax.set_ylabel(words + " vs path-traced reference (95% CI)")
+    ax.set_title(title or "error against the truth vs cost: lower left is better")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small", loc="best")
     fig.tight_layout()
-    path = out_dir / "charts" / f"front_{chosen[0]}.png"
-    path.parent.mkdir(exist_ok=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return Img(str(path.relative_to(out_dir)), "error-versus-cost fronts", 720)
+    return path
+
+
+def points_from_csv(path: Path, metric: str) -> list[Point]:
+    """The points of a ``truth.csv`` against ``metric`` (a fronts' redrawing without the
+    images: every number it needs is in the file)."""
+    out = []
+    with open(path, encoding="utf-8", newline="") as f:
+        for r in csv.DictReader(f):
+            if not r.get(metric) or not r.get("gpu_ms"):
+                continue
+            out.append(Point(r["variant"], r["family"], float(r["gpu_ms"]),
+                             float(r["gpu_ms_ci_lo"]), float(r["gpu_ms_ci_hi"]),
+                             float(r[metric]), float(r[f"{metric}_ci_lo"]),
+                             float(r[f"{metric}_ci_hi"])))
+    return out
 
 
 def _short_label(label: str) -> str:
