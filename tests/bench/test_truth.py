@@ -229,3 +229,17 @@ def test_anti_aliasing_is_judged_on_the_displayed_image_along_a_camera_path(tmp_
     truth = json.loads((out / "truth.json").read_text())
     (ref,) = truth["references"].values()  # the path's last frame, for all three
     assert any(c.startswith("camera.position=") for c in ref["view"]["camera"])
+
+
+def test_a_report_asked_for_a_truth_its_bench_never_rendered_is_one_line(ao_bench):
+    tmp, out, _ = ao_bench
+    (tmp / "bare").mkdir()
+    (tmp / "bare" / "results.jsonl").write_bytes((out / "results.jsonl").read_bytes())
+    done = rfw_cli("bench", "report", tmp / "bare", "--reference", "pathtrace:ao:64", cwd=tmp)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "no references" in done.stderr
+    assert not (tmp / "bare" / "report.md").exists()
+    # control: the bench that rendered them reports again, truth section and all
+    again = rfw_cli("bench", "report", out, "--reference", "pathtrace:ao:64", cwd=tmp)
+    assert again.returncode == 0, again.stderr
+    assert "## Error against the truth" in (out / "report.md").read_text()

@@ -656,6 +656,10 @@ def test_control_workers(tmp_path):
     marker = str(tmp_path / "unique-marker")
     proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", marker])
     try:
+        # a loaded machine may scan /proc before the child has exec'd into its command line
+        deadline = time.monotonic() + 10
+        while not workers(marker) and time.monotonic() < deadline:
+            time.sleep(0.05)
         assert workers(marker) != []
     finally:
         proc.kill()

@@ -60,6 +60,9 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     # --reference pathtrace[:SPP]: the images are compared with the first variant, as without
     # one, and against the truth in a section of their own
     truth_given = parse_truth(reference) is not None
+    if truth_given and not (out_dir / "truth.json").is_file():
+        raise ValueError(f"--reference {reference}: this bench has no references (it ran "
+                         "without --reference pathtrace; run it again with it)")
     _images(doc, out_dir, rfw, None if truth_given else reference, pooled,
             diff_scale=diff_scale, parts=parts)
     truth_rows = _truth(doc, out_dir, pooled)
