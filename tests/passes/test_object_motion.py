@@ -78,25 +78,6 @@ def write_scene(folder: Path, *, animated: bool = True, channel: tuple = SLIDE,
     return path
 
 
-@pytest.fixture(scope="module")
-def vk_device():
-    from vkext import VkDevice, VkUnavailableError
-
-    try:
-        device = VkDevice(validation=True, label="rfw-tests:object-motion")
-    except VkUnavailableError as e:
-        pytest.skip(f"no Vulkan: {e}")
-    yield device
-    device.destroy()
-    device.check_validation()
-
-
-@pytest.fixture(params=["wgpu", "vk"])
-def backend(request, device):
-    if request.param == "wgpu":
-        return "wgpu", device
-    return "vk", request.getfixturevalue("vk_device")
-
 
 def _frames(backend, scene: Path, config: str = "deferred.toml", outputs=(
         "gbuffer.velocity", "gbuffer.depth", "gbuffer.albedo", "tonemap.ldr"),

@@ -38,25 +38,6 @@ W, H = 64, 36
 SETTLE = 8  # frames for the history to fill (feedback 0.9) before flicker is measured
 
 
-@pytest.fixture(scope="module")
-def vk_device():
-    from vkext import VkDevice, VkUnavailableError
-
-    try:
-        device = VkDevice(validation=True, label="rfw-tests:taa")
-    except VkUnavailableError as e:
-        pytest.skip(f"no Vulkan: {e}")
-    yield device
-    device.destroy()
-    device.check_validation()
-
-
-@pytest.fixture(params=["wgpu", "vk"])
-def backend(request, device):
-    if request.param == "wgpu":
-        return "wgpu", device
-    return "vk", request.getfixturevalue("vk_device")
-
 
 def frames(backend, sets: list[str], n: int, output: str = "fxaa.color",
            size: tuple[int, int] = (W, H)) -> list[np.ndarray]:

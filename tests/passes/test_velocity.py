@@ -23,25 +23,6 @@ W, H = 64, 36
 TOLERANCE = 0.01
 
 
-@pytest.fixture(scope="module")
-def vk_device():
-    from vkext import VkDevice, VkUnavailableError
-
-    try:
-        device = VkDevice(validation=True, label="rfw-tests:velocity")
-    except VkUnavailableError as e:
-        pytest.skip(f"no Vulkan: {e}")
-    yield device
-    device.destroy()
-    device.check_validation()
-
-
-@pytest.fixture(params=["wgpu", "vk"])
-def backend(request, device):
-    if request.param == "wgpu":
-        return "wgpu", device
-    return "vk", request.getfixturevalue("vk_device")
-
 
 def _frames(backend, config: str, sets: list[str], frames: int) -> list[dict]:
     """Each timed frame's velocity, depth and the index the scene's camera began it with."""
