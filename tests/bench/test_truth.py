@@ -54,6 +54,10 @@ def test_a_bad_reference_is_refused_before_any_run(tmp_path):
     assert len(done.stderr.strip().splitlines()) == 1 and "Traceback" not in done.stderr
     assert "pathtrace[:COMPONENT][:SPP]" in done.stderr
     assert not (tmp_path / "out").exists()
+    ray = rfw_cli("bench", "rt_shadows@vk", "--reference", "pathtrace", "--executor", "ray",
+                  "--out", tmp_path / "out", cwd=tmp_path)
+    assert ray.returncode == 2 and "--executor local only" in ray.stderr, ray.stderr
+    assert len(ray.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
 
 
 def noisy(shape=(64, 96), seed=1):
