@@ -14,7 +14,6 @@ from pathlib import Path
 
 from .agreement import cornell, spheres
 from .courtyard import courtyard
-from .gltf import load_gltf
 from .model import Camera, Instance, Light, Material, Mesh, Scene, SceneError, Texture
 from .stress import MAX_INSTANCES, STRESS_INSTANCES, stress
 
@@ -93,6 +92,17 @@ def load_scene(path: str | Path) -> Scene:
         return load_meshfile(path)
     known = ", ".join(sorted(GLTF_SUFFIXES | meshes))
     raise SceneError(f"{path}: unknown scene file type '{path.suffix}' (expected {known})")
+
+
+def load_gltf(path: str | Path) -> Scene:
+    """Load a ``.gltf``/``.glb`` file (``rfw.scene.gltf.load_gltf``).
+
+    Its loader, and pygltflib with it (about 0.07 s of CPU), is imported on the first call,
+    as trimesh is for mesh files: most ``rfw`` processes draw a built-in scene.
+    """
+    from .gltf import load_gltf as load
+
+    return load(path)
 
 
 def load_meshfile(path: str | Path) -> Scene:
