@@ -1,0 +1,117 @@
+"""``python -m rfw.cli ARGS`` forked from a warm zygote (tests/cli/warm_zygote.py) instead of
+started: the same process a fresh start would become, less its start (Python, numpy, wgpu's
+header parse, rfw's imports: about 0.4 s of CPU a run on lavapipe's machines).
+
+For the corpora that run rfw a few hundred times and judge only what ``main()`` does (exit
+code, stderr, the files): ``warm_cli`` takes the arguments of ``conftest.rfw_cli`` that they
+use. A run whose environment differs from this process's in anything read before
+``main()`` (anything but HOME, XDG_CACHE_HOME, RFW_*, PYTHONPATH and
+PYTHONDONTWRITEBYTECODE) is started fresh through ``rfw_cli``, as is every run where the
+zygote cannot start.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+from ..conftest import ROOT, rfw_cli
+
+ZYGOTE = Path(__file__).with_name("warm_zygote.py")
+# what a child sets per run; everything else must be this process's
+PER_RUN = ("HOME", "XDG_CACHE_HOME", "PYTHONPATH", "PYTHONDONTWRITEBYTECODE")
+
+
+
+class Zygote:
+    """The zygote process and its answers, read line by line without Python's buffering
+    (a buffered line would be invisible to ``select``)."""
+
+    def __init__(self) -> None:
+        # this tree first, as conftest.tree_env has it: the children run this tree's rfw
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+            [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+        self.proc = subprocess.Popen([sys.executable, "-s", str(ZYGOTE)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.DEVNULL, env=env, cwd=ROOT, bufsize=0)
+        self.buf = b""
+
+    def send(self, request: dict) -> None:
+        self.proc.stdin.write(json.dumps(request).encode() + b"\n")
+
+    def answer(self, deadline: float | None = None) -> dict | None:
+        """The next JSON line, or None when ``deadline`` passed or the zygote ended."""
+        fd = self.proc.stdout.fileno()
+        while b"\n" not in self.buf:
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and (left <= 0 or not select.select([fd], [], [], left)[0]):
+                return None
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                return None
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        return json.loads(line)
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+
+_zygote: Zygote | None = None
+
+
+def _start() -> Zygote | None:
+    z = Zygote()
+    if z.answer(time.monotonic() + 120) != "ready":
+        z.proc.kill()
+        z.proc.wait()
+        return None
+    return z
+
+
+def _zygote_proc() -> Zygote | None:
+    global _zygote
+    if _zygote is None or not _zygote.alive():
+        _zygote = _start()
+    return _zygote
+
+
+def same_start(environ: Mapping[str, str]) -> bool:
+    """Whether a process with ``environ`` starts as the zygote did (see the module)."""
+    def started(env: Mapping[str, str]) -> dict[str, str]:
+        return {k: v for k, v in env.items() if k not in PER_RUN and not k.startswith("RFW_")}
+
+    return started(environ) == started(os.environ)
+
+
+def warm_cli(*args: object, cwd: Path | str, environ: Mapping[str, str],
+             timeout: float = 300, errors: str = "strict") -> subprocess.CompletedProcess:
+    """``rfw_cli(*args, cwd=cwd, environ=environ, timeout=timeout, errors=errors)``, forked."""
+    argv = [str(a) for a in args]
+    z = _zygote_proc() if same_start(environ) else None
+    if z is None:
+        return rfw_cli(*argv, cwd=cwd, environ=environ, timeout=timeout, errors=errors)
+    with tempfile.TemporaryDirectory(prefix="rfw-warm-") as tmp:
+        out, err = Path(tmp) / "stdout", Path(tmp) / "stderr"
+        z.send({"argv": argv, "cwd": str(cwd), "env": dict(environ), "stdout": str(out),
+                "stderr": str(err)})
+        deadline = time.monotonic() + timeout
+        forked = z.answer(deadline)
+        assert forked is not None, "the rfw zygote ended"
+        done = z.answer(deadline)
+        if done is None:
+            os.kill(forked["pid"], signal.SIGKILL)
+            z.answer()  # the zygote's answer for the killed child
+            raise subprocess.TimeoutExpired(["rfw", *argv], timeout)
+        code = done["status"]
+        return subprocess.CompletedProcess(
+            [sys.executable, "-m", "rfw.cli", *argv], code,
+            out.read_bytes().decode(errors=errors), err.read_bytes().decode(errors=errors))
