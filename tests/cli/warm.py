@@ -2,9 +2,9 @@
 started: the same process a fresh start would become, less its start (Python, numpy, wgpu's
 header parse, rfw's imports: about 0.4 s of CPU a run on lavapipe's machines).
 
-For the corpora that run rfw a few hundred times and judge only what ``main()`` does (exit
-code, stderr, the files): ``warm_cli`` takes the arguments of ``conftest.rfw_cli`` that they
-use. A run whose environment differs from this process's in anything read before
+For the tests that run rfw many times and judge only what ``main()`` does (exit code,
+stdout, stderr, the files): ``warm_cli`` takes ``conftest.rfw_cli``'s arguments, less
+``safe_path`` and what it passes to subprocess.run. A run whose environment differs from this process's in anything read before
 ``main()`` (anything but HOME, XDG_CACHE_HOME, RFW_*, PYTHONPATH and
 PYTHONDONTWRITEBYTECODE) is started fresh through ``rfw_cli``, as is every run where the
 zygote cannot start.
@@ -13,6 +13,7 @@ zygote cannot start.
 from __future__ import annotations
 
 import json
+import locale
 import os
 import select
 import signal
@@ -92,16 +93,29 @@ def same_start(environ: Mapping[str, str]) -> bool:
     return started(environ) == started(os.environ)
 
 
-def warm_cli(*args: object, cwd: Path | str, environ: Mapping[str, str],
+def _text(data: bytes, errors: str) -> str:
+    # as subprocess.run(text=True) decodes: the locale's encoding, universal newlines
+    text = data.decode(locale.getpreferredencoding(False), errors=errors)
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def warm_cli(*args: object, cwd: Path | str | None = None,
+             env: Mapping[str, str | None] | None = None,
+             environ: Mapping[str, str] | None = None, tree: bool = False,
              timeout: float = 300, errors: str = "strict") -> subprocess.CompletedProcess:
-    """``rfw_cli(*args, cwd=cwd, environ=environ, timeout=timeout, errors=errors)``, forked."""
+    """``rfw_cli`` with these arguments (their meaning is its), forked. The children run this
+    tree's rfw, ``tree`` or not."""
     argv = [str(a) for a in args]
-    z = _zygote_proc() if same_start(environ) else None
+    merged = {**(os.environ if environ is None else environ), **(env or {})}
+    full = {k: v for k, v in merged.items() if v is not None}
+    cwd = os.getcwd() if cwd is None else cwd
+    z = _zygote_proc() if same_start(full) else None
     if z is None:
-        return rfw_cli(*argv, cwd=cwd, environ=environ, timeout=timeout, errors=errors)
+        return rfw_cli(*argv, cwd=cwd, environ=full, tree=tree, timeout=timeout,
+                       errors=errors)
     with tempfile.TemporaryDirectory(prefix="rfw-warm-") as tmp:
         out, err = Path(tmp) / "stdout", Path(tmp) / "stderr"
-        z.send({"argv": argv, "cwd": str(cwd), "env": dict(environ), "stdout": str(out),
+        z.send({"argv": argv, "cwd": str(cwd), "env": full, "stdout": str(out),
                 "stderr": str(err)})
         deadline = time.monotonic() + timeout
         forked = z.answer(deadline)
@@ -114,4 +128,4 @@ def warm_cli(*args: object, cwd: Path | str, environ: Mapping[str, str],
         code = done["status"]
         return subprocess.CompletedProcess(
             [sys.executable, "-m", "rfw.cli", *argv], code,
-            out.read_bytes().decode(errors=errors), err.read_bytes().decode(errors=errors))
+            _text(out.read_bytes(), errors), _text(err.read_bytes(), errors))
