@@ -51,6 +51,8 @@ def test_a_timeout_kills_the_run_and_the_next_one_runs(tmp_path):
 
 
 def test_what_changes_a_start_starts_fresh():
-    assert same_start({**os.environ, "HOME": "/elsewhere", "RFW_FRAMES_IN_FLIGHT": "2"})
-    assert not same_start({**os.environ, "WGPU_DEBUG": "1"})
-    assert not same_start({k: v for k, v in os.environ.items() if k != "PATH"})
+    base = {"PATH": "/bin", "HOME": "/root", "PYTEST_CURRENT_TEST": "a"}
+    assert same_start({**base, "HOME": "/elsewhere", "RFW_FRAMES_IN_FLIGHT": "2",
+                       "PYTEST_CURRENT_TEST": "b", "PYTHONPATH": "site"}, base)
+    assert not same_start({**base, "WGPU_DEBUG": "1"}, base)
+    assert not same_start({"HOME": "/root"}, base)

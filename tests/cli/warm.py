@@ -4,7 +4,7 @@ header parse, rfw's imports: about 0.4 s of CPU a run on lavapipe's machines).
 
 For the tests that run rfw many times and judge only what ``main()`` does (exit code,
 stdout, stderr, the files): ``warm_cli`` takes ``conftest.rfw_cli``'s arguments, less
-``safe_path`` and what it passes to subprocess.run. A run whose environment differs from this process's in anything read before
+what it passes to subprocess.run. A run whose environment differs from this process's in anything read before
 ``main()`` (anything but HOME, XDG_CACHE_HOME, RFW_*, PYTHONPATH and
 PYTHONDONTWRITEBYTECODE) is started fresh through ``rfw_cli``, as is every run where the
 zygote cannot start.
@@ -28,7 +28,8 @@ from ..conftest import ROOT, rfw_cli
 
 ZYGOTE = Path(__file__).with_name("warm_zygote.py")
 # what a child sets per run; everything else must be this process's
-PER_RUN = ("HOME", "XDG_CACHE_HOME", "PYTHONPATH", "PYTHONDONTWRITEBYTECODE")
+PER_RUN = ("HOME", "XDG_CACHE_HOME", "PYTHONPATH", "PYTHONDONTWRITEBYTECODE",
+           "PYTEST_CURRENT_TEST")  # pytest's, per test: nothing reads it
 
 
 
@@ -40,6 +41,7 @@ class Zygote:
         # this tree first, as conftest.tree_env has it: the children run this tree's rfw
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(
             [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+        self.env = dict(os.environ)  # what it started with
         self.proc = subprocess.Popen([sys.executable, "-s", str(ZYGOTE)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL, env=env, cwd=ROOT, bufsize=0)
@@ -85,12 +87,13 @@ def _zygote_proc() -> Zygote | None:
     return _zygote
 
 
-def same_start(environ: Mapping[str, str]) -> bool:
-    """Whether a process with ``environ`` starts as the zygote did (see the module)."""
+def same_start(environ: Mapping[str, str], zygote: Mapping[str, str]) -> bool:
+    """Whether a process with ``environ`` starts as one with the zygote's environment
+    ``zygote`` does (see the module)."""
     def started(env: Mapping[str, str]) -> dict[str, str]:
         return {k: v for k, v in env.items() if k not in PER_RUN and not k.startswith("RFW_")}
 
-    return started(environ) == started(os.environ)
+    return started(environ) == started(zygote)
 
 
 def _text(data: bytes, errors: str) -> str:
@@ -102,21 +105,23 @@ def _text(data: bytes, errors: str) -> str:
 def warm_cli(*args: object, cwd: Path | str | None = None,
              env: Mapping[str, str | None] | None = None,
              environ: Mapping[str, str] | None = None, tree: bool = False,
-             timeout: float = 300, errors: str = "strict") -> subprocess.CompletedProcess:
+             safe_path: bool = False, timeout: float = 300,
+             errors: str = "strict") -> subprocess.CompletedProcess:
     """``rfw_cli`` with these arguments (their meaning is its), forked. The children run this
     tree's rfw, ``tree`` or not."""
     argv = [str(a) for a in args]
     merged = {**(os.environ if environ is None else environ), **(env or {})}
     full = {k: v for k, v in merged.items() if v is not None}
     cwd = os.getcwd() if cwd is None else cwd
-    z = _zygote_proc() if same_start(full) else None
+    z = _zygote_proc()
+    z = z if z is not None and same_start(full, z.env) else None
     if z is None:
-        return rfw_cli(*argv, cwd=cwd, environ=full, tree=tree, timeout=timeout,
-                       errors=errors)
+        return rfw_cli(*argv, cwd=cwd, environ=full, tree=tree, safe_path=safe_path,
+                       timeout=timeout, errors=errors)
     with tempfile.TemporaryDirectory(prefix="rfw-warm-") as tmp:
         out, err = Path(tmp) / "stdout", Path(tmp) / "stderr"
         z.send({"argv": argv, "cwd": str(cwd), "env": full, "stdout": str(out),
-                "stderr": str(err)})
+                "stderr": str(err), "safe_path": safe_path})
         deadline = time.monotonic() + timeout
         forked = z.answer(deadline)
         assert forked is not None, "the rfw zygote ended"

@@ -2,13 +2,14 @@
 
 Started once per test process, it imports what every ``rfw`` process imports first (numpy,
 wgpu's native backend, whose cffi header parse is a quarter of a second, and rfw's command
-line) and then waits. Each request (one JSON line on stdin: argv, cwd, env and two file
-names) is served by a forked child that becomes what ``python -m rfw.cli ARGV`` would be
-there: that working folder, that environment, that folder first on ``sys.path`` and the
-environment's PYTHONPATH after it, stdin from /dev/null, stdout and stderr into the two
-files; then it runs ``rfw.cli`` as ``__main__`` and exits as such a process does (its exit
-code, a traceback and exit 1 for an uncaught exception, atexit handlers run). The zygote
-answers with the child's pid at once and, when it has ended, its exit status.
+line) and then waits. Each request (one JSON line on stdin: argv, cwd, env, two file names,
+safe_path) is served by a forked child that becomes what ``python -m rfw.cli ARGV`` would
+be there: that working folder, that environment, that folder first on ``sys.path`` (not
+with ``safe_path``: ``python -P``) and the environment's PYTHONPATH after it, stdin from
+/dev/null, stdout and stderr into the two files; then it runs ``rfw.cli`` as ``__main__``
+and exits as such a process does (its exit code, a traceback and exit 1 for an uncaught
+exception, atexit handlers run). The zygote answers with the child's pid at once and, when
+it has ended, its exit status.
 
 Not for tests of what happens at start-up (signals during imports, import errors): only
 what ``main()`` does differs in nothing.
@@ -52,7 +53,8 @@ def become(req: dict) -> None:
     os.environ.update(req["env"])
     sys.dont_write_bytecode = bool(req["env"].get("PYTHONDONTWRITEBYTECODE"))
     extra = [p for p in req["env"].get("PYTHONPATH", "").split(os.pathsep) if p]
-    sys.path[:] = [os.getcwd(), *extra, *BASE]
+    # ``python -P`` (a console script's start) puts no working folder first
+    sys.path[:] = [*([] if req.get("safe_path") else [os.getcwd()]), *extra, *BASE]
     sys.argv = ["-m", *req["argv"]]
 
 
