@@ -12,6 +12,7 @@ import pytest
 from rfw.bench.runner import _slug
 from rfw.errors import IDENTIFIER
 
+from ..cli.warm import warm_cli
 from ..conftest import rfw_cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -54,8 +55,8 @@ def test_relative_paths_from_another_directory_and_a_failed_run(elsewhere):
     text = (out / "report.md").read_text()
     assert "### fwd@wgpu default" in text and "| fwd@wgpu broken | 1 of 1 |" in text
     # compare resolves its folders from the working directory too
-    same = rfw_cli("bench", "compare", "results", "results/results.jsonl", cwd=elsewhere,
-                   safe_path=True)
+    same = warm_cli("bench", "compare", "results", "results/results.jsonl", cwd=elsewhere,
+                    safe_path=True)
     assert same.returncode == 0, same.stderr
     assert "0 regression(s), 0 improvement(s)" in same.stdout
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli.warm import warm_cli
 from tests.conftest import rfw_cli
 
 from .synthetic import record
@@ -26,7 +27,7 @@ SHA = {k: c * 64 for k, c in (("config", "a"), ("graph", "b"), ("scene", "c"),
 
 
 def compare(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return rfw_cli("bench", "compare", *args, cwd=cwd, tree=True, safe_path=True)
+    return warm_cli("bench", "compare", *args, cwd=cwd, tree=True, safe_path=True)
 
 
 def lines_of(variants: dict[str, dict[str, float]] = BASE, *, repeats: int = 3, seed: int = 0,

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from ..cli.warm import warm_cli
 from ..conftest import rfw_cli
 from .synthetic import record
 
@@ -129,13 +130,13 @@ def test_compare_refuses_runs_measured_differently(tmp_path, old, new, expected)
     a, b = write(tmp_path / "old", **old), write(tmp_path / "new", **new)
     before = listing(tmp_path)
     for extra in ([], ["--fail-on-regression"], ["--out", str(tmp_path / "cmp")]):
-        done = rfw_cli("bench", "compare", str(a), str(b), *extra, cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", "compare", str(a), str(b), *extra, cwd=tmp_path, safe_path=True)
         one_error_line(done, "bench compare: flat@wgpu: measured differently: ", expected,
                        "--allow-mismatch")
         assert listing(tmp_path) == before  # no compare.md/html
     # allowed: compared, and every report says so at its top
-    done = rfw_cli("bench", "compare", str(a), str(b), "--allow-mismatch", "--out",
-                   str(tmp_path / "cmp"), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "compare", str(a), str(b), "--allow-mismatch", "--out",
+                    str(tmp_path / "cmp"), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == f"MISMATCH: flat@wgpu: measured differently: " \
         f"{expected}"
@@ -150,8 +151,8 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
     # negative control: the same plan (settings in another order) is no mismatch
     a = write(tmp_path / "old", settings=["a.x=1", "b.y=2"])
     b = write(tmp_path / "new", settings=["b.y=2", "a.x=1"])
-    done = rfw_cli("bench", "compare", str(a), str(b), "--out", str(tmp_path / "cmp"), cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "compare", str(a), str(b), "--out", str(tmp_path / "cmp"), cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 0, done.stderr
     assert "MISMATCH" not in done.stdout
     assert "Mismatch" not in (tmp_path / "cmp" / "compare.md").read_text()
@@ -159,8 +160,8 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
     where = {"executor": "ray", "ray": {"host": "vm", "gpu_ids": [0]}}
     for plan in (where, {"device": "GPU A"}):
         a, b = write(tmp_path / "o2", **plan), write(tmp_path / "n2", **plan)
-        done = rfw_cli("bench", "compare", str(a), str(b), "--fail-on-regression", cwd=tmp_path,
-                       safe_path=True)
+        done = warm_cli("bench", "compare", str(a), str(b), "--fail-on-regression", cwd=tmp_path,
+                        safe_path=True)
         assert done.returncode == 0, done.stderr
         assert "MISMATCH" not in done.stdout and "measured differently" not in done.stdout
 
@@ -198,7 +199,7 @@ def table_row(md: str, prefix: str) -> list[str]:
 
 def test_ray_report_states_concurrency_and_splits_devices(tmp_path):
     out = ray_results(tmp_path / "ray", executor="ray")
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     how = md.split("## How this was measured")[1]
@@ -227,7 +228,7 @@ def test_local_report_keeps_its_claims_and_marks(tmp_path):
     # negative control: the same numbers from the local runner: one process after another,
     # one device, so no split rows (no device suffix), and the +50 % gets its mark
     out = ray_results(tmp_path / "local", executor=None)
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     how = md.split("## How this was measured")[1]

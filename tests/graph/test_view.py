@@ -132,7 +132,7 @@ def test_raptor_graph_names_its_dangling_outputs(tmp_path):
     assert "--output final" in text and "depth, final" in text
     # the suggestion is the presented image, and the bytes it quotes are its plan's
     done = warm_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), cwd=tmp_path,
-                   tree=True)
+                    tree=True)
     [note] = [line for line in done.stdout.splitlines() if line.startswith("note:")]
     assert "1 resource nothing reads became an output and lives" in note
     assert ": visibility_motion_vectors; " in note and "--output taa_output (" in note
@@ -140,7 +140,7 @@ def test_raptor_graph_names_its_dangling_outputs(tmp_path):
                                          note).groups())
     for extra, quoted in (((), before), (("--output", "taa_output"), after)):
         plan = warm_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), "--json",
-                       *extra, cwd=tmp_path, tree=True)
+                        *extra, cwd=tmp_path, tree=True)
         assert f"{json.loads(plan.stdout)['transient_bytes'] / 2**20:.2f}" == f"{quoted:.2f}"
     assert after < before
     # a graph given its output, and an rfw config (outputs declared), get no note
@@ -154,7 +154,7 @@ def test_html_onto_a_folder_is_one_line(tmp_path):
     folder = tmp_path / "taken"
     folder.mkdir()
     done = warm_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", folder, cwd=tmp_path,
-                   tree=True)
+                    tree=True)
     assert done.returncode == 2
     assert done.stderr == (f"rfw: error: {folder}: --html: exists and is a folder, not a regular "
                            "file: refused as an output\n")
@@ -163,6 +163,6 @@ def test_html_onto_a_folder_is_one_line(tmp_path):
     # a missing folder is made, as for every other output
     out = tmp_path / "new" / "plan.html"
     done = warm_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", out, cwd=tmp_path,
-                   tree=True)
+                    tree=True)
     assert done.returncode == 0, done.stderr
     assert out.is_file()
