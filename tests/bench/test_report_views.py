@@ -14,7 +14,6 @@ from PIL import Image
 from rfw.bench.images import colorize
 
 from ..cli.warm import warm_cli
-from ..conftest import rfw_cli
 from .test_paper_report import _image, _rewrite, _row, relative_refs, write_results
 from .test_review_fixes import ray_results
 
@@ -141,8 +140,8 @@ def test_static_cameras_compare_as_the_config_reads_them(tmp_path):
 def test_bench_vary_camera_path_through_the_cli(tmp_path):
     # the review's case, run for real: --vary camera.path=orbit,off; the static view is not
     # diffed against the orbit's last frame
-    done = rfw_cli("bench", "flat", "--vary", "camera.path=orbit,off", "--out", "b", "--diff-scale",
-                   "shared", *TINY, cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "flat", "--vary", "camera.path=orbit,off", "--out", "b", "--diff-scale",
+                    "shared", *TINY, cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     out = tmp_path / "b"
     recs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]

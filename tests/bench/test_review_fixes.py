@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from ..cli.warm import warm_cli
-from ..conftest import rfw_cli
 from .synthetic import record
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,9 +43,9 @@ def listing(folder: Path) -> list[str]:
                                     ["--set", "camera.yfov=20"],
                                     ["--vary", "camera.yfov=20,40"]])
 def test_peers_with_a_camera_setting_are_refused(tmp_path, camera):
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--frames", "2",
-                   "--repeat", "1", "--peers", "moderngl", *camera, "--out", "X", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--frames", "2",
+                    "--repeat", "1", "--peers", "moderngl", *camera, "--out", "X", cwd=tmp_path,
+                    safe_path=True)
     key = camera[1].partition("=")[0]
     one_error_line(done, "--peers:", key, "default camera")
     assert listing(tmp_path) == []
@@ -60,8 +59,8 @@ def test_peer_camera_check_is_only_for_camera_keys_with_peers(tmp_path):
             (["--peers", "moderngl", "--set", "flat.ambient=0.5"], "--reference 'nosuch'"),
             (["--set", "camera.yfov=20"], "--reference 'nosuch'"),
             (["--peers", "moderngl", "--set", "cameraman=1"], "no pass or variant 'cameraman'")):
-        done = rfw_cli("bench", flat, "--size", "32x18", *args, "--reference", "nosuch", "--out",
-                       "X", cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", flat, "--size", "32x18", *args, "--reference", "nosuch", "--out",
+                        "X", cwd=tmp_path, safe_path=True)
         line = one_error_line(done, later)
         assert "--peers" not in line
     assert listing(tmp_path) == []
@@ -79,8 +78,8 @@ def test_peer_camera_check_is_only_for_camera_keys_with_peers(tmp_path):
     ("https://head:8265", "(the dashboard's http address is not the cluster's)"),
 ])
 def test_bad_ray_address_syntax_is_one_line_before_any_output(tmp_path, address, expected):
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
-                   "--ray-address", address, "--out", "X", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                    "--ray-address", address, "--out", "X", cwd=tmp_path, safe_path=True)
     one_error_line(done, "--ray-address", expected)
     assert listing(tmp_path) == []
 
@@ -88,8 +87,8 @@ def test_bad_ray_address_syntax_is_one_line_before_any_output(tmp_path, address,
 def test_good_ray_address_syntax_passes_the_parser(tmp_path):
     # negative control: a well-formed address gets past the syntax check to the connection
     # check (nothing listens on port 1), still before anything is printed
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
-                   "--ray-address", "ray://127.0.0.1:1", "--out", "X", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                    "--ray-address", "ray://127.0.0.1:1", "--out", "X", cwd=tmp_path, safe_path=True)
     line = one_error_line(done, "nothing answers at 127.0.0.1:1")
     assert "expected auto" not in line
     assert listing(tmp_path) == []
@@ -243,14 +242,14 @@ def test_peers_with_a_config_camera_are_refused(tmp_path):
         'outputs = ["flat.color"]', 'outputs = ["flat.color"]\ncamera = { yfov = 20.0 }'))
     (tmp_path / "plain.toml").write_text(text)
     before = listing(tmp_path)
-    done = rfw_cli("bench", "cam.toml", "--size", "32x18", "--peers", "moderngl", "--out", "X",
-                   cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "cam.toml", "--size", "32x18", "--peers", "moderngl", "--out", "X",
+                    cwd=tmp_path, safe_path=True)
     one_error_line(done, f"{tmp_path / 'cam.toml'}: --peers: ", "[camera]")
     # negative controls: the camera table is accepted without peers, and the same config
     # without it is accepted with peers (both reach the later --reference check)
     for args in (["cam.toml"], ["plain.toml", "--peers", "moderngl"]):
-        done = rfw_cli("bench", *args, "--size", "32x18", "--reference", "nosuch", "--out", "X",
-                       cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", *args, "--size", "32x18", "--reference", "nosuch", "--out", "X",
+                        cwd=tmp_path, safe_path=True)
         line = one_error_line(done, "--reference 'nosuch'")
         assert "--peers" not in line
     assert listing(tmp_path) == before

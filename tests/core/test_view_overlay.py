@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ..conftest import ROOT, rfw_cli
+from ..cli.warm import warm_cli
+from ..conftest import ROOT
 from .view_xvfb import needs_xvfb, under_xvfb
 
 pytestmark = needs_xvfb
@@ -85,8 +86,8 @@ def drive(tmp: Path, hook: str, *, config: Path = DEFERRED, sets=(), frames: int
 def run_cli(tmp: Path, size: str, *sets: str, config: Path = DEFERRED,
             args: tuple[str, ...] = ()) -> Path:
     out = tmp / "run"
-    done = rfw_cli("run", config, "--size", size, "--frames", "1", "--out", out, *args,
-                   *(a for s in sets for a in ("--set", s)), cwd=tmp)
+    done = warm_cli("run", config, "--size", size, "--frames", "1", "--out", out, *args,
+                    *(a for s in sets for a in ("--set", s)), cwd=tmp)
     assert done.returncode == 0, done.stdout + done.stderr
     return out
 
