@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from .conftest import rfw_cli
+from .cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ["run", str(ROOT / "configs" / "meshlet.toml"), "--backend", "vk", "--size", "64x36",
@@ -20,7 +20,7 @@ RUN = ["run", str(ROOT / "configs" / "meshlet.toml"), "--backend", "vk", "--size
 
 
 def rfw(args: list[str], cwd: Path, cache: Path) -> subprocess.CompletedProcess:
-    return rfw_cli(*args, cwd=cwd, env={"RFW_CACHE_MESHLETS": str(cache)})
+    return warm_cli(*args, cwd=cwd, env={"RFW_CACHE_MESHLETS": str(cache)})
 
 
 def warnings_of(done: subprocess.CompletedProcess) -> list[str]:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import rfw_cli
+from .cli.warm import warm_cli
 from .golden_util import assert_similar, changed_share, mismatch, read_png
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +58,7 @@ def render(config: Path, backend: str, out: Path, sets: list[str],
             "--out", str(out), *(["--validate"] if backend == "vk" else [])]
     for s in sets:
         args += ["--set", s]
-    done = rfw_cli(*args, cwd=ROOT, env={"RFW_CACHE_SPIRV": str(cache)} if cache else None)
+    done = warm_cli(*args, cwd=ROOT, env={"RFW_CACHE_SPIRV": str(cache)} if cache else None)
     assert done.returncode == 0, f"{config.name} on {backend}: {done.stdout}{done.stderr}"
     images = {p.name: read_png(p) for p in sorted(out.glob("*.png"))}
     assert images, f"{config.name} on {backend} wrote no image"
@@ -109,8 +109,8 @@ def test_vk_only_configs_run_on_vk_and_wgpu_refuses_them(name, tmp_path):
     text = text.replace("[[pass]]\n", '[[pass]]\nbackend = "wgpu"\n')
     config = tmp_path / f"{name}.toml"
     config.write_text(text)
-    done = rfw_cli("run", str(config), "--backend", "wgpu", "--size", SIZE, "--frames", "1",
-                   "--out", str(tmp_path / "out"), cwd=tmp_path)
+    done = warm_cli("run", str(config), "--backend", "wgpu", "--size", SIZE, "--frames", "1",
+                    "--out", str(tmp_path / "out"), cwd=tmp_path)
     pass_, cap = VK_ONLY[name]
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr

@@ -13,7 +13,7 @@ from rfw.config import load_config
 from rfw.fileio import read_exr, write_exr
 from rfw.render import render
 
-from .conftest import rfw_cli
+from .cli.warm import warm_cli
 from .golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +48,7 @@ def bits(a: np.ndarray) -> np.ndarray:
 def hdr_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("exr")
     (root / "hdr.toml").write_text(HDR)
-    done = rfw_cli("run", "hdr.toml", "--exr", "--out", "out", cwd=root)
+    done = warm_cli("run", "hdr.toml", "--exr", "--out", "out", cwd=root)
     assert done.returncode == 0, done.stderr
     return root, done
 
@@ -106,8 +106,8 @@ def test_write_exr_refuses_8bit(tmp_path):
 
 def test_exr_without_float_outputs_is_one_line(tmp_path):
     out = tmp_path / "out"
-    done = rfw_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--exr",
-                   "--out", str(out), cwd=tmp_path)
+    done = warm_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--exr",
+                    "--out", str(out), cwd=tmp_path)
     assert done.returncode == 2
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and "Traceback" not in done.stderr
@@ -117,8 +117,8 @@ def test_exr_without_float_outputs_is_one_line(tmp_path):
     assert not (out / "timings.json").exists() and not (out / "flat.color.png").exists()
     assert {p.name for p in tmp_path.iterdir()} <= {"out"}
     # the same config without --exr runs: the refusal is --exr's
-    done = rfw_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--out",
-                   str(out), cwd=tmp_path)
+    done = warm_cli("run", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--out",
+                    str(out), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
 
 
@@ -129,21 +129,21 @@ def test_stale_exr_removed_by_a_run_without_exr(hdr_run, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "lighting.hdr.exr").write_bytes((root / "out" / "lighting.hdr.exr").read_bytes())
-    done = rfw_cli("run", str(root / "hdr.toml"), "--out", str(out), cwd=tmp_path)
+    done = warm_cli("run", str(root / "hdr.toml"), "--out", str(out), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not (out / "lighting.hdr.exr").exists() and (out / "lighting.hdr.png").exists()
 
 
 def test_exr_flag_only_for_run(tmp_path):
-    done = rfw_cli("view", "--exr", cwd=tmp_path)
+    done = warm_cli("view", "--exr", cwd=tmp_path)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1
     assert "unrecognized arguments: --exr" in done.stderr
 
 
 def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
     (tmp_path / "hdr.toml").write_text(HDR)
-    done = rfw_cli("run", "hdr.toml", "--exr", "--frames", "3", "--save-every", "1", "--set",
-                   "camera.path=orbit", "--out", "out", cwd=tmp_path)
+    done = warm_cli("run", "hdr.toml", "--exr", "--frames", "3", "--save-every", "1", "--set",
+                    "camera.path=orbit", "--out", "out", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     frames = tmp_path / "out" / "frames"
     names = sorted(p.name for p in frames.iterdir())
@@ -161,7 +161,7 @@ def test_save_every_writes_each_frames_float_outputs_as_exr_too(tmp_path):
         first = read_exr(frames / f"{out}.0000.exr")
         assert changed_share(first, last, over=1e-3) > 0.25, out
     # a run without --exr leaves no EXR of an earlier run among its frames
-    done = rfw_cli("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
-                   cwd=tmp_path)
+    done = warm_cli("run", "hdr.toml", "--frames", "2", "--save-every", "1", "--out", "out",
+                    cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not list(frames.glob("*.exr"))

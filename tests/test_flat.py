@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .conftest import ROOT, rfw_cli, tiny_scene
+from .cli.warm import warm_cli
+from .conftest import ROOT, tiny_scene
 from .test_golden import config, rgb
 
 NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
@@ -55,8 +56,8 @@ def test_other_ambient_is_not_explained(renders):
 
 
 def test_ambient_out_of_range_is_one_line(tmp_path):
-    done = rfw_cli("run", "configs/flat.toml", "--size", "32x18", "--set", "flat.ambient=1.5",
-                   "--out", tmp_path, cwd=ROOT)
+    done = warm_cli("run", "configs/flat.toml", "--size", "32x18", "--set", "flat.ambient=1.5",
+                    "--out", tmp_path, cwd=ROOT)
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert lines[0].startswith("rfw: error: ") and "ambient" in lines[0]

@@ -14,7 +14,8 @@ import pytest
 from rfw.config import apply_overrides, build, load_config
 from rfw.graph import Buffer, GraphBuilder, GraphError, Storage, Texture, compile
 
-from .conftest import rfw_cli, tiny_scene
+from .cli.warm import warm_cli
+from .conftest import tiny_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "meshlet.toml"
@@ -131,7 +132,7 @@ def test_both_geometries_render_the_same_image():
 
 
 def _plan_barriers(*args: str) -> list[str]:
-    out = rfw_cli("graph", "plan", CONFIG, *args, cwd=ROOT)
+    out = warm_cli("graph", "plan", CONFIG, *args, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
     start = next(k for k, line in enumerate(lines) if line.startswith("barriers ("))

@@ -23,7 +23,8 @@ from rfw.config import apply_overrides, load_config
 from rfw.render import render, to_png_array
 from rfw.scene.model import Camera, Scene, SceneError, Texture
 
-from .conftest import ROOT, rfw_cli, tiny_scene
+from .cli.warm import warm_cli
+from .conftest import ROOT, tiny_scene
 from .golden_util import changed_share
 
 SIZE = "96x64"
@@ -227,8 +228,8 @@ def test_zero_scale_node_loads_and_renders_through_the_cli(tmp_path):
     scene = tmp_path / "zero.gltf"
     _cube_gltf(scene, [[1, 1, 1], [0, 0, 0], [-1, 1, 1]])
     out = tmp_path / "out"
-    run = rfw_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
-                  "--size", "64x48", "--frames", "1", "--out", str(out), cwd=tmp_path)
+    run = warm_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
+                   "--size", "64x48", "--frames", "1", "--out", str(out), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr
     warnings = [line for line in run.stderr.splitlines() if "skipped" in line]
@@ -247,8 +248,8 @@ def test_only_zero_scale_nodes_render_the_empty_scene_with_a_warning(tmp_path):
     # as an empty scene does (tests/scene/test_limits.py): the background, one line saying so
     scene = tmp_path / "zero.gltf"
     _cube_gltf(scene, [[0, 0, 0], [1, 0, 1]])
-    run = rfw_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
-                  "--size", "64x48", "--frames", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    run = warm_cli("run", str(ROOT / "configs" / "forward.toml"), "--scene", str(scene),
+                   "--size", "64x48", "--frames", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     lines = [line for line in run.stderr.splitlines() if "nothing is drawable" in line]
     assert lines == [f"rfw: warning: {scene}: nothing is drawable (no instances, or every one "

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from .conftest import rfw_cli
+from .cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -96,8 +96,8 @@ def run(tmp: Path, fmt: str, backend: str,
     # extended, not replaced: on the GPU machine rfw's dependencies come through PYTHONPATH
     path = [str(site), str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
     env = {"PYTHONPATH": os.pathsep.join(path), "RFW_CACHE_SPIRV": str(tmp / "spirv")}
-    return rfw_cli("run", config, "--backend", backend, "--frames", "1", "--out", tmp / "out",
-                   env=env, cwd=tmp)
+    return warm_cli("run", config, "--backend", backend, "--frames", "1", "--out", tmp / "out",
+                    env=env, cwd=tmp)
 
 
 CASES = [("wgpu", "fmt_fill.comp.glsl"), ("vk", "fmt_fill.comp.glsl"),

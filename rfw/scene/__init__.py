@@ -14,8 +14,6 @@ from pathlib import Path
 
 from .agreement import cornell, spheres
 from .courtyard import courtyard
-from .gltf import load_gltf
-from .meshfile import load_meshfile, mesh_suffixes
 from .model import Camera, Instance, Light, Material, Mesh, Scene, SceneError, Texture
 from .stress import MAX_INSTANCES, STRESS_INSTANCES, stress
 
@@ -87,11 +85,35 @@ def load_scene(path: str | Path) -> Scene:
     suffix = path.suffix.lower()
     if suffix in GLTF_SUFFIXES:
         return load_gltf(path)
+    from .meshfile import mesh_suffixes
+
     meshes = mesh_suffixes()
     if suffix in meshes:
         return load_meshfile(path)
     known = ", ".join(sorted(GLTF_SUFFIXES | meshes))
     raise SceneError(f"{path}: unknown scene file type '{path.suffix}' (expected {known})")
+
+
+def load_gltf(path: str | Path) -> Scene:
+    """Load a ``.gltf``/``.glb`` file (``rfw.scene.gltf.load_gltf``).
+
+    Its loader, and pygltflib with it (about 0.07 s of CPU), is imported on the first call,
+    as trimesh is for mesh files: most ``rfw`` processes draw a built-in scene.
+    """
+    from .gltf import load_gltf as load
+
+    return load(path)
+
+
+def load_meshfile(path: str | Path) -> Scene:
+    """Load a mesh file through trimesh (``rfw.scene.meshfile.load_meshfile``).
+
+    trimesh is imported on the first call: it costs about 0.15 s of CPU, which every
+    ``rfw`` process whose scene is no mesh file (most runs, every failed config) saves.
+    """
+    from .meshfile import load_meshfile as load
+
+    return load(path)
 
 
 def default_scene() -> Scene:

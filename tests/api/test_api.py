@@ -18,7 +18,7 @@ from PIL import Image
 import rfw
 from rfw.fileio import to_png_array
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -155,7 +155,7 @@ def test_bad_input_is_the_cli_line(tmp_path, sets, backend):
         rfw.run(DEFERRED, *sets, backend=backend, size=SIZE)
     args = ["run", DEFERRED, "--size", "32x18", "--out", str(tmp_path / "out")]
     args += [a for s in sets for a in ("--set", s)] + (["--backend", backend] if backend else [])
-    done = rfw_cli(*args, cwd=tmp_path)
+    done = warm_cli(*args, cwd=tmp_path)
     assert done.returncode == 2
     assert done.stderr.splitlines() == [f"rfw: error: {err.value}"]
     assert "\n" not in str(err.value)
@@ -181,8 +181,8 @@ def test_save_writes_what_rfw_run_writes(pair, tmp_path):
     _, a, _, _ = pair
     written = a.save(tmp_path / "api")
     assert [p.name for p in written] == ["tonemap.ldr.png", "timings.json"]
-    done = rfw_cli("run", DEFERRED, "--size", "32x18", "--frames", "2", "--out",
-                   str(tmp_path / "cli"), cwd=tmp_path)
+    done = warm_cli("run", DEFERRED, "--size", "32x18", "--frames", "2", "--out",
+                    str(tmp_path / "cli"), cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     ours = np.asarray(Image.open(tmp_path / "api" / "tonemap.ldr.png"))
     theirs = np.asarray(Image.open(tmp_path / "cli" / "tonemap.ldr.png"))

@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import ROOT, rfw_cli
+from ..cli.warm import warm_cli
+from ..conftest import ROOT
 
 
 def bench(out: Path, config: str, *args: str) -> list[dict]:
-    done = rfw_cli("bench", ROOT / config, "--size", "32x18", "--warmup", "1", "--out", out,
-                   "--no-progress", *args)
+    done = warm_cli("bench", ROOT / config, "--size", "32x18", "--warmup", "1", "--out", out,
+                    "--no-progress", *args)
     assert done.returncode == 0, done.stderr
     return [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
 
@@ -64,9 +65,9 @@ def test_meshlet_culling_counters_along_the_path(tmp_path):
 
 def test_meshlet_path_under_validation(tmp_path):
     # the camera written between frames on vk (host-mapped uniforms: frames drained first)
-    done = rfw_cli("run", ROOT / "configs/meshlet.toml", "--backend", "vk", "--validate",
-                   "--size", "32x18", "--frames", "3", "--set", "camera.path=orbit",
-                   "--out", tmp_path / "o")
+    done = warm_cli("run", ROOT / "configs/meshlet.toml", "--backend", "vk", "--validate",
+                    "--size", "32x18", "--frames", "3", "--set", "camera.path=orbit",
+                    "--out", tmp_path / "o")
     assert done.returncode == 0, done.stderr
     assert "validation: 0 message(s)" in done.stdout
 

@@ -12,7 +12,7 @@ import pytest
 from rfw.bench.runner import _slug
 from rfw.errors import IDENTIFIER
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = ["--size", "64x36", "--frames", "2", "--warmup", "1", "--repeat", "1", "--no-progress"]
@@ -34,8 +34,8 @@ def records(out: Path) -> list[dict]:
 
 
 def test_relative_paths_from_another_directory_and_a_failed_run(elsewhere):
-    done = rfw_cli("bench", "fwd.toml", "--scene", "default", "--scene", "broken.glb", "--out",
-                   "results", *TINY, cwd=elsewhere, safe_path=True)
+    done = warm_cli("bench", "fwd.toml", "--scene", "default", "--scene", "broken.glb", "--out",
+                    "results", *TINY, cwd=elsewhere, safe_path=True)
     assert done.returncode == 1, done.stderr
     assert "Traceback" not in done.stderr
     out = elsewhere / "results"
@@ -54,20 +54,20 @@ def test_relative_paths_from_another_directory_and_a_failed_run(elsewhere):
     text = (out / "report.md").read_text()
     assert "### fwd@wgpu default" in text and "| fwd@wgpu broken | 1 of 1 |" in text
     # compare resolves its folders from the working directory too
-    same = rfw_cli("bench", "compare", "results", "results/results.jsonl", cwd=elsewhere,
-                   safe_path=True)
+    same = warm_cli("bench", "compare", "results", "results/results.jsonl", cwd=elsewhere,
+                    safe_path=True)
     assert same.returncode == 0, same.stderr
     assert "0 regression(s), 0 improvement(s)" in same.stdout
 
 
 def test_all_runs_failing_exits_1_and_leaves_no_stale_image(elsewhere):
-    ok = rfw_cli("bench", "fwd.toml", "--out", "o", *TINY, cwd=elsewhere, safe_path=True)
+    ok = warm_cli("bench", "fwd.toml", "--out", "o", *TINY, cwd=elsewhere, safe_path=True)
     assert ok.returncode == 0, ok.stderr  # negative control of the exit code below
     image = elsewhere / "o" / records(elsewhere / "o")[0]["image"]
     assert image.is_file()
     # the same variant (same run folder) now fails: its old image must not pass for new
-    failed = rfw_cli("bench", "fwd.toml", "--set", "scene=broken.glb", "--out", "o", *TINY,
-                     cwd=elsewhere, safe_path=True)
+    failed = warm_cli("bench", "fwd.toml", "--set", "scene=broken.glb", "--out", "o", *TINY,
+                      cwd=elsewhere, safe_path=True)
     assert failed.returncode == 1
     assert "Traceback" not in failed.stderr
     assert "rfw bench: all 1 of 1 runs failed:" in failed.stderr
@@ -113,7 +113,7 @@ def test_bad_arguments_are_one_line(elsewhere, case):
     (elsewhere / "results.jsonl").write_text("{not json\n")
     before = sorted(p.name for p in elsewhere.iterdir())
     out = () if "--out" in args else ("--out", "bench_out")
-    done = rfw_cli("bench", *args, *out, cwd=elsewhere, safe_path=True)
+    done = warm_cli("bench", *args, *out, cwd=elsewhere, safe_path=True)
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2, done.stderr
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import rfw_cli
+from tests.cli.warm import warm_cli
 
 from .synthetic import record
 from .test_review_fixes import listing, one_error_line
@@ -26,7 +26,7 @@ SHA = {k: c * 64 for k, c in (("config", "a"), ("graph", "b"), ("scene", "c"),
 
 
 def compare(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return rfw_cli("bench", "compare", *args, cwd=cwd, tree=True, safe_path=True)
+    return warm_cli("bench", "compare", *args, cwd=cwd, tree=True, safe_path=True)
 
 
 def lines_of(variants: dict[str, dict[str, float]] = BASE, *, repeats: int = 3, seed: int = 0,
@@ -372,8 +372,8 @@ def test_real_bench_records_inputs_and_compare_names_an_edited_config(tmp_path):
     config = tmp_path / "deferred.toml"
     shutil.copy(ROOT / "configs" / "deferred.toml", config)
     tiny = ["--size", "32x18", "--frames", "2", "--warmup", "1", "--no-progress"]
-    done = rfw_cli("bench", "deferred.toml", *tiny, "--repeat", "2", "--out", "A", cwd=tmp_path,
-                   tree=True, safe_path=True)
+    done = warm_cli("bench", "deferred.toml", *tiny, "--repeat", "2", "--out", "A", cwd=tmp_path,
+                    tree=True, safe_path=True)
     assert done.returncode == 0, done.stderr
     recs = [json.loads(x) for x in (tmp_path / "A" / "results.jsonl").read_text().splitlines()]
     assert len(recs) == 2
@@ -386,8 +386,8 @@ def test_real_bench_records_inputs_and_compare_names_an_edited_config(tmp_path):
     # the tonemap's exposure set in the config copy: its bytes and the graph change
     config.write_text(config.read_text().replace('name = "tonemap"\n',
                                                  'name = "tonemap"\nsettings = { exposure = 1.5 }\n'))
-    done = rfw_cli("bench", "deferred.toml", *tiny, "--repeat", "1", "--out", "B", cwd=tmp_path,
-                   tree=True, safe_path=True)
+    done = warm_cli("bench", "deferred.toml", *tiny, "--repeat", "1", "--out", "B", cwd=tmp_path,
+                    tree=True, safe_path=True)
     assert done.returncode == 0, done.stderr
     same = compare(tmp_path, "A", "A")
     assert "input: unchanged (config, graph, scene, shaders)" in same.stdout  # control

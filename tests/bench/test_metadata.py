@@ -15,7 +15,7 @@ from rfw.bench.report import _clocks
 from rfw.bench.runner import NO_CLOCKS, environment, gpu_clocks, parse_clocks
 from rfw.errors import RfwError
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 # what nvidia-smi --query-gpu=index,name,clocks.sm,clocks.mem,clocks.max.sm,clocks.max.mem
@@ -122,9 +122,9 @@ def test_the_cli_records_commit_cpu_and_clocks(tmp_path):
     """A real tiny run as on the GPU machine: RFW_COMMIT set, nvidia-smi present."""
     smi = fake_smi(tmp_path / "bin", SMI_LINE)
     path = f"{smi}{os.pathsep}{os.environ['PATH']}"
-    done = rfw_cli("bench", "deferred", "--size", "32x18", "--frames", "1", "--warmup", "1",
-                   "--repeat", "1", "--no-progress", "--out", "b", cwd=tmp_path,
-                   env={"RFW_COMMIT": "cafe123", "PATH": path}, safe_path=True)
+    done = warm_cli("bench", "deferred", "--size", "32x18", "--frames", "1", "--warmup", "1",
+                    "--repeat", "1", "--no-progress", "--out", "b", cwd=tmp_path,
+                    env={"RFW_COMMIT": "cafe123", "PATH": path}, safe_path=True)
     assert done.returncode == 0, done.stderr
     (run,) = [json.loads(x) for x in (tmp_path / "b" / "results.jsonl").read_text().splitlines()]
     assert run["rfw_commit"] == "cafe123" and run["rfw_commit_source"] == "RFW_COMMIT"
@@ -136,9 +136,9 @@ def test_the_cli_records_commit_cpu_and_clocks(tmp_path):
 
 
 def test_the_cli_refuses_a_bad_rfw_commit_before_any_run(tmp_path):
-    done = rfw_cli("bench", "deferred", "--size", "32x18", "--frames", "1", "--repeat", "1",
-                   "--no-progress", "--out", "b", cwd=tmp_path, env={"RFW_COMMIT": "two words"},
-                   safe_path=True)
+    done = warm_cli("bench", "deferred", "--size", "32x18", "--frames", "1", "--repeat", "1",
+                    "--no-progress", "--out", "b", cwd=tmp_path, env={"RFW_COMMIT": "two words"},
+                    safe_path=True)
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         "rfw: error: RFW_COMMIT: expected a commit (one word of letters, digits "

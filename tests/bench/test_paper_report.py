@@ -18,7 +18,7 @@ from rfw.bench.report import write_report
 from rfw.bench.stats import significant
 from rfw.bench.summary import summarize_results
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .synthetic import record
 
 # every place an HTML page can load another file from
@@ -78,7 +78,7 @@ def test_html_is_one_file_with_csv_and_tables_that_fit(tmp_path):
     out = write_results(tmp_path / "b", {
         "deferred@wgpu": {"passes": {"gbuffer": 10.0, "lighting": 2.0}, "image": _image()},
         "forward@wgpu": {"passes": {"forward": 8.0}, "image": changed}})
-    done = rfw_cli("bench", "report", str(out), safe_path=True)
+    done = warm_cli("bench", "report", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     page = (out / "report.html").read_text()
     # negative control: the check finds what the old report had (a relative PNG)
@@ -134,7 +134,7 @@ def test_significance_mark_only_where_cis_do_not_overlap(tmp_path):
     assert clear["median"] / ref["median"] - 1 == pytest.approx(0.15)
     assert noisy["ci_lo"] <= ref["ci_hi"] and not significant(ref, noisy)
     assert significant(ref, clear)
-    done = rfw_cli("bench", "report", str(out), safe_path=True)
+    done = warm_cli("bench", "report", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     cells = _vs_reference((out / "report.md").read_text())
     assert cells["ref@wgpu"] == "reference"
@@ -166,7 +166,7 @@ def test_difference_map_neither_saturates_nor_hides(tmp_path):
     out = write_results(tmp_path / "b", {
         "a@wgpu": {"passes": {"p": 1.0}, "image": _image()},
         "b@wgpu": {"passes": {"p": 1.0}, "image": changed}})
-    assert rfw_cli("bench", "report", str(out), safe_path=True).returncode == 0
+    assert warm_cli("bench", "report", str(out), safe_path=True).returncode == 0
     from PIL import Image
 
     legend = Image.open(out / "images" / "b_wgpu.diff_legend.png")
@@ -237,7 +237,7 @@ def test_per_device_tables_side_by_side(tmp_path):
             _slower(rec, 2.0)
 
     _rewrite(two, first_d_on_b)
-    assert rfw_cli("bench", "report", str(two), safe_path=True).returncode == 0
+    assert warm_cli("bench", "report", str(two), safe_path=True).returncode == 0
     md = (two / "report.md").read_text()
     assert "## Per device" in md
     # devices in first-run order: B (d's first run), then A
@@ -279,7 +279,7 @@ def test_per_device_tables_side_by_side(tmp_path):
     # negative control: one device, no per-device section, no device suffix on any label
     one = write_results(tmp_path / "one", {"d@wgpu": {"passes": {"g": 10.0}},
                                            "e@wgpu": {"passes": {"g": 5.0}}})
-    assert rfw_cli("bench", "report", str(one), safe_path=True).returncode == 0
+    assert warm_cli("bench", "report", str(one), safe_path=True).returncode == 0
     md = (one / "report.md").read_text()
     assert "## Per device" not in md and "[synthetic]" not in md
     assert _row(md.split("## Frame time per variant")[1], "| d@wgpu |")[1] == "synthetic"
@@ -308,7 +308,7 @@ def test_vs_reference_on_the_same_device(tmp_path):
             rec["device"] = "GPU A"
 
     _rewrite(out, place)
-    done = rfw_cli("bench", "report", str(out), safe_path=True)
+    done = warm_cli("bench", "report", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     images = md.split("## Images")[1].split("\n## ")[0]
@@ -328,7 +328,7 @@ def test_vs_reference_on_the_same_device(tmp_path):
     diffs = sorted(p.name for p in (out / "images").glob("n_wgpu*.diff.png"))
     assert len(diffs) == 2, diffs
     # --reference names the variant as run, not one of its rows
-    done = rfw_cli("bench", "report", str(out), "--reference", "n@wgpu", safe_path=True)
+    done = warm_cli("bench", "report", str(out), "--reference", "n@wgpu", safe_path=True)
     assert done.returncode == 0, done.stderr
     images = (out / "report.md").read_text().split("## Images")[1].split("\n## ")[0]
     assert _row(images, "| r@wgpu [GPU B] |")[-1] == "-9.1% *"
@@ -343,7 +343,7 @@ def test_compare_writes_md_and_html_with_image_diffs(tmp_path):
     new = write_results(tmp_path / "new", {"d@wgpu": {"passes": {"p": 10.0, "q": 2.6},
                                                       "image": changed}})
     out = tmp_path / "cmp"
-    done = rfw_cli("bench", "compare", str(old), str(new), "--out", str(out), safe_path=True)
+    done = warm_cli("bench", "compare", str(old), str(new), "--out", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "compare.md").read_text()
     q = next(x for x in md.splitlines() if x.startswith("| d@wgpu | q | gpu_ms |"))
@@ -357,8 +357,8 @@ def test_compare_writes_md_and_html_with_image_diffs(tmp_path):
     assert (out / "images" / "0_diff.png").is_file()
     # bad input: one line, exit 2, nothing written to --out
     bad = tmp_path / "bad"
-    done = rfw_cli("bench", "compare", str(old), str(tmp_path / "missing"), "--out", str(bad),
-                   safe_path=True)
+    done = warm_cli("bench", "compare", str(old), str(tmp_path / "missing"), "--out", str(bad),
+                    safe_path=True)
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1
     assert "missing" in done.stderr and "Traceback" not in done.stderr
     assert not bad.exists()

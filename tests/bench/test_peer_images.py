@@ -28,7 +28,7 @@ import pytest
 
 from benchmarks.peers import RASTER
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,8 +52,8 @@ def over2(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.fixture(scope="module")
 def flat(tmp_path_factory) -> np.ndarray:
     out = tmp_path_factory.mktemp("flat")
-    done = rfw_cli("run", "configs/flat.toml", "--size", SIZE, "--frames", "1", "--out", out,
-                   cwd=ROOT)
+    done = warm_cli("run", "configs/flat.toml", "--size", SIZE, "--frames", "1", "--out", out,
+                    cwd=ROOT)
     assert done.returncode == 0, done.stdout + done.stderr
     return read_png(out / "flat.color.png")[..., :3]
 
@@ -109,8 +109,8 @@ def test_bench_report_states_each_peers_psnr_against_flat(tmp_path):
 
     def report(config: str) -> str:
         out = tmp_path / config
-        done = rfw_cli("bench", config, "--size", "96x54", "--frames", "1", "--warmup", "0",
-                       "--repeat", "1", "--peers", peer, "--no-progress", "--out", out, cwd=ROOT)
+        done = warm_cli("bench", config, "--size", "96x54", "--frames", "1", "--warmup", "0",
+                        "--repeat", "1", "--peers", peer, "--no-progress", "--out", out, cwd=ROOT)
         assert done.returncode == 0, done.stdout + done.stderr
         return (out / "report.md").read_text()
 

@@ -13,7 +13,7 @@ from PIL import Image
 
 from rfw.bench.images import colorize
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .test_paper_report import _image, _rewrite, _row, relative_refs, write_results
 from .test_review_fixes import ray_results
 
@@ -65,7 +65,7 @@ def test_a_camera_path_against_a_static_reference_is_not_compared(tmp_path):
             rec["scene"] = "sponza"
 
     _rewrite(out, cameras)
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     images = _images_section(md)
@@ -90,8 +90,8 @@ def test_a_camera_path_against_a_static_reference_is_not_compared(tmp_path):
     page = (out / "report.html").read_text()
     assert "different cameras: not compared" in page and relative_refs(page) == []
     # a path against the same path: compared (the same last frame); another path is not
-    done = rfw_cli("bench", "report", str(out), "--reference", "orbit@wgpu", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "report", str(out), "--reference", "orbit@wgpu", cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     assert _row(images, "| orbit@wgpu |")[-1] == "reference"
@@ -107,8 +107,8 @@ def test_a_camera_path_against_a_static_reference_is_not_compared(tmp_path):
             rec["camera_path"] = _orbit()
 
     _rewrite(out, half_turn)
-    done = rfw_cli("bench", "report", str(out), "--reference", "orbit@wgpu", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "report", str(out), "--reference", "orbit@wgpu", cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     assert _row(images, "| same@wgpu |")[2].startswith("different cameras: not compared")
@@ -128,7 +128,7 @@ def test_static_cameras_compare_as_the_config_reads_them(tmp_path):
         rec["settings"] = [f"camera.yfov={yfov[rec['variant']]}", "flat.ambient=0.2"]
 
     _rewrite(out, settings)
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     assert "![diff](images/b_wgpu.diff.png)" in _row(images, "| b@wgpu |")[2]
@@ -140,8 +140,8 @@ def test_static_cameras_compare_as_the_config_reads_them(tmp_path):
 def test_bench_vary_camera_path_through_the_cli(tmp_path):
     # the review's case, run for real: --vary camera.path=orbit,off; the static view is not
     # diffed against the orbit's last frame
-    done = rfw_cli("bench", "flat", "--vary", "camera.path=orbit,off", "--out", "b", "--diff-scale",
-                   "shared", *TINY, cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "flat", "--vary", "camera.path=orbit,off", "--out", "b", "--diff-scale",
+                    "shared", *TINY, cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     out = tmp_path / "b"
     recs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
@@ -156,7 +156,7 @@ def test_bench_vary_camera_path_through_the_cli(tmp_path):
     orbit = _row(images, "| flat[camera.path=orbit]@wgpu |")
     assert "∞ (identical)" in orbit and "(shared; this image's max 0)" in orbit[2]
     # the same results with the static view as reference: the orbit is the one not compared
-    done = rfw_cli("bench", "report", "b", "--reference", "1", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", "b", "--reference", "1", cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     assert _row(images, "| flat[camera.path=orbit]@wgpu |")[2].startswith(
@@ -178,11 +178,11 @@ def test_compare_does_not_diff_images_of_different_cameras(tmp_path):
 
     _rewrite(new, orbit)
     # the settings differ: refused without --allow-mismatch, as before
-    done = rfw_cli("bench", "compare", str(old), str(new), "--out", "cmp", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "compare", str(old), str(new), "--out", "cmp", cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 2 and "settings" in done.stderr
-    done = rfw_cli("bench", "compare", str(old), str(new), "--out", "cmp", "--allow-mismatch",
-                   cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "compare", str(old), str(new), "--out", "cmp", "--allow-mismatch",
+                    cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (tmp_path / "cmp" / "compare.md").read_text()
     images = md.split("## Images")[1]
@@ -212,7 +212,7 @@ def test_each_difference_states_its_scale_and_shared_puts_them_on_one(tmp_path):
         "ref@wgpu": {"passes": {"p": 1.0}, "image": _image()},
         "e105@wgpu": {"passes": {"p": 1.0}, "image": _other(104)},
         "e3@wgpu": {"passes": {"p": 1.0}, "image": _other(178)}})
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     small, large = _row(images, "| e105@wgpu |")[2], _row(images, "| e3@wgpu |")[2]
@@ -224,8 +224,8 @@ def test_each_difference_states_its_scale_and_shared_puts_them_on_one(tmp_path):
     assert _max_pixel(out / "images" / "e105_wgpu.diff.png") == top
     assert _max_pixel(out / "images" / "e3_wgpu.diff.png") == top
     own_legend = np.asarray(Image.open(out / "images" / "e105_wgpu.diff_legend.png"))
-    done = rfw_cli("bench", "report", str(out), "--diff-scale", "shared", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "report", str(out), "--diff-scale", "shared", cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 0, done.stderr
     images = _images_section((out / "report.md").read_text())
     small, large = _row(images, "| e105@wgpu |")[2], _row(images, "| e3@wgpu |")[2]
@@ -242,14 +242,14 @@ def test_each_difference_states_its_scale_and_shared_puts_them_on_one(tmp_path):
     new = write_results(tmp_path / "new", {
         "ref@wgpu": {"passes": {"p": 1.0}, "image": _other(104)},
         "e3@wgpu": {"passes": {"p": 1.0}, "image": _image()}})
-    done = rfw_cli("bench", "compare", str(out), str(new), "--out", "cmp", "--diff-scale", "shared",
-                   cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "compare", str(out), str(new), "--out", "cmp", "--diff-scale", "shared",
+                    cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     images = (tmp_path / "cmp" / "compare.md").read_text().split("## Images")[1]
     assert "scale 0-78/255 (shared; this image's max 4)" in _row(images, "| ref@wgpu |")[3]
     assert "scale 0-78/255 (shared; this image's max 78)" in _row(images, "| e3@wgpu |")[3]
     # a value that is not a scale: one line, exit 2
-    done = rfw_cli("bench", "report", str(out), "--diff-scale", "max", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), "--diff-scale", "max", cwd=tmp_path, safe_path=True)
     assert done.returncode == 2 and "--diff-scale" in done.stderr
     assert "Traceback" not in done.stderr
 
@@ -260,7 +260,7 @@ def test_each_difference_states_its_scale_and_shared_puts_them_on_one(tmp_path):
 
 def test_ray_report_points_to_the_per_device_table_only_where_it_exists(tmp_path):
     two = ray_results(tmp_path / "two", executor="ray")  # new@wgpu ran on hosts a and b
-    done = rfw_cli("bench", "report", str(two), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(two), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (two / "report.md").read_text()
     how = md.split("## How this was measured")[1]
@@ -273,7 +273,7 @@ def test_ray_report_points_to_the_per_device_table_only_where_it_exists(tmp_path
         rec["ray"]["host"] = "a"
 
     _rewrite(one, host_a)
-    done = rfw_cli("bench", "report", str(one), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(one), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (one / "report.md").read_text()
     how = md.split("## How this was measured")[1]

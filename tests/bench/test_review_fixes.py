@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .synthetic import record
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,9 +43,9 @@ def listing(folder: Path) -> list[str]:
                                     ["--set", "camera.yfov=20"],
                                     ["--vary", "camera.yfov=20,40"]])
 def test_peers_with_a_camera_setting_are_refused(tmp_path, camera):
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--frames", "2",
-                   "--repeat", "1", "--peers", "moderngl", *camera, "--out", "X", cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--size", "32x18", "--frames", "2",
+                    "--repeat", "1", "--peers", "moderngl", *camera, "--out", "X", cwd=tmp_path,
+                    safe_path=True)
     key = camera[1].partition("=")[0]
     one_error_line(done, "--peers:", key, "default camera")
     assert listing(tmp_path) == []
@@ -59,8 +59,8 @@ def test_peer_camera_check_is_only_for_camera_keys_with_peers(tmp_path):
             (["--peers", "moderngl", "--set", "flat.ambient=0.5"], "--reference 'nosuch'"),
             (["--set", "camera.yfov=20"], "--reference 'nosuch'"),
             (["--peers", "moderngl", "--set", "cameraman=1"], "no pass or variant 'cameraman'")):
-        done = rfw_cli("bench", flat, "--size", "32x18", *args, "--reference", "nosuch", "--out",
-                       "X", cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", flat, "--size", "32x18", *args, "--reference", "nosuch", "--out",
+                        "X", cwd=tmp_path, safe_path=True)
         line = one_error_line(done, later)
         assert "--peers" not in line
     assert listing(tmp_path) == []
@@ -78,8 +78,8 @@ def test_peer_camera_check_is_only_for_camera_keys_with_peers(tmp_path):
     ("https://head:8265", "(the dashboard's http address is not the cluster's)"),
 ])
 def test_bad_ray_address_syntax_is_one_line_before_any_output(tmp_path, address, expected):
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
-                   "--ray-address", address, "--out", "X", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                    "--ray-address", address, "--out", "X", cwd=tmp_path, safe_path=True)
     one_error_line(done, "--ray-address", expected)
     assert listing(tmp_path) == []
 
@@ -87,8 +87,8 @@ def test_bad_ray_address_syntax_is_one_line_before_any_output(tmp_path, address,
 def test_good_ray_address_syntax_passes_the_parser(tmp_path):
     # negative control: a well-formed address gets past the syntax check to the connection
     # check (nothing listens on port 1), still before anything is printed
-    done = rfw_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
-                   "--ray-address", "ray://127.0.0.1:1", "--out", "X", cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", str(ROOT / "configs" / "flat.toml"), "--executor", "ray",
+                    "--ray-address", "ray://127.0.0.1:1", "--out", "X", cwd=tmp_path, safe_path=True)
     line = one_error_line(done, "nothing answers at 127.0.0.1:1")
     assert "expected auto" not in line
     assert listing(tmp_path) == []
@@ -129,13 +129,13 @@ def test_compare_refuses_runs_measured_differently(tmp_path, old, new, expected)
     a, b = write(tmp_path / "old", **old), write(tmp_path / "new", **new)
     before = listing(tmp_path)
     for extra in ([], ["--fail-on-regression"], ["--out", str(tmp_path / "cmp")]):
-        done = rfw_cli("bench", "compare", str(a), str(b), *extra, cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", "compare", str(a), str(b), *extra, cwd=tmp_path, safe_path=True)
         one_error_line(done, "bench compare: flat@wgpu: measured differently: ", expected,
                        "--allow-mismatch")
         assert listing(tmp_path) == before  # no compare.md/html
     # allowed: compared, and every report says so at its top
-    done = rfw_cli("bench", "compare", str(a), str(b), "--allow-mismatch", "--out",
-                   str(tmp_path / "cmp"), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "compare", str(a), str(b), "--allow-mismatch", "--out",
+                    str(tmp_path / "cmp"), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == f"MISMATCH: flat@wgpu: measured differently: " \
         f"{expected}"
@@ -150,8 +150,8 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
     # negative control: the same plan (settings in another order) is no mismatch
     a = write(tmp_path / "old", settings=["a.x=1", "b.y=2"])
     b = write(tmp_path / "new", settings=["b.y=2", "a.x=1"])
-    done = rfw_cli("bench", "compare", str(a), str(b), "--out", str(tmp_path / "cmp"), cwd=tmp_path,
-                   safe_path=True)
+    done = warm_cli("bench", "compare", str(a), str(b), "--out", str(tmp_path / "cmp"), cwd=tmp_path,
+                    safe_path=True)
     assert done.returncode == 0, done.stderr
     assert "MISMATCH" not in done.stdout
     assert "Mismatch" not in (tmp_path / "cmp" / "compare.md").read_text()
@@ -159,8 +159,8 @@ def test_compare_of_runs_measured_alike_has_no_mismatch(tmp_path):
     where = {"executor": "ray", "ray": {"host": "vm", "gpu_ids": [0]}}
     for plan in (where, {"device": "GPU A"}):
         a, b = write(tmp_path / "o2", **plan), write(tmp_path / "n2", **plan)
-        done = rfw_cli("bench", "compare", str(a), str(b), "--fail-on-regression", cwd=tmp_path,
-                       safe_path=True)
+        done = warm_cli("bench", "compare", str(a), str(b), "--fail-on-regression", cwd=tmp_path,
+                        safe_path=True)
         assert done.returncode == 0, done.stderr
         assert "MISMATCH" not in done.stdout and "measured differently" not in done.stdout
 
@@ -198,7 +198,7 @@ def table_row(md: str, prefix: str) -> list[str]:
 
 def test_ray_report_states_concurrency_and_splits_devices(tmp_path):
     out = ray_results(tmp_path / "ray", executor="ray")
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     how = md.split("## How this was measured")[1]
@@ -227,7 +227,7 @@ def test_local_report_keeps_its_claims_and_marks(tmp_path):
     # negative control: the same numbers from the local runner: one process after another,
     # one device, so no split rows (no device suffix), and the +50 % gets its mark
     out = ray_results(tmp_path / "local", executor=None)
-    done = rfw_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "report", str(out), cwd=tmp_path, safe_path=True)
     assert done.returncode == 0, done.stderr
     md = (out / "report.md").read_text()
     how = md.split("## How this was measured")[1]
@@ -242,14 +242,14 @@ def test_peers_with_a_config_camera_are_refused(tmp_path):
         'outputs = ["flat.color"]', 'outputs = ["flat.color"]\ncamera = { yfov = 20.0 }'))
     (tmp_path / "plain.toml").write_text(text)
     before = listing(tmp_path)
-    done = rfw_cli("bench", "cam.toml", "--size", "32x18", "--peers", "moderngl", "--out", "X",
-                   cwd=tmp_path, safe_path=True)
+    done = warm_cli("bench", "cam.toml", "--size", "32x18", "--peers", "moderngl", "--out", "X",
+                    cwd=tmp_path, safe_path=True)
     one_error_line(done, f"{tmp_path / 'cam.toml'}: --peers: ", "[camera]")
     # negative controls: the camera table is accepted without peers, and the same config
     # without it is accepted with peers (both reach the later --reference check)
     for args in (["cam.toml"], ["plain.toml", "--peers", "moderngl"]):
-        done = rfw_cli("bench", *args, "--size", "32x18", "--reference", "nosuch", "--out", "X",
-                       cwd=tmp_path, safe_path=True)
+        done = warm_cli("bench", *args, "--size", "32x18", "--reference", "nosuch", "--out", "X",
+                        cwd=tmp_path, safe_path=True)
         line = one_error_line(done, "--reference 'nosuch'")
         assert "--peers" not in line
     assert listing(tmp_path) == before

@@ -23,7 +23,7 @@ from rfw.bench.stats import (
     summarize_runs,
 )
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .synthetic import record
 
 
@@ -81,7 +81,7 @@ def test_the_rule():
 def test_report_marks_only_enough_samples(tmp_path, repeats, frames, expected):
     out = write(tmp_path / "b", {"r@wgpu": 10.0, "s@wgpu": 20.0}, repeats=repeats,
                 frames=frames)
-    done = rfw_cli("bench", "report", str(out), safe_path=True)
+    done = warm_cli("bench", "report", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     vs = vs_reference(out, "s@wgpu")
     assert vs.startswith("+") and vs.endswith(f"% {expected}"), vs
@@ -100,8 +100,8 @@ def test_report_marks_only_enough_samples(tmp_path, repeats, frames, expected):
 def test_compare_judges_only_enough_samples(tmp_path, repeats, frames, flagged):
     old = write(tmp_path / "old", {"d@wgpu": 10.0}, repeats=repeats, frames=frames)
     new = write(tmp_path / "new", {"d@wgpu": 20.0}, repeats=repeats, frames=frames)
-    done = rfw_cli("bench", "compare", str(old), str(new), "--fail-on-regression", "--out",
-                   str(tmp_path / "cmp"), safe_path=True)
+    done = warm_cli("bench", "compare", str(old), str(new), "--fail-on-regression", "--out",
+                    str(tmp_path / "cmp"), safe_path=True)
     assert done.returncode == (1 if flagged else 0), done.stdout + done.stderr
     md = (tmp_path / "cmp" / "compare.md").read_text()
     row = next(x for x in md.splitlines() if x.startswith("| d@wgpu | g | gpu_ms |"))
@@ -112,7 +112,7 @@ def test_compare_judges_only_enough_samples(tmp_path, repeats, frames, flagged):
         assert "% (n=3<6: no mark) | too few samples (n=3<6) |" in row
         assert "1 regression" not in done.stdout
         assert "not judged: too few samples (under 6 samples or 2 runs a side" in done.stdout
-        listed = rfw_cli("bench", "compare", str(old), str(new), "--all", safe_path=True)
+        listed = warm_cli("bench", "compare", str(old), str(new), "--all", safe_path=True)
         assert "too few samples (n=3<6)" in listed.stdout
 
 
@@ -120,7 +120,7 @@ def test_wall_is_per_run_total_over_frames(tmp_path):
     # frames in flight: one frame's wall clock absorbs the wait for another
     wall = [0.9, 0.9, 0.9, 60.3]
     out = write(tmp_path / "b", {"r@wgpu": 15.0}, repeats=6, frames=4, wall=wall)
-    done = rfw_cli("bench", "report", str(out), safe_path=True)
+    done = warm_cli("bench", "report", str(out), safe_path=True)
     assert done.returncode == 0, done.stderr
     rows = list(csv.DictReader((out / "results.csv").open()))
     w = next(r for r in rows if r["pass"] == "frame" and r["metric"] == "wall_ms")

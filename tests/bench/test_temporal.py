@@ -123,13 +123,14 @@ def test_run_flicker_reads_the_saved_frames(tmp_path):
 
 
 def test_run_flicker_of_rfw_runs_saving_every_frame(tmp_path):
-    from ..conftest import ROOT, rfw_cli
+    from ..cli.warm import warm_cli
+    from ..conftest import ROOT
 
     def flicker(aa: str) -> float:
         out = tmp_path / aa
-        done = rfw_cli("run", ROOT / "configs" / "deferred_ssao_shadows.toml", "--size",
-                       "32x18", "--frames", "6", "--save-every", "1", "--set", f"aa={aa}",
-                       "--out", out)
+        done = warm_cli("run", ROOT / "configs" / "deferred_ssao_shadows.toml", "--size",
+                        "32x18", "--frames", "6", "--save-every", "1", "--set", f"aa={aa}",
+                        "--out", out)
         assert done.returncode == 0, done.stderr
         return run_flicker(out, "fxaa.color", skip=2).index
 

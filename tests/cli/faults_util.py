@@ -27,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from ..conftest import rfw_cli, tree_env
+from .warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = str(ROOT / "configs" / "flat.toml")
@@ -54,7 +55,11 @@ def env_for(home: Path) -> dict[str, str]:
 def rfw(argv: list[str], cwd: Path, env: dict[str, str], *,
         preexec_fn: Callable[[], None] | None = None,
         timeout: float = TIMEOUT) -> subprocess.CompletedProcess:
-    """Run ``python -m rfw.cli ARGV`` to the end."""
+    """Run ``python -m rfw.cli ARGV`` to the end: forked from the warm zygote (tests/cli/warm.py)
+    unless ``preexec_fn`` is to run in it first. (The signal cases start theirs fresh: see
+    :func:`start`.)"""
+    if preexec_fn is None:
+        return warm_cli(*argv, cwd=cwd, environ=env, timeout=timeout, errors="replace")
     return rfw_cli(*argv, cwd=cwd, environ=env, timeout=timeout, errors="replace",
                    preexec_fn=preexec_fn)
 

@@ -1,4 +1,5 @@
-"""The bad-input corpus (issue 11, item 9): every case runs the real CLI in a subprocess.
+"""The bad-input corpus (issue 11, item 9): every case runs the real CLI in a subprocess
+(forked from a warm one, tests/cli/warm.py: what ``main()`` does is what is judged).
 
 Each bad input must give exit code 2 and exactly one non-empty stderr line, starting
 ``rfw: error:`` and naming the file and the element (pass, slot, key, line); no traceback;
@@ -28,8 +29,8 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import rfw_cli
 from .corpus_cases import ACCEPTED, Accepted, Case, all_cases
+from .warm import warm_cli
 
 CASES = all_cases()
 OLD_PNG = b"\x89PNG\r\n\x1a\n an image from an earlier run"
@@ -59,7 +60,7 @@ def _prepare(root: Path, files: dict[str, bytes]) -> Path:
 
 
 def _run(argv: list[str], cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
-    return rfw_cli(*argv, cwd=cwd, environ=env, timeout=TIMEOUT, errors="replace")
+    return warm_cli(*argv, cwd=cwd, environ=env, timeout=TIMEOUT, errors="replace")
 
 
 def snapshot(root: Path, skip: list[Path]) -> dict[str, str]:

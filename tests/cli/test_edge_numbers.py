@@ -1,4 +1,5 @@
-"""Numbers and environment variables at the edges, through the real CLI (issue 21, item 8).
+"""Numbers and environment variables at the edges, through the real CLI (issue 21, item 8;
+forked from a warm one, tests/cli/warm.py).
 
 Bad ``RFW_*`` values (one case or more per variable), camera numbers that are finite in
 float64 but not in float32, cameras whose float32 matrices keep no picture (huge positions,
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ..conftest import rfw_cli
+from .warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 FLAT = ROOT / "configs" / "flat.toml"
@@ -145,7 +146,7 @@ def _env(base: Path, extra: dict[str, str]) -> dict[str, str]:
 
 def _rfw(args: list[str], cwd: Path, base: Path, extra: dict[str, str]
          ) -> subprocess.CompletedProcess:
-    return rfw_cli(*args, cwd=cwd, environ=_env(base, extra), timeout=TIMEOUT)
+    return warm_cli(*args, cwd=cwd, environ=_env(base, extra), timeout=TIMEOUT)
 
 
 @pytest.fixture(scope="module")

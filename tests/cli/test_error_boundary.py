@@ -1,4 +1,5 @@
-"""The CLI's error boundary (issue 11, items 2 and 3), through the real CLI in a subprocess.
+"""The CLI's error boundary (issue 11, items 2 and 3), through the real CLI in a subprocess
+(forked from a warm one, tests/cli/warm.py; the closed-pipe case starts its own).
 
 Every bad input exits 2 with exactly one stderr line ``rfw: error: FILE: ELEMENT: message``
 and no traceback; nothing is written outside ``--out``; a failed run leaves no
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import rfw_cli
+from .warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFERRED = ROOT / "configs" / "deferred.toml"
@@ -43,8 +44,8 @@ inputs = { hdr = "lighting.hdr" }
 
 
 def rfw(*args: object, cwd: Path) -> subprocess.CompletedProcess:
-    return rfw_cli(*args, cwd=cwd, env={"HOME": str(cwd / "home"),
-                                        "XDG_CACHE_HOME": str(cwd / "cache")})
+    return warm_cli(*args, cwd=cwd, env={"HOME": str(cwd / "home"),
+                                         "XDG_CACHE_HOME": str(cwd / "cache")})
 
 
 def error_line(done: subprocess.CompletedProcess, *needles: str) -> str:

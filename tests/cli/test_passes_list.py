@@ -6,13 +6,13 @@ from pathlib import Path
 
 import rfw.registry as registry
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_every_pass_is_listed(tmp_path):
-    done = rfw_cli("passes", cwd=tmp_path, tree=True)
+    done = warm_cli("passes", cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     headers = [line.split()[0] for line in done.stdout.splitlines()
                if line and not line.startswith(" ")]
@@ -21,7 +21,7 @@ def test_every_pass_is_listed(tmp_path):
 
 
 def test_slots_and_settings_of_known_passes(tmp_path):
-    done = rfw_cli("passes", "tonemap", "flat", cwd=tmp_path, tree=True)
+    done = warm_cli("passes", "tonemap", "flat", cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     assert "tonemap  (compute; passes.tonemap.tonemap)" in lines
@@ -35,7 +35,7 @@ def test_slots_and_settings_of_known_passes(tmp_path):
 
 
 def test_json_carries_the_declarations(tmp_path):
-    done = rfw_cli("passes", "--json", "debug_view", cwd=tmp_path, tree=True)
+    done = warm_cli("passes", "--json", "debug_view", cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     [entry] = json.loads(done.stdout)
     cls = registry.get_pass("debug_view")
@@ -51,7 +51,7 @@ def test_json_carries_the_declarations(tmp_path):
 
 def test_unknown_pass_is_one_line_with_a_suggestion(tmp_path):
     # negative control: a misspelt name is refused, nothing printed on stdout
-    done = rfw_cli("passes", "tonemap", "tonemapp", cwd=tmp_path, tree=True)
+    done = warm_cli("passes", "tonemap", "tonemapp", cwd=tmp_path, tree=True)
     assert done.returncode == 2
     assert done.stderr == "rfw: error: passes: unknown pass 'tonemapp' (did you mean " \
                           "'tonemap'?)\n"

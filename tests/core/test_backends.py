@@ -19,7 +19,8 @@ import rfw.backend as backend
 import rfw.plugins as plugins
 from rfw.errors import RfwError
 
-from ..conftest import ROOT, rfw_cli
+from ..cli.warm import warm_cli
+from ..conftest import ROOT
 
 CONFIG = ROOT / "configs" / "deferred.toml"
 
@@ -35,7 +36,7 @@ def test_builtin_backends_are_installed():
 
 
 def test_unknown_backend_on_the_command_line_is_one_line(tmp_path):
-    done = rfw_cli("run", CONFIG, "--backend", "metal", "--out", tmp_path / "out", cwd=tmp_path)
+    done = warm_cli("run", CONFIG, "--backend", "metal", "--out", tmp_path / "out", cwd=tmp_path)
     assert done.returncode == 2, done.stderr
     assert done.stderr.strip() == "rfw: error: --backend: unknown backend 'metal'; " \
                                   "installed: wgpu, vk"
@@ -66,8 +67,8 @@ def test_third_party_backend_runs_through_the_cli(demo_site, tmp_path):
     log = tmp_path / "calls.log"
     env = {**_with_demo(demo_site), "RFW_BACKEND_DEMO_LOG": str(log)}
     out = tmp_path / "out"
-    done = rfw_cli("run", CONFIG, "--backend", "paint", "--size", "40x24", "--frames", "3",
-                   "--out", out, cwd=tmp_path, env=env)
+    done = warm_cli("run", CONFIG, "--backend", "paint", "--size", "40x24", "--frames", "3",
+                    "--out", out, cwd=tmp_path, env=env)
     assert done.returncode == 0, done.stderr
     timings = json.loads((out / "timings.json").read_text())
     assert (timings["backend"], timings["device"], timings["frames"]) == ("paint", "canvas", 3)
@@ -81,14 +82,14 @@ def test_third_party_backend_runs_through_the_cli(demo_site, tmp_path):
     assert log.read_text().split() == ["make_device", "fit", "executor", "executor.destroy",
                                        "scene.destroy", "destroy_device"]
     # the same run under the installed name of another backend lists the painter too
-    done = rfw_cli("run", CONFIG, "--backend", "pain", "--out", out, cwd=tmp_path, env=env)
+    done = warm_cli("run", CONFIG, "--backend", "pain", "--out", out, cwd=tmp_path, env=env)
     assert done.returncode == 2
     assert "(did you mean 'paint'?); installed: wgpu, vk, broken, paint" in done.stderr
 
 
 def test_a_backend_missing_members_is_one_line(demo_site, tmp_path):
-    done = rfw_cli("run", CONFIG, "--backend", "broken", "--out", tmp_path / "out", cwd=tmp_path,
-                   env=_with_demo(demo_site))
+    done = warm_cli("run", CONFIG, "--backend", "broken", "--out", tmp_path / "out", cwd=tmp_path,
+                    env=_with_demo(demo_site))
     assert done.returncode == 2
     (line,) = done.stderr.strip().splitlines()
     assert line.startswith("rfw: error: --backend: backend 'broken' "

@@ -17,7 +17,7 @@ from rfw.camera_path import CameraPath, check_path
 from rfw.errors import RfwError
 from rfw.scene import Camera
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,7 +27,7 @@ SIZE = "32x18"
 
 def run(out: Path, *args: str, config: Path = FLAT,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    done = rfw_cli("run", str(config), "--size", SIZE, "--out", str(out), *args, env=env)
+    done = warm_cli("run", str(config), "--size", SIZE, "--out", str(out), *args, env=env)
     assert done.returncode == 0, done.stderr
     return done
 
@@ -44,7 +44,7 @@ def refused(tmp_path: Path, *args: str, needles: tuple[str, ...],
     work.mkdir(exist_ok=True)
     out = tmp_path / "o"
     extra = ["--out", str(out), "--frames", "2"] if command == "run" else []
-    done = rfw_cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
+    done = warm_cli(command, str(FLAT), "--size", SIZE, *extra, *args, cwd=work)
     assert done.returncode == 2, done.stdout + done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rfw: error: "), done.stderr

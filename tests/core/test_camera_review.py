@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .test_camera_path import FLAT, SIZE, refused
 
 # two keys from one eye, looking opposite ways (+z, then -z)
@@ -22,8 +22,8 @@ SLERP = "camera.path.target_interpolation=slerp"
 
 def run(out: Path, *args: str, frames: int = 2) -> dict:
     """``rfw run`` that succeeds quietly (no warning on stderr); its timings.json."""
-    done = rfw_cli("run", str(FLAT), "--size", SIZE, "--frames", str(frames), "--out",
-                   str(out), *args)
+    done = warm_cli("run", str(FLAT), "--size", SIZE, "--frames", str(frames), "--out",
+                    str(out), *args)
     assert done.returncode == 0, done.stderr
     assert done.stderr == "", done.stderr
     return json.loads((out / "timings.json").read_text())

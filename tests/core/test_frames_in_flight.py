@@ -21,7 +21,8 @@ from rfw.frame import InFlight, frames_in_flight
 from rfw.options import RunOptions
 from rfw.render import render
 
-from ..conftest import rfw_cli, tiny_scene
+from ..cli.warm import warm_cli
+from ..conftest import tiny_scene
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -132,9 +133,9 @@ def test_the_config_key_wins_over_the_environment(monkeypatch):
 
 def _rfw_run(tmp_path: Path, env_value: str | None, *sets: str) -> subprocess.CompletedProcess:
     extra = [a for s in sets for a in ("--set", s)]
-    return rfw_cli("run", ROOT / "configs" / "flat.toml", "--size", "32x18", "--frames", "2",
-                   *extra, "--out", tmp_path / "out", env={"RFW_FRAMES_IN_FLIGHT": env_value},
-                   timeout=600)
+    return warm_cli("run", ROOT / "configs" / "flat.toml", "--size", "32x18", "--frames", "2",
+                    *extra, "--out", tmp_path / "out", env={"RFW_FRAMES_IN_FLIGHT": env_value},
+                    timeout=600)
 
 
 @pytest.mark.parametrize(("env_value", "sets", "where"), [
@@ -153,7 +154,7 @@ def test_a_bad_config_value_is_one_line_and_exit_2(tmp_path):
     cfg = tmp_path / "flat.toml"
     text = (ROOT / "configs" / "flat.toml").read_text()
     cfg.write_text("frames_in_flight = true\n" + text)
-    run = rfw_cli("run", cfg, "--size", "32x18", "--out", tmp_path / "out", timeout=600)
+    run = warm_cli("run", cfg, "--size", "32x18", "--out", tmp_path / "out", timeout=600)
     assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
     assert f"rfw: error: {cfg}: frames_in_flight: " in run.stderr
 
@@ -171,9 +172,9 @@ def test_a_good_value_runs_through_the_cli(tmp_path, env_value, sets, want):
 @pytest.mark.parametrize(("env_value", "code"), [("0", 2), ("1", 0)])
 def test_rfw_bench_refuses_a_bad_environment_value_once(tmp_path, env_value, code):
     # before any run starts (each run would fail alone); "1" is the negative control
-    run = rfw_cli("bench", "flat", "--size", "16x8", "--frames", "1", "--warmup", "0",
-                  "--repeat", "1", "--out", tmp_path / "b", env={"RFW_FRAMES_IN_FLIGHT": env_value},
-                  timeout=600)
+    run = warm_cli("bench", "flat", "--size", "16x8", "--frames", "1", "--warmup", "0",
+                   "--repeat", "1", "--out", tmp_path / "b", env={"RFW_FRAMES_IN_FLIGHT": env_value},
+                   timeout=600)
     assert run.returncode == code, run.stderr
     if code:
         assert run.stderr.count("\n") == 1 and "RFW_FRAMES_IN_FLIGHT: " in run.stderr

@@ -17,14 +17,14 @@ from PIL import Image
 from rfw.backend import pick_gpu
 from rfw.errors import RfwError
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(tmp: Path, backend: str, gpu: str | None, out: str) -> subprocess.CompletedProcess:
-    return rfw_cli("run", ROOT / "configs" / "flat.toml", "--size", "32x18", "--backend",
-                   backend, "--out", tmp / out, env={"RFW_GPU": gpu})
+    return warm_cli("run", ROOT / "configs" / "flat.toml", "--size", "32x18", "--backend",
+                    backend, "--out", tmp / out, env={"RFW_GPU": gpu})
 
 
 @pytest.mark.parametrize("backend", ["wgpu", "vk"])

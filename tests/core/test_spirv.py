@@ -8,7 +8,7 @@ import pytest
 
 from rfw.spirv import ShaderCompileError, compile_glsl, reflect
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -158,8 +158,8 @@ VK_RUN = ["run", "configs/deferred.toml", "--backend", "vk", "--size", "64x36", 
 
 
 def rfw_vk(tmp_path, cache):
-    return rfw_cli(*VK_RUN, "--out", tmp_path / "out", cwd=ROOT,
-                   env={"RFW_CACHE_SPIRV": str(cache)})
+    return warm_cli(*VK_RUN, "--out", tmp_path / "out", cwd=ROOT,
+                    env={"RFW_CACHE_SPIRV": str(cache)})
 
 
 def test_corrupt_cache_entries_heal_through_the_cli(tmp_path):

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ..conftest import ROOT, rfw_cli
+from ..cli.warm import warm_cli
+from ..conftest import ROOT
 from .view_xvfb import needs_xvfb, under_xvfb
 
 pytestmark = needs_xvfb
@@ -37,8 +38,8 @@ def view(tmp: Path, config: str, *args: str, **env: str) -> subprocess.Completed
 
 def run_png(tmp: Path, config: str, *sets: str) -> np.ndarray:
     out = tmp / ("run_" + "_".join(s.replace("=", "-") for s in sets))
-    done = rfw_cli("run", config, "--size", SIZE, "--frames", "1", "--out", out,
-                   *(a for s in sets for a in ("--set", s)), environ=_env(), cwd=tmp)
+    done = warm_cli("run", config, "--size", SIZE, "--frames", "1", "--out", out,
+                    *(a for s in sets for a in ("--set", s)), environ=_env(), cwd=tmp)
     assert done.returncode == 0, done.stdout + done.stderr
     [png] = [p for p in out.glob("*.png")]
     return np.asarray(Image.open(png).convert("RGBA")).astype(int)

@@ -8,7 +8,7 @@ import pytest
 
 from rfw.graph import AccelStructure, DepthAttachment, GraphBuilder, GraphError, Texture, compile
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 BUILD = {"ACCELERATION_STRUCTURE_BUILD_KHR"}
 AS_READ = {"ACCELERATION_STRUCTURE_READ_KHR"}
@@ -102,7 +102,7 @@ BUILD_RW = ("ACCELERATION_STRUCTURE_BUILD_KHR:ACCELERATION_STRUCTURE_READ_KHR|"
 
 
 def _plan(*args: str) -> list[str]:
-    done = rfw_cli("graph", "plan", *args, cwd=ROOT)
+    done = warm_cli("graph", "plan", *args, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     return done.stdout.splitlines()
 
@@ -141,7 +141,7 @@ def test_plan_prints_rt_shadows_acceleration_structure_barriers_for_a_ray_tracin
 
 
 def test_plan_with_caps_a_pass_lacks_is_one_error_line():
-    done = rfw_cli("graph", "plan", "configs/rt_primary.toml", "--caps", "VK_KHR_ray_query",
-                   cwd=ROOT)
+    done = warm_cli("graph", "plan", "configs/rt_primary.toml", "--caps", "VK_KHR_ray_query",
+                    cwd=ROOT)
     assert done.returncode == 2 and done.stderr.startswith("rfw: error: ")
     assert len(done.stderr.splitlines()) == 1 and "accel" in done.stderr

@@ -16,7 +16,7 @@ from rfw.graph import Attachment, GraphBuilder, Texture, compile
 from rfw.graph import queues as gq
 from rfw.graph.queues import COMPUTE, GRAPHICS, PREVIOUS_FRAME, check_sync
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SSAO = ROOT / "configs" / "deferred_ssao_shadows.toml"
@@ -212,17 +212,17 @@ def test_the_switch_is_part_of_the_cache_key():
 
 
 def test_graph_plan_prints_queues_submissions_and_transfers():
-    r = rfw_cli("graph", "plan", str(SSAO), "--caps", "compute_family", cwd=ROOT)
+    r = warm_cli("graph", "plan", str(SSAO), "--caps", "compute_family", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "queues: graphics, compute (two families" in out
     assert "#1 compute  [ssao]  wait graphics = 1 at ALL_COMMANDS;  signal compute = 1" in out
     assert "#3 graphics [lighting, points_lines, tonemap, fxaa]  wait compute = 1" in out
     assert "ssao.ao: compute -> graphics; release after ssao" in out
-    r = rfw_cli("graph", "plan", str(SSAO), "--json", "--caps", "compute_queue", cwd=ROOT)
+    r = warm_cli("graph", "plan", str(SSAO), "--json", "--caps", "compute_queue", cwd=ROOT)
     q = json.loads(r.stdout)["queues"]
     assert [s["queue"] for s in q["submissions"]] == [GRAPHICS, COMPUTE, GRAPHICS, GRAPHICS]
-    r = rfw_cli("graph", "plan", str(SSAO), cwd=ROOT)
+    r = warm_cli("graph", "plan", str(SSAO), cwd=ROOT)
     assert "queues: graphics (off: async_compute = auto and the device has no second" in r.stdout
 
 
@@ -230,14 +230,14 @@ def test_graph_plan_prints_queues_submissions_and_transfers():
 def test_a_bad_switch_in_a_config_is_one_line(tmp_path, line):
     cfg = tmp_path / "c.toml"
     cfg.write_text(line + "\n" + SSAO.read_text())
-    r = rfw_cli("graph", "plan", str(cfg), cwd=ROOT)
+    r = warm_cli("graph", "plan", str(cfg), cwd=ROOT)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.count("\n") == 1 and "async_compute: must be true, false or" in r.stderr
 
 
 def test_a_bad_switch_on_the_command_line_is_one_line(tmp_path):
-    r = rfw_cli("run", str(SSAO), "--set", "async_compute=maybe", "--out", str(tmp_path / "o"),
-                cwd=ROOT)
+    r = warm_cli("run", str(SSAO), "--set", "async_compute=maybe", "--out", str(tmp_path / "o"),
+                 cwd=ROOT)
     assert r.returncode == 2
     assert r.stderr.strip().splitlines() == [
         f"rfw: error: {SSAO}: --set async_compute: must be true, false or \"auto\", "

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 RAPTOR = sorted((ROOT / "tests" / "data" / "raptor").glob("*.json"))
@@ -22,13 +22,13 @@ LOST = "no kept pass produces"
 
 
 def plan(graph, *extra, cwd):
-    done = rfw_cli("graph", "plan", graph, "--json", *extra, cwd=cwd, tree=True)
+    done = warm_cli("graph", "plan", graph, "--json", *extra, cwd=cwd, tree=True)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
 
 def note_of(graph, cwd):
-    done = rfw_cli("graph", "plan", graph, cwd=cwd, tree=True)
+    done = warm_cli("graph", "plan", graph, cwd=cwd, tree=True)
     assert done.returncode == 0, done.stderr
     notes = [line for line in done.stdout.splitlines() if line.startswith("note:")]
     assert len(notes) <= 1, done.stdout
@@ -67,7 +67,7 @@ def write_graph(tmp_path):
 def old_mapping(tmp_path, path):
     """The graph as rfw loaded it before: Raptor's reference inputs ordering only (the
     TOML ``rfw graph convert`` wrote then)."""
-    done = rfw_cli("graph", "convert", path, cwd=tmp_path, tree=True)
+    done = warm_cli("graph", "convert", path, cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     data = tomllib.loads(done.stdout)
     [post] = [p for p in data["pass"] if p["name"] == "post"]
@@ -172,7 +172,7 @@ def test_every_raptor_suggestion_is_a_valid_graph(tmp_path, path):
 
 def _outputs(path, cwd):
     # the text plan names the graph outputs (the JSON plan leaves them out)
-    done = rfw_cli("graph", "plan", path, cwd=cwd, tree=True)
+    done = warm_cli("graph", "plan", path, cwd=cwd, tree=True)
     [line] = [x for x in done.stdout.splitlines() if x.startswith("outputs:")]
     names = line.split(":", 1)[1].strip()
     return [] if names == "-" else names.split(", ")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "deferred_ssao_shadows.toml"
@@ -22,10 +22,10 @@ pytestmark = pytest.mark.skipif(__import__("shutil").which("dot") is None,
 
 def page(tmp_path, graph, *extra):
     out = tmp_path / "plan.html"
-    done = rfw_cli("graph", "plan", graph, "--html", out, *extra, cwd=tmp_path, tree=True)
+    done = warm_cli("graph", "plan", graph, "--html", out, *extra, cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     assert f"wrote {out}" in done.stdout
-    plan = rfw_cli("graph", "plan", graph, "--json", *extra, cwd=tmp_path, tree=True)
+    plan = warm_cli("graph", "plan", graph, "--json", *extra, cwd=tmp_path, tree=True)
     assert plan.returncode == 0, plan.stderr
     return out.read_text(encoding="utf-8"), json.loads(plan.stdout), done.stdout
 
@@ -131,21 +131,21 @@ def test_raptor_graph_names_its_dangling_outputs(tmp_path):
     assert "depth, final" in notes[0] and "--output final" in notes[0]
     assert "--output final" in text and "depth, final" in text
     # the suggestion is the presented image, and the bytes it quotes are its plan's
-    done = rfw_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), cwd=tmp_path,
-                   tree=True)
+    done = warm_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), cwd=tmp_path,
+                    tree=True)
     [note] = [line for line in done.stdout.splitlines() if line.startswith("note:")]
     assert "1 resource nothing reads became an output and lives" in note
     assert ": visibility_motion_vectors; " in note and "--output taa_output (" in note
     before, after = map(float, re.search(r"transient ([\d.]+) MiB -> ([\d.]+) MiB",
                                          note).groups())
     for extra, quoted in (((), before), (("--output", "taa_output"), after)):
-        plan = rfw_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), "--json",
-                       *extra, cwd=tmp_path, tree=True)
+        plan = warm_cli("graph", "plan", RAPTOR.with_name("chapter13_graph.json"), "--json",
+                        *extra, cwd=tmp_path, tree=True)
         assert f"{json.loads(plan.stdout)['transient_bytes'] / 2**20:.2f}" == f"{quoted:.2f}"
     assert after < before
     # a graph given its output, and an rfw config (outputs declared), get no note
     for graph, extra in ((RAPTOR, ("--output", "final")), (CONFIG, ())):
-        done = rfw_cli("graph", "plan", graph, *extra, cwd=tmp_path, tree=True)
+        done = warm_cli("graph", "plan", graph, *extra, cwd=tmp_path, tree=True)
         assert done.returncode == 0, done.stderr
         assert "note: no outputs" not in done.stdout
 
@@ -153,8 +153,8 @@ def test_raptor_graph_names_its_dangling_outputs(tmp_path):
 def test_html_onto_a_folder_is_one_line(tmp_path):
     folder = tmp_path / "taken"
     folder.mkdir()
-    done = rfw_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", folder, cwd=tmp_path,
-                   tree=True)
+    done = warm_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", folder, cwd=tmp_path,
+                    tree=True)
     assert done.returncode == 2
     assert done.stderr == (f"rfw: error: {folder}: --html: exists and is a folder, not a regular "
                            "file: refused as an output\n")
@@ -162,7 +162,7 @@ def test_html_onto_a_folder_is_one_line(tmp_path):
     assert [p.name for p in tmp_path.rglob("*")] == ["taken"]
     # a missing folder is made, as for every other output
     out = tmp_path / "new" / "plan.html"
-    done = rfw_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", out, cwd=tmp_path,
-                   tree=True)
+    done = warm_cli("graph", "plan", CONFIG, "--size", "32x18", "--html", out, cwd=tmp_path,
+                    tree=True)
     assert done.returncode == 0, done.stderr
     assert out.is_file()

@@ -23,7 +23,7 @@ from rfw.backends.scene_data import mip_chain
 from rfw.scene import SceneError, limits, load_gltf
 from rfw.scene.model import Instance, Material, Mesh, Scene, Texture
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -443,8 +443,8 @@ def test_empty_scene_and_skipped_only_instance_render_alike(tmp_path):
     images = {}
     for path in (empty, skipped, drawn):
         out = tmp_path / f"out-{path.stem}"
-        run = rfw_cli("run", "configs/flat.toml", "--backend", "vk", "--scene", path, "--size",
-                      "32x32", "--frames", "1", "--out", out, cwd=ROOT)
+        run = warm_cli("run", "configs/flat.toml", "--backend", "vk", "--scene", path, "--size",
+                       "32x32", "--frames", "1", "--out", out, cwd=ROOT)
         assert run.returncode == 0, run.stderr
         said = [line for line in run.stderr.splitlines() if "nothing is drawable" in line]
         if path is drawn:  # the control: a drawable scene says nothing and shows the quad

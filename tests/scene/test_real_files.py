@@ -18,7 +18,7 @@ from rfw.scene import SceneError, load_gltf, load_meshfile
 from rfw.scene.model import Material, Mesh, Scene
 from rfw.scene.sides import back_faced, closed_outward, with_back_faces
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .test_gltf import PIXELS, QUAD_IDX, QUAD_POS, QUAD_UV, Gltf, png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,8 +28,8 @@ BACK_IDX = np.array([0, 2, 1, 0, 3, 2])  # the quad wound clockwise: its front f
 def run(scene: Path, out: Path, backend: str = "wgpu") -> tuple[int, list[str], int]:
     """``rfw run configs/flat.toml --scene SCENE`` at 32x32: exit code, stderr lines and the
     pixels covered (the flat pass clears to black)."""
-    p = rfw_cli("run", "configs/flat.toml", "--scene", scene, "--size", "32x32", "--frames", "1",
-                "--out", out, "--backend", backend, cwd=ROOT)
+    p = warm_cli("run", "configs/flat.toml", "--scene", scene, "--size", "32x32", "--frames", "1",
+                 "--out", out, "--backend", backend, cwd=ROOT)
     assert "Traceback" not in p.stderr, p.stderr
     covered = -1
     if p.returncode == 0:

@@ -18,7 +18,7 @@ from rfw.scene import stress
 from rfw.scene.fetch import SCENES, scene_to_glb
 from rfw.scene.fetch.cache import FORMAT
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,7 +27,7 @@ FLAT = ROOT / "configs" / "flat.toml"
 
 def cli(*args: str, cache: Path, cwd: Path | None = None,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    return rfw_cli(*args, cwd=cwd, env={"RFW_FETCH": None, "RFW_CACHE": str(cache), **(env or {})})
+    return warm_cli(*args, cwd=cwd, env={"RFW_FETCH": None, "RFW_CACHE": str(cache), **(env or {})})
 
 
 def one_line(done: subprocess.CompletedProcess, *needles: str) -> str:

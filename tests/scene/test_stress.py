@@ -15,7 +15,7 @@ import pytest
 from rfw.scene import SceneError, builtin_scene, load_scene, stress
 from rfw.scene.stress import STRESS_INSTANCES, grid_transforms
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share, read_png
 from .test_courtyard import digest
 
@@ -64,8 +64,8 @@ def test_bad_counts_are_scene_errors():
 
 
 def test_bad_count_through_the_cli_is_one_line(tmp_path):
-    done = rfw_cli("run", "configs/deferred.toml", "--scene", "stress:0", "--size", "32x24",
-                   "--out", str(tmp_path), cwd=ROOT)
+    done = warm_cli("run", "configs/deferred.toml", "--scene", "stress:0", "--size", "32x24",
+                    "--out", str(tmp_path), cwd=ROOT)
     assert done.returncode == 2
     assert done.stderr.strip().count("\n") == 0
     assert done.stderr.startswith("rfw: error: stress:0: scene: the instance count")
@@ -74,8 +74,8 @@ def test_bad_count_through_the_cli_is_one_line(tmp_path):
 def _render(tmp_path: Path, backend: str, scene: str, *, config: str = "deferred",
             size: str = "96x64", output: str = "tonemap.ldr.png") -> np.ndarray:
     out = tmp_path / f"{backend}-{config}-{scene.replace(':', '_')}"
-    done = rfw_cli("run", f"configs/{config}.toml", "--backend", backend, "--scene", scene,
-                   "--size", size, "--frames", "1", "--out", str(out), cwd=ROOT)
+    done = warm_cli("run", f"configs/{config}.toml", "--backend", backend, "--scene", scene,
+                    "--size", size, "--frames", "1", "--out", str(out), cwd=ROOT)
     assert done.returncode == 0, done.stdout + done.stderr
     return read_png(out / output)
 

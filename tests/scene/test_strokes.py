@@ -12,7 +12,7 @@ from PIL import Image
 
 from rfw.scene import SceneError, load_gltf
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from .test_gltf import PIXELS, QUAD_POS, Gltf, png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -60,8 +60,8 @@ def test_color_0_is_kept_per_vertex_and_odd_lines_are_refused(tmp_path):
 def render(scene: Path, out: Path, backend: str, config: str = "configs/flat.toml",
            *sets: str) -> tuple[np.ndarray, list[str]]:
     args = [a for s in sets for a in ("--set", s)]
-    p = rfw_cli("run", config, "--scene", scene, "--size", "48x32", "--frames", "1", "--out", out,
-                "--backend", backend, *args, cwd=ROOT)
+    p = warm_cli("run", config, "--scene", scene, "--size", "48x32", "--frames", "1", "--out", out,
+                 "--backend", backend, *args, cwd=ROOT)
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     png = next(out.glob("*.png"))
     return np.asarray(Image.open(png).convert("RGB")), p.stderr.splitlines()

@@ -17,7 +17,7 @@ from vkext import VkDevice
 from vkext.backend import render_vk
 from vkext.queues import AsyncQueues
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import changed_share
 from ..graph.test_queues import SSAO
 
@@ -137,8 +137,8 @@ def test_the_second_queue_choice():
 
 
 def test_a_bad_async_queue_preference_is_one_line(tmp_path):
-    r = rfw_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x16",
-                "--out", tmp_path / "out", env={"RFW_VK_ASYNC_QUEUE": "fast"})
+    r = warm_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x16",
+                 "--out", tmp_path / "out", env={"RFW_VK_ASYNC_QUEUE": "fast"})
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "RFW_VK_ASYNC_QUEUE" in lines[0] and "'fast'" in lines[0]

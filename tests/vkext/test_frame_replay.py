@@ -20,7 +20,8 @@ from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
-from ..conftest import rfw_cli, tiny_scene
+from ..cli.warm import warm_cli
+from ..conftest import tiny_scene
 from ..golden_util import changed_share
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,8 +97,8 @@ def test_passes_that_record_every_frame_record_the_frame(vk_device, monkeypatch)
 @pytest.mark.parametrize(("value", "code"), [("maybe", 2), ("0", 0)])
 def test_a_bad_switch_is_one_line_and_exit_2(tmp_path, value, code):
     # "0" (a good value, the baseline) is the negative control
-    run = rfw_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x8",
-                  "--out", tmp_path / "o", timeout=600, env={"RFW_VK_FRAME_REPLAY": value})
+    run = warm_cli("run", ROOT / "configs" / "flat.toml", "--backend", "vk", "--size", "16x8",
+                   "--out", tmp_path / "o", timeout=600, env={"RFW_VK_FRAME_REPLAY": value})
     assert run.returncode == code, run.stderr
     if code:
         assert run.stderr.count("\n") == 1 and "RFW_VK_FRAME_REPLAY: expected 0 or 1" in \

@@ -28,7 +28,8 @@ from rfw.meshlets import cached_meshlets
 from vkext.backend import render_vk
 from vkext.meshlet import MAX_TRIANGLES, MAX_VERTICES
 
-from ..conftest import rfw_cli, tiny_scene
+from ..cli.warm import warm_cli
+from ..conftest import tiny_scene
 from ..golden_util import assert_similar, mismatch
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -154,9 +155,9 @@ def test_too_small_meshlet_buffers_fail_in_one_line(vk_device, tmp_path, setting
         pytest.skip("no VK_EXT_mesh_shader")
 
     def run(value: int):
-        return rfw_cli("run", ROOT / "configs" / "deferred_meshlet.toml", "--size", "32x18",
-                       "--frames", "1", "--set", f"cull.{setting}={value}", "--out",
-                       tmp_path / str(value), cwd=tmp_path)
+        return warm_cli("run", ROOT / "configs" / "deferred_meshlet.toml", "--size", "32x18",
+                        "--frames", "1", "--set", f"cull.{setting}={value}", "--out",
+                        tmp_path / str(value), cwd=tmp_path)
 
     small = run(1)
     assert small.returncode == 2 and "Traceback" not in small.stderr

@@ -15,7 +15,7 @@ from PIL import Image
 
 from vkext import VkDevice, VkUnavailableError
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
@@ -31,7 +31,7 @@ def _needs_vulkan():
 
 def rfw(tmp_path: Path, out: str, *args: str) -> tuple[subprocess.CompletedProcess, Path]:
     target = tmp_path / out
-    done = rfw_cli("run", *args, "--frames", "1", "--out", target, cwd=ROOT)
+    done = warm_cli("run", *args, "--frames", "1", "--out", target, cwd=ROOT)
     return done, target
 
 

@@ -47,7 +47,7 @@ from vkext.executor import VkExecutor
 from vkext.fitting import fit_plan
 from vkext.scene import VkScene
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -324,8 +324,8 @@ def test_cli_order_seed_and_poison(deferred_ssao, tmp_path):
     fz, plan, reference = deferred_ssao
     seed = next(s for s in range(50) if fz.plan(s).order != plan.order)
     run = ["run", ROOT / "configs/deferred_ssao_shadows.toml"]
-    r = rfw_cli(*run, "--backend", "vk", "--size", f"{SIZE[0]}x{SIZE[1]}", "--validate",
-                "--poison", "--order-seed", seed, "--out", tmp_path / "out", cwd=ROOT)
+    r = warm_cli(*run, "--backend", "vk", "--size", f"{SIZE[0]}x{SIZE[1]}", "--validate",
+                 "--poison", "--order-seed", seed, "--out", tmp_path / "out", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     timings = json.loads((tmp_path / "out/timings.json").read_text())
     assert [p["name"] for p in timings["passes"]] == list(fz.plan(seed).order)
@@ -334,7 +334,7 @@ def test_cli_order_seed_and_poison(deferred_ssao, tmp_path):
     # the negative control: the same comparison tells another image apart
     assert not np.array_equal(image[:, ::-1], reference["fxaa.color"])
     # and only vk has them: one line, exit 2
-    r = rfw_cli(*run, "--backend", "wgpu", "--poison", "--out", tmp_path / "w", cwd=ROOT)
+    r = warm_cli(*run, "--backend", "wgpu", "--poison", "--out", tmp_path / "w", cwd=ROOT)
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
     assert "--order-seed and --poison need --backend vk" in r.stderr
 

@@ -31,7 +31,7 @@ import pytest
 from rfw.config import apply_overrides, load_config
 from rfw.render import render
 
-from ..conftest import rfw_cli
+from ..cli.warm import warm_cli
 from ..golden_util import Bounds, mismatch, read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -201,7 +201,7 @@ def final_image(tmp_path: Path, label: str, *sets: str) -> np.ndarray:
             f"{SIZE[0]}x{SIZE[1]}", "--frames", "1", "--out", str(tmp_path / label)]
     for s in sets:
         args += ["--set", s]
-    done = rfw_cli(*args, cwd=ROOT)
+    done = warm_cli(*args, cwd=ROOT)
     assert done.returncode == 0, done.stdout + done.stderr
     return read_png(tmp_path / label / "tonemap.ldr.png")
 
@@ -220,8 +220,8 @@ def test_wgpu_refuses_the_visibility_buffer_in_one_line(tmp_path):
     text = CONFIG.read_text().replace('backend = "vk"', 'backend = "wgpu"')
     config = tmp_path / "deferred_vis.toml"
     config.write_text(text)
-    done = rfw_cli("run", str(config), "--backend", "wgpu", "--size", "64x36", "--frames", "1",
-                   "--out", str(tmp_path / "out"), cwd=ROOT)
+    done = warm_cli("run", str(config), "--backend", "wgpu", "--size", "64x36", "--frames", "1",
+                    "--out", str(tmp_path / "out"), cwd=ROOT)
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
     assert lines[0].startswith("rfw: error: pass 'vis' (visbuffer) needs geometry_shader")
@@ -254,7 +254,7 @@ def test_bad_settings_fail_in_one_line(tmp_path, sets, message):
             "--out", str(tmp_path / "out")]
     for s in sets:
         args += ["--set", s]
-    done = rfw_cli(*args, cwd=ROOT)
+    done = warm_cli(*args, cwd=ROOT)
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
     assert lines[0].startswith("rfw: error: ") and message in lines[0], lines[0]
