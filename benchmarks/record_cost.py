@@ -10,28 +10,47 @@ times everything an executor does per pass, wherever its own timer starts and st
 trees whose timed regions differ can be compared. benchmarks/record_cost_ab.sh alternates
 two trees.
 """
-import json, statistics, sys, time
-tree, frames, backend, config, size = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4], sys.argv[5]
-if backend == "vk":
-    from vkext.executor import VkExecutor as E
-else:
-    try:
-        from rfw.backends.wgpu.executor import Executor as E
-    except ImportError:
-        from rfw.backends.wgpu_backend import Executor as E
-acc = {}
-def wrap(meth):
-    orig = getattr(E, meth)
-    def f(self, *a):
-        t = time.perf_counter_ns(); orig(self, *a)
-        acc.setdefault(meth + (":" + a[0] if a else ""), []).append(time.perf_counter_ns() - t)
-    setattr(E, meth, f)
-for m in ("record", "begin_frame", "end_frame"):
-    wrap(m)
-import rfw
-from rfw.config import apply_overrides, load_config
-cfg = apply_overrides(load_config(f"{tree}/configs/{config}.toml"), [f"size={size}"])
-r = rfw.run(cfg, backend=backend, frames=frames)
-out = {n: round(statistics.median(v[30:]) / 1e3, 1) for n, v in acc.items()}
-cpu = {p["name"]: round(p["cpu_ms"] * 1e3, 1) for p in r.timings["passes"]}
-print(json.dumps({"host_us": out, "cpu_us": cpu}))
+
+import json
+import statistics
+import sys
+import time
+
+
+def main() -> None:
+    tree, frames, backend, config, size = (sys.argv[1], int(sys.argv[2]), sys.argv[3],
+                                           sys.argv[4], sys.argv[5])
+    if backend == "vk":
+        from vkext.executor import VkExecutor as Executor
+    else:
+        try:
+            from rfw.backends.wgpu.executor import Executor
+        except ImportError:  # a tree from before the wgpu backend's split
+            from rfw.backends.wgpu_backend import Executor
+    acc: dict[str, list[int]] = {}
+
+    def wrap(meth: str) -> None:
+        orig = getattr(Executor, meth)
+
+        def timed(self, *a):
+            t = time.perf_counter_ns()
+            orig(self, *a)
+            acc.setdefault(meth + (":" + a[0] if a else ""), []).append(
+                time.perf_counter_ns() - t)
+
+        setattr(Executor, meth, timed)
+
+    for m in ("record", "begin_frame", "end_frame"):
+        wrap(m)
+    import rfw
+    from rfw.config import apply_overrides, load_config
+
+    cfg = apply_overrides(load_config(f"{tree}/configs/{config}.toml"), [f"size={size}"])
+    r = rfw.run(cfg, backend=backend, frames=frames)
+    out = {n: round(statistics.median(v[30:]) / 1e3, 1) for n, v in acc.items()}
+    cpu = {p["name"]: round(p["cpu_ms"] * 1e3, 1) for p in r.timings["passes"]}
+    print(json.dumps({"host_us": out, "cpu_us": cpu}))
+
+
+if __name__ == "__main__":
+    main()
