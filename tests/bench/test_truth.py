@@ -243,7 +243,13 @@ def test_a_report_asked_for_a_truth_its_bench_never_rendered_is_one_line(ao_benc
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and "no references" in done.stderr
     assert not (tmp / "bare" / "report.md").exists()
-    # control: the bench that rendered them reports again, truth section and all
-    again = rfw_cli("bench", "report", out, "--reference", "pathtrace:ao:64", cwd=tmp)
+    # control: the bench's own folder with its truth.json reports (here without the
+    # references' folders, so the truth section says what is missing and computes nothing)
+    import shutil
+
+    copy = tmp / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("reference"))
+    again = rfw_cli("bench", "report", copy, "--reference", "pathtrace:ao:64", cwd=tmp)
     assert again.returncode == 0, again.stderr
-    assert "## Error against the truth" in (out / "report.md").read_text()
+    report = (copy / "report.md").read_text()
+    assert "## Error against the truth" in report and "reference missing" in report

@@ -141,8 +141,10 @@ def _truth(doc: Doc, out_dir: Path, pooled: list[VariantSummary]) -> list[dict]:
             table.append([key, where, "-", "-", "-", "-", f"failed: {ref['error']}", "-"])
             continue
         noise = ref.get("noise") or {}
+        shown = f"{ref['folder']}/ldr.png"
         table.append([
-            Img(f"{ref['folder']}/ldr.png", "reference", 200), where,
+            Img(shown, "reference", 200) if (out_dir / shown).is_file() else "image missing",
+            where,
             f"{ref['size'][0]}x{ref['size'][1]}, {ref['spp']} spp",
             f"{ref['render_s']:.1f} s", f"{ref['samples_per_s'] / 1e6:.3f} M",
             f"{noise.get('rel_mse', float('nan')):.2e}",
