@@ -58,12 +58,17 @@ def rfw_cli(*args: object, cwd: Path | str | None = None,
 
 
 def pytest_configure(config):
-    """Compile this tree's modules once, beside their sources, before any test starts rfw in
-    a subprocess: with PYTHONDONTWRITEBYTECODE set (as on the CI machines, and as the fault
+    """Share the driver's shader cache (below), and compile this tree's modules once, beside
+    their sources, before any test starts rfw in a subprocess: with PYTHONDONTWRITEBYTECODE set (as on the CI machines, and as the fault
     corpus sets it for its children) nothing writes them, so each child compiled some 135
     modules again, half a second of every ``rfw`` it ran. Python still reads them."""
     import compileall
 
+    # lavapipe's shader cache where a run with the default HOME keeps it: the runs that get
+    # a HOME and XDG_CACHE_HOME of their own (the corpora, the error boundary) compiled every
+    # pipeline again, about 0.8 s of a small deferred run; rfw's own caches stay theirs
+    os.environ.setdefault("MESA_SHADER_CACHE_DIR", os.environ.get("XDG_CACHE_HOME")
+                          or os.path.expanduser("~/.cache"))
     if os.environ.get("PYTEST_XDIST_WORKER"):  # the controller does it, once
         return
     for folder in ("rfw", "passes", "vkext"):
