@@ -23,7 +23,10 @@ def _folder(tmp_path: Path) -> dict[str, str]:
     for rel, data in plugin_files(WGSL.encode(), None, BROKEN).items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_bytes(data)
-    return {**os.environ, "PYTHONPATH": str(tmp_path / "site")}
+    # the plugin's site first, before what the environment puts on the path already (the
+    # GPU machine's dependencies live on PYTHONPATH)
+    path = [str(tmp_path / "site"), *filter(None, [os.environ.get("PYTHONPATH")])]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
 
 
 def test_a_traceback_is_a_fresh_processs_and_nothing_is_kept(tmp_path):
@@ -37,7 +40,7 @@ def test_a_traceback_is_a_fresh_processs_and_nothing_is_kept(tmp_path):
     assert warm.stderr.splitlines()[-1] == fresh.stderr.splitlines()[-1]
     # the plugin registered its pass in the last child only: without it on the path the
     # next run does not know the pass
-    env.pop("PYTHONPATH")
+    env["PYTHONPATH"] = os.environ.get("PYTHONPATH", "")
     gone = warm_cli(*argv, cwd=tmp_path, environ=env)
     assert gone.returncode == 2 and "corpus_copy" in gone.stderr, gone.stderr
 
