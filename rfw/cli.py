@@ -61,8 +61,14 @@ def _compile_file(args: argparse.Namespace, graph: Graph | None = None) -> Compi
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
+    if args.what_if or args.budget is not None:
+        return _plan_what_if(args)
     graph = _load(args)
     c = _compile_file(args, graph)
+    if args.device_profile is not None:  # sizes and alignments as that driver gives them
+        from .graph.memory_model import predict
+
+        c = predict(c, args.device_profile, alias=not args.no_alias)
     note = _outputs_note(args, graph, c)
     page = None
     if args.html:  # made (and checked) before anything is printed
@@ -76,6 +82,33 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if page is not None:
         _write_atomic(Path(args.html), page)
         print(f"wrote {args.html}", file=sys.stderr if args.json else sys.stdout)
+    return 0
+
+
+def _plan_what_if(args: argparse.Namespace) -> int:
+    """``--what-if`` / ``--budget``: a row of transient bytes per combination; exit 1 when
+    the worst exceeds the budget (one line naming it)."""
+    from . import memplan
+
+    if args.html:
+        raise RfwError("--html draws one plan: leave out --what-if and --budget")
+    caps = None if args.caps is None else [c for c in args.caps.split(",") if c]
+    rows = memplan.table(args.file, args.what_if or [], profile=args.device_profile,
+                         strict=args.strict, caps=caps, alias=not args.no_alias,
+                         outputs=args.output, cull=not args.no_cull, backend=args.backend,
+                         size=args.size)
+    over = None if args.budget is None else memplan.budget_line(rows, args.budget)
+    if args.json:
+        w = memplan.worst(rows)
+        print(json.dumps({"profile": args.device_profile and args.device_profile.name,
+                          "budget_mib": args.budget, "over_budget": over is not None,
+                          "worst": w.to_json(),
+                          "combinations": [r.to_json() for r in rows]}, indent=2))
+    else:
+        print(memplan.text(rows, profile=args.device_profile, budget=args.budget))
+    if over is not None:
+        print(f"rfw: {over}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -329,6 +362,16 @@ def cmd_passes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _device_profile(text: str) -> typing.Any:
+    """``--device-profile``: a known profile's name or a JSON profile file."""
+    from .graph.memory_model import profile
+
+    try:
+        return profile(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def _graph_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="graph file: .toml (rfw graph or run config) or .json (Raptor)")
     p.add_argument("--size", type=argtypes.size, help="output size WxH (default: the graph's own)")
@@ -465,6 +508,15 @@ def parser() -> argparse.ArgumentParser:
     plan.add_argument("--html", metavar="OUT.html",
                       help="also write one self-contained page: the pass DAG and the memory "
                       "timeline (Graphviz dot needed)")
+    plan.add_argument("--device-profile", metavar="NAME|FILE.json", type=_device_profile,
+                      help="size transients as that driver does (lavapipe, nvidia, or a JSON "
+                      "profile): the bytes the vk executor allocates, with no GPU")
+    plan.add_argument("--what-if", action="append", metavar="KEY=V1,V2,...",
+                      help="a table of transient bytes over every combination (repeatable: "
+                      "the cross product); size=720p,1080p,4k or WxH, a variant or --set key "
+                      "of a run config, <pass>.enabled of a graph file")
+    plan.add_argument("--budget", type=argtypes.real(0.0, 1e9), metavar="MiB",
+                      help="exit 1 when any combination's transient bytes exceed MiB")
     plan.set_defaults(func=cmd_plan)
     dot = gsub.add_parser("dot", help="Graphviz DOT (and SVG when dot is installed)")
     _graph_args(dot)

@@ -25,8 +25,10 @@ Profiles
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 
 from ..units import align_up
 from .compile import place
@@ -122,12 +124,34 @@ PROFILES: dict[str, Profile] = {
 
 
 def profile(name: str) -> Profile:
-    """The profile of that name; a ValueError naming the known ones."""
+    """The profile of that name, or of a JSON file (``{"base": "nvidia", "page": 131072}``:
+    a known profile with some of its parameters changed, e.g. fitted to a device by
+    ``benchmarks/bench_memplan.py``); a ValueError saying what is wrong."""
+    if name.lower().endswith(".json"):
+        return _profile_file(Path(name))
     try:
         return PROFILES[name]
     except KeyError:
         raise ValueError(f"unknown device profile '{name}' (known: "
-                         f"{', '.join(sorted(PROFILES))})") from None
+                         f"{', '.join(sorted(PROFILES))}, or a .json file)") from None
+
+
+def _profile_file(path: Path) -> Profile:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"device profile {path}: {e}") from None
+    if not isinstance(data, dict) or data.get("base") not in PROFILES:
+        raise ValueError(f"device profile {path}: expected an object with \"base\": one of "
+                         f"{', '.join(sorted(PROFILES))}")
+    base = PROFILES[data.pop("base")]
+    known = {f.name for f in fields(base)} - {"name", "about"}
+    unknown = sorted(set(data) - known)
+    if unknown or not all(isinstance(v, int) and v > 0 for v in data.values()):
+        raise ValueError(f"device profile {path}: parameters of '{base.name}' are positive "
+                         f"integers among {', '.join(sorted(known))}"
+                         + (f" (unknown: {', '.join(unknown)})" if unknown else ""))
+    return replace(base, name=f"{base.name}:{path.name}", **data)
 
 
 def _usages(r: ResourcePlan, readback: bool) -> frozenset[str]:
