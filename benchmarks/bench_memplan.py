@@ -42,8 +42,10 @@ from rfw.graph.memory_model import predict, profile  # noqa: E402
 from rfw.graph.memory_model import requirements as modelled  # noqa: E402
 
 SIZES = "1280x720,1920x1080,3840x2160"
-# beside the checkout (/work/main -> /work/shared), a worktree's grandparent, or inside it
-RAPTOR = [base / "shared" / "data" / "raptor-graphs" for base in (ROOT.parent, ROOT.parent.parent, ROOT)]
+# beside the checkout (/work/main -> /work/shared), a worktree's grandparent, inside it, or
+# the tests' copy of the same 28 files
+RAPTOR = [*(base / "shared" / "data" / "raptor-graphs"
+            for base in (ROOT.parent, ROOT.parent.parent, ROOT)), ROOT / "tests" / "data" / "raptor"]
 
 
 def _size(text: str) -> tuple[int, int]:

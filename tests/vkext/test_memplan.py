@@ -1,0 +1,71 @@
+"""The no-GPU memory model against the vk executor's real heaps on lavapipe: the transient
+bytes ``rfw graph plan --device-profile lavapipe`` predicts are the bytes allocated."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from rfw.config import apply_overrides, build, load_config, resolve_auto
+from rfw.graph import MemoryOptions, compile, load_graph
+from rfw.graph.compile import place
+from rfw.graph.memory_model import PROFILES, predict
+from rfw.graph.memory_model import requirements as modelled
+from vkext.fitting import fit_graph
+from vkext.memory import memory_options, plan_heaps, requirements
+
+ROOT = Path(__file__).parents[2]
+TOLERANCE = 0.02  # issue 24: prediction within 2 % of the allocation
+
+
+@pytest.fixture(scope="module")
+def lavapipe(vk_device):
+    if vk_device.driver_name != "llvmpipe":
+        pytest.skip(f"the lavapipe profile models llvmpipe, not {vk_device.name} "
+                    "(benchmarks/device_memplan.sh measures other drivers)")
+    return vk_device
+
+
+def _allocated(plan, device) -> int:
+    tm = plan_heaps(plan, device, readback=True)
+    try:
+        return tm.allocated_bytes
+    finally:
+        tm.destroy()
+
+
+def _config(name: str, size: tuple[int, int], device):
+    cfg, _ = resolve_auto(load_config(ROOT / "configs" / f"{name}.toml"), device.caps)
+    graph = build(apply_overrides(cfg, [f"size={size[0]}x{size[1]}"])).graph
+    fitted, _ = fit_graph(graph, device, readback=True)  # what rfw run --backend vk does
+    return compile(graph, caps=device.caps, backend="vk"), fitted
+
+
+def _raptor(size: tuple[int, int], device):
+    graph = replace(load_graph(ROOT / "tests" / "data" / "raptor" / "chapter11_graph.json"),
+                    size=size)
+    base = compile(graph, backend="vk")
+    return base, place(base, memory_options(base, device, base=MemoryOptions(), readback=True))
+
+
+# odd sizes: the driver pads rows and heights to 4 texels and rows to cache lines there
+CASES = [("flat", (48, 48)), ("deferred_ssao_shadows", (50, 38)), ("forward", (37, 61)),
+         ("raptor", (61, 45))]
+
+
+@pytest.mark.parametrize("name, size", CASES, ids=[c[0] for c in CASES])
+def test_prediction_is_the_allocation(lavapipe, name, size):
+    base, fitted = _raptor(size, lavapipe) if name == "raptor" else \
+        _config(name, size, lavapipe)
+    allocated = _allocated(fitted, lavapipe)
+    predicted = predict(base, PROFILES["lavapipe"]).transient_bytes
+    assert allocated > 0
+    assert abs(predicted - allocated) <= TOLERANCE * allocated, (predicted, allocated)
+    # resource by resource, the model is the driver (so the 2 % holds at any size)
+    assert modelled(base, PROFILES["lavapipe"]) == requirements(base, lavapipe, readback=True)
+    # negative control: another driver's layout (64 KiB pages, 8-row GOBs) and the
+    # compiler's own estimate (64 KiB-aligned texel bytes) miss by far more at these sizes
+    for wrong in (predict(base, PROFILES["nvidia"]).transient_bytes, base.transient_bytes):
+        assert abs(wrong - allocated) > TOLERANCE * allocated, (wrong, allocated)
