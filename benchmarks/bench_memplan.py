@@ -83,7 +83,7 @@ def measure(kind: str, name: str, base, fitted, device, prof) -> dict:
                            "layers": r.layers, "samples": r.samples,
                            "usages": sorted(r.usages), "driver": list(drv[r.name]),
                            "model": list(mod[r.name])})
-    return {"kind": kind, "graph": name, "size": f"{base.size[0]}x{base.size[1]}",
+    return {"_base": base, "kind": kind, "graph": name, "size": f"{base.size[0]}x{base.size[1]}",
             "allocated": allocated, "driver_sizes": driver_sum,
             "predicted": predicted.transient_bytes, "generic": base.transient_bytes,
             "error": (predicted.transient_bytes - allocated) / allocated if allocated else 0.0,
@@ -175,6 +175,30 @@ def probe(device, prof) -> list[dict]:
     return out
 
 
+# parameters a profile's fit tries (every combination): what the driver may do differently
+GRID = {"nvidia": {"max_block_gobs": (1, 2, 4, 8, 16, 32), "page": (4096, 65536, 131072,
+                                                                   2 << 20)},
+        "lavapipe": {"cacheline": (32, 64, 128)}}
+
+
+def fit(rows: list[dict], prof) -> dict:
+    """The grid's parameters of ``prof`` with the smallest max |error| over ``rows``: what
+    to put in a ``--device-profile FILE.json`` when the defaults are off on a device."""
+    import itertools
+
+    grid = {k: sorted(v, key=lambda x, k=k: x != getattr(prof, k))  # ties keep the defaults
+            for k, v in GRID.get(prof.name.split(":")[0], {}).items()}
+    best = None
+    for values in itertools.product(*grid.values()):
+        params = dict(zip(grid, values, strict=True))
+        cand = replace(prof, **params)
+        worst = max((abs(predict(r["_base"], cand).transient_bytes - r["allocated"])
+                     / r["allocated"] for r in rows if r["allocated"]), default=0.0)
+        if best is None or worst < best["max_error"]:
+            best = {"base": prof.name.split(":")[0], **params, "max_error": worst}
+    return best or {}
+
+
 def markdown(result: dict) -> str:
     rows = result["rows"]
     lines = [f"# Predicted vs allocated transient bytes ({result['device']})", "",
@@ -187,6 +211,12 @@ def markdown(result: dict) -> str:
         lines.append(f"| {r['kind']} | {r['graph']} | {r['size']} | {r['allocated']:,} | "
                      f"{r['predicted']:,} | {r['error']:+.3%} | {r['generic']:,} | "
                      f"{r['generic_error']:+.3%} | {len(r['differ'])}/{r['transients']} |")
+    if result.get("fit"):
+        f = dict(result["fit"])
+        lines += ["", f"Best fit of the profile's parameters over these rows: "
+                  f"{json.dumps({k: v for k, v in f.items() if k != 'max_error'})} "
+                  f"(max |error| {f['max_error']:.3%}; save it without max_error as a .json "
+                  "for --device-profile)"]
     if result["skipped"]:
         lines += ["", "Skipped:", ""] + [f"- {s}" for s in result["skipped"]]
     return "\n".join(lines) + "\n"
@@ -201,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="folder for memplan.md/json (default: $OUT, "
                     "else out/memplan)")
     ap.add_argument("--no-probe", action="store_true", help="skip the requirements probe")
+    ap.add_argument("--no-fit", action="store_true", help="skip fitting the profile's "
+                    "parameters to the rows")
     args = ap.parse_args(argv)
     from vkext import VkDevice
 
@@ -219,7 +251,10 @@ def main(argv: list[str] | None = None) -> int:
                   "max_error": max((abs(r["error"]) for r in rows), default=0.0),
                   "max_generic_error": max((abs(r["generic_error"]) for r in rows),
                                            default=0.0),
-                  "probe": [] if args.no_probe else probe(device, prof)}
+                  "probe": [] if args.no_probe else probe(device, prof),
+                  "fit": {} if args.no_fit else fit(rows, prof)}
+        for r in rows:
+            del r["_base"]
     finally:
         device.destroy()
     result["seconds"] = time.perf_counter() - start
