@@ -110,9 +110,8 @@ def _plan(bundle: Bundle, out: Path) -> Any:
         if j["kind"] == "peer":
             jobs.append(Job("peer", j["label"], j["id"], peer=j.get("peer", ""), scene=scene))
             continue
-        member = j["config"]["member"]
-        bundle.extract(out, [member])
-        jobs.append(Job("rfw", j["label"], j["id"], str(inside(out, member)),
+        config = _unpack(bundle, out, [j["config"]["member"]])
+        jobs.append(Job("rfw", j["label"], j["id"], str(config),
                         tuple(map(str, j.get("sets") or [])),
                         tuple(map(str, j.get("varied") or [])), scene,
                         j.get("backend") or "wgpu"))
@@ -129,8 +128,9 @@ def _scene(bundle: Bundle, s: dict[str, Any], arg: str | None, out: Path) -> str
 
     if s.get("embedded"):
         base = s["embedded"].rpartition("/")[0] + "/"
-        bundle.extract(out, [n for n in bundle.members if n.startswith(base)])
-        return str(inside(out, s["embedded"]))
+        files = [s["embedded"], *(n for n in bundle.members
+                                  if n.startswith(base) and n != s["embedded"])]
+        return str(_unpack(bundle, out, files))
     path = Path(str(s.get("path")))
     if not path.is_file():
         raise RfwError(f"the scene is not in the bundle ({s.get('why', 'not embedded')}) and "
@@ -140,6 +140,25 @@ def _scene(bundle: Bundle, s: dict[str, Any], arg: str | None, out: Path) -> str
                        f"bench ran (sha256 {str(s.get('sha256'))[:12]})", file=str(path),
                        element="scene")
     return str(path)
+
+
+def _unpack(bundle: Bundle, out: Path, names: list[str]) -> Path:
+    """Write the members ``names`` (one folder of the bundle's ``inputs/``) to
+    ``out/inputs/<sha12 of their bytes>/``, keeping their names in that folder; returns the
+    first one's path. Named by content: a second replay writes the same bytes there, an
+    edited bundle another folder."""
+    if not all(n in bundle.members for n in names):
+        raise RfwError(f"damaged: {names[0]} is not in the bundle", file=str(bundle.path))
+    base = names[0].rpartition("/")[0] + "/"
+    digest = sha256(b"".join(n.removeprefix(base).encode() + b"\0" + bundle.members[n]
+                             + b"\0" for n in sorted(names)))
+    folder = inside(out, f"inputs/{digest[:12]}")
+    for n in names:
+        target = inside(folder, n.removeprefix(base))
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if not (target.is_file() and target.read_bytes() == bundle.members[n]):
+            atomic_write(target, lambda f, d=bundle.members[n]: f.write(d))
+    return inside(folder, names[0].removeprefix(base))
 
 
 def _adapter(r: dict[str, Any]) -> tuple[Any, Any, Any]:
