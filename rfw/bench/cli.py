@@ -4,6 +4,9 @@
         [--executor ray [--ray-address ADDR]]  its runs as Ray tasks, one per GPU
     rfw bench compare OLD NEW [--out D]  per-pass changes beyond the noise (D: md/html)
     rfw bench report DIR [--reference]   re-write the reports from DIR/results.jsonl
+    rfw bench report BUNDLE [--out D]    the reports again from a bundle alone (D: out/report)
+    rfw bench replay BUNDLE [--out D]    re-run a bundle (OUT/bundle.tar), compare images
+                                         and timings (D: out/replay; rfw.bench.replay)
     --diff-scale shared                  difference images on one scale (default: own)
 
 Relative paths (configs, scenes, ``--out``, folders to compare) mean what they mean in the
@@ -32,8 +35,8 @@ PEER_NAMES = ("moderngl", "pyvista", "pygfx", "open3d", "mitsuba", "embree", "rf
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("configs", nargs="+", metavar="CONFIG",
                    help="config TOMLs or names in configs/ (deferred, forward, ...), "
-                        "CONFIG@vk to pin one config's backend; or 'compare OLD NEW', or "
-                        "'report DIR'")
+                        "CONFIG@vk to pin one config's backend; or 'compare OLD NEW', "
+                        "'report DIR|BUNDLE' or 'replay BUNDLE'")
     p.add_argument("--scene", action="append", help="scene file, 'default', a built-in or "
                    "fetched scene's name ('rfw scenes list'); repeatable: a matrix axis")
     p.add_argument("--fetch", action="store_true",
@@ -75,7 +78,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --executor ray: an existing cluster (auto, HOST:6379, "
                         "ray://HOST:10001); default: a local Ray instance rfw starts and stops")
     p.add_argument("--out", help="output folder (default out/bench); compare: where "
-                   "compare.md and compare.html go (default: print only)")
+                   "compare.md and compare.html go (default: print only); replay: the "
+                   "replay's folder (default out/replay); report BUNDLE: where the reports "
+                   "go (default out/report)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--threshold", type=threshold, default=0.05,
                    help="compare: relative change that counts (default 0.05)")
@@ -132,11 +137,23 @@ def run(args: argparse.Namespace) -> int:
                        fail_on_regression=args.fail_on_regression, show_all=args.all,
                        out=_out_dir(args.out) if args.out else None,
                        allow_mismatch=args.allow_mismatch, diff_scale=args.diff_scale)
+    if head == "replay":
+        from .replay import replay
+
+        if len(rest) != 1:
+            raise GraphError("usage: rfw bench replay BUNDLE [--out DIR]",
+                             element="bench replay")
+        return replay(Path(rest[0]), _out_dir(args.out or "out/replay"),
+                      progress=not args.no_progress)
     if head == "report":
         from .report import main_report
 
         if len(rest) != 1:
             raise GraphError("usage: rfw bench report DIR", element="bench report")
+        if Path(rest[0]).is_file():  # a bundle: its reports again, from it alone
+            from .replay import report
+
+            return report(Path(rest[0]), _out_dir(args.out or "out/report"))
         try:
             return main_report(rest[0], reference=args.reference, diff_scale=args.diff_scale)
         except ValueError as e:
@@ -187,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
     folder = OutputFolder(out)
     for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", REPORT_MD,
-                 REPORT_HTML):
+                 REPORT_HTML, BUNDLE):
         folder.target(name)  # a FIFO or device there is refused before any run
     with folder:
         try:
@@ -200,6 +217,11 @@ def run(args: argparse.Namespace) -> int:
                 render_references(folder.staging, load_results(results), truth,
                                   timeout=plan.timeout, progress=not args.no_progress)
             code, written = _finish(folder.staging, results, args.reference, args.diff_scale)
+            from .bundle import write_bundle
+
+            # everything that defines this bench, in one file (rfw bench replay BUNDLE)
+            written.append(write_bundle(folder.staging, plan, reference=args.reference,
+                                        diff_scale=args.diff_scale))
         except BaseException as e:
             _keep_partial(folder, len(plan.schedule()), e)
             raise
@@ -209,6 +231,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 REPORT_MD, REPORT_HTML = "report.md", "report.html"  # written last: they mark a whole bench
+BUNDLE = "bundle.tar"  # rfw.bench.bundle
 PARTIAL_NOTE = "PARTIAL.txt"
 
 
@@ -235,7 +258,7 @@ def _keep_partial(folder: OutputFolder, total: int, error: BaseException) -> Non
         f"stopped by {type(error).__name__}: {error}"
     with signals_held(), contextlib.suppress(OSError):
         # an unfinished report would pass for a whole one: only the runs are kept
-        for name in (REPORT_MD, REPORT_HTML, "results.csv"):
+        for name in (REPORT_MD, REPORT_HTML, "results.csv", BUNDLE):
             (folder.staging / name).unlink(missing_ok=True)
         (folder.staging / PARTIAL_NOTE).write_text(
             f"rfw bench {why} after {done} of {total} runs: these are its results so far "

@@ -17,6 +17,9 @@ DIFF_CMAP = "inferno"  # perceptually ordered, black at zero: unchanged pixels s
 _ROWS = 512
 # FLIP and SSIM hold several float copies of both images: larger images get PSNR only
 PERCEPTUAL_MAX_PIXELS = 4096 * 4096
+# the PNG text chunks of every matplotlib figure a report writes: fixed, so a report
+# regenerated from a bundle is the same bytes (matplotlib's own names its version)
+PNG_METADATA = {"Software": "rfw"}
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
@@ -109,7 +112,7 @@ def diff_legend(path: Path, top: int, *, own_max: int | None = None) -> None:
     ax.set_title(f"|difference|, {scale_text(top, own_max=own_max)}", fontsize=6)
     ax.tick_params(labelsize=6)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # 8-bit steps are whole
-    fig.savefig(path, dpi=100, bbox_inches="tight")
+    fig.savefig(path, dpi=100, bbox_inches="tight", metadata=PNG_METADATA)
     plt.close(fig)
 
 

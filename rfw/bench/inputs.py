@@ -68,6 +68,29 @@ def watching_shaders() -> Iterator[dict[Path, bytes]]:
         watchers.remove(seen)
 
 
+@contextmanager
+def watching_spirv() -> Iterator[dict[str, str]]:
+    """Inside: every SPIR-V module :func:`rfw.spirv.compile_glsl` returned, as
+    ``{"<file from the rfw checkout> <target> -DK=V...": sha256 of the SPIR-V}``."""
+    from ..spirv import spirv_watchers
+
+    seen: dict[str, str] = {}
+    spirv_watchers.append(seen)
+    try:
+        yield seen
+    finally:
+        spirv_watchers.remove(seen)
+
+
+def spirv_names(seen: dict[str, str]) -> dict[str, str]:
+    """:func:`watching_spirv`'s modules, their files named from the rfw checkout, sorted."""
+    out = {}
+    for name, digest in seen.items():
+        file, _, rest = name.partition(" ")
+        out[f"{_stable(Path(file))} {rest}".strip()] = digest
+    return dict(sorted(out.items()))
+
+
 def scene_hash(scene: str) -> str:
     """A scene file's bytes (a ``.gltf`` with the files it names), or a built-in's name."""
     from ..scene import is_builtin

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..fileio import inside
+from .images import PNG_METADATA
 
 # culling counters drawn per frame, where a record has them (None: not measured)
 CULLING_KEYS = ("meshlets_drawn", "culled_frustum", "culled_cone", "culled_occlusion",
@@ -84,7 +85,7 @@ def path_charts(out_dir: Path, variants: list[Any], img: Any) -> list[Any]:
         axes[-1][0].set_xlabel("path parameter t (frame k of N)")
         fig.tight_layout()
         name = f"path_{i}_{re.sub(r'[^A-Za-z0-9._-]+', '_', v.label).strip('_') or 'run'}.png"
-        fig.savefig(folder / name, dpi=100)
+        fig.savefig(folder / name, dpi=100, metadata=PNG_METADATA)
         plt.close(fig)
         out.append(img(f"charts/{name}", f"GPU ms per frame along the camera path: {v.label}"))
     return out

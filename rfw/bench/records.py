@@ -72,7 +72,7 @@ def check_record(record: Any) -> None:
     for key in ("image",):
         if record.get(key) is not None and not isinstance(record[key], str):
             raise RfwError(f"expected a file name, not {_kind(record[key])}", element=key)
-    for key in ("ray", "inputs", "shader_files", "camera_path"):
+    for key in ("ray", "inputs", "shader_files", "spirv", "camera_path"):
         if record.get(key) is not None and not isinstance(record[key], dict):
             raise RfwError(f"expected an object, not {_kind(record[key])}", element=key)
     _check_inputs(record)
@@ -110,7 +110,7 @@ def check_record(record: Any) -> None:
 
 
 def _check_inputs(record: dict[str, Any]) -> None:
-    for key in ("inputs", "shader_files"):
+    for key in ("inputs", "shader_files", "spirv"):
         for name, digest in (record.get(key) or {}).items():
             if not isinstance(digest, str):
                 raise RfwError(f"expected a sha256, not {_kind(digest)}",

@@ -25,7 +25,7 @@ from typing import Any
 from ..config import parse_size
 from ..errors import RfwError
 from ..fileio import atomic_write
-from .inputs import run_inputs, watching_shaders
+from .inputs import run_inputs, spirv_names, watching_shaders, watching_spirv
 from .runner import gpu_clocks
 from .temporal import along_run
 
@@ -99,7 +99,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     clock.patch(FrameExecutor)  # one backend: the executor's own frames
     clock.patch(Frame)  # mixed: the frame that walks every side (their own frame() idle)
     try:
-        with watching_shaders() as shader_sources:
+        with watching_shaders() as shader_sources, watching_spirv() as spirv:
             t0 = time.perf_counter()
             result = render(cfg, backend=backend, options=options)
             total_s = time.perf_counter() - t0
@@ -134,6 +134,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
         "process_s": total_s, "gpu_clocks": clocks,
     }
     record.update(run_inputs(config, cfg, shader_sources))  # what compare says changed
+    record["spirv"] = spirv_names(spirv)  # every SPIR-V module the run used (a bundle's)
     for key in EXTRA_KEYS:
         if key in timings:
             record[key] = timings[key]

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..images import PNG_METADATA
 from ..summary import VariantSummary
 from .document import Img
 
@@ -57,7 +58,7 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
     axes[1].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
     fig.tight_layout()
     passes = charts / "passes.png"
-    fig.savefig(passes, dpi=100)
+    fig.savefig(passes, dpi=100, metadata=PNG_METADATA)
     plt.close(fig)
     fig, axes = plt.subplots(1, 2, figsize=(14, height), sharey=True)
     for ax, metric, title in ((axes[0], "gpu_ms", "frame GPU ms (all frames, all repeats)"),
@@ -71,7 +72,7 @@ def _charts(out_dir: Path, rfw: list[VariantSummary]) -> list[Img]:
     axes[0].invert_yaxis()
     fig.tight_layout()
     dist = charts / "distributions.png"
-    fig.savefig(dist, dpi=100)
+    fig.savefig(dist, dpi=100, metadata=PNG_METADATA)
     plt.close(fig)
     return [Img("charts/passes.png", "stacked per-pass medians"),
             Img("charts/distributions.png", "frame time distributions")]

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ...fileio import inside, read_exr
-from ..images import load_png
+from ..images import PNG_METADATA, load_png
 from ..stats import no_mark
 from ..summary import VariantSummary
 from ..truth import META_FILE, Point, dominance, errors, family_of, front, front_metric
@@ -239,7 +239,7 @@ def draw_front(path: Path, pts: list[Point], words: str, *, title: str | None = 
     ax.legend(fontsize="small", loc="best")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, metadata=PNG_METADATA)
     plt.close(fig)
     return path
 
