@@ -474,10 +474,13 @@ class CudaView:
 
 def is_device_array(a: Any) -> bool:
     """Whether ``a`` is a CUDA array (``__cuda_array_interface__`` or a CUDA dlpack)."""
-    if hasattr(type(a), "__cuda_array_interface__") and not isinstance(a, DeviceArray):
-        return True
     if isinstance(a, DeviceArray):
         return a.zero_copy
+    if isinstance(a, np.ndarray | int | float | str | bytes) or a is None:
+        return False
+    # on the instance: PyTorch's CPU tensors have the property and raise AttributeError
+    if hasattr(a, "__cuda_array_interface__"):
+        return True
     dev = getattr(a, "__dlpack_device__", None)
     if dev is None or isinstance(a, np.ndarray):
         return False

@@ -337,6 +337,7 @@ class ImageExport:
     def destroy(self) -> None:
         self.submitter.destroy()
         self.buffer.release()
+        self.view = None  # the buffer goes with the last array of it
 
 
 _exports: weakref.WeakKeyDictionary[Any, dict[str, ImageExport]] = weakref.WeakKeyDictionary()

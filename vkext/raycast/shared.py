@@ -43,6 +43,7 @@ class SharedRays:
         self.label = label
         self.capacity = self.generation = 0
         self.rays = self.hits = self.set = None
+        self._views: tuple[Any, dict[str, DeviceArray]] | None = None
         self.submitter = Submitter(self.device, label=f"{label}:shared")
         self.timer = TimestampPool(self.device, 2, label=f"{label}:shared timestamps") \
             if "timestamp" in self.device.caps else None
@@ -83,13 +84,19 @@ class SharedRays:
         return max(0, int(b) - int(a)) / 1e6
 
     def hit_views(self, n: int, names: tuple[str, ...]) -> dict[str, DeviceArray]:
+        """The views of ``n`` hits, made once per buffer and size (the same memory)."""
+        key = (self.generation, n, names)
+        if self._views is not None and self._views[0] == key:
+            return dict(self._views[1])
         out, at = {}, 0
         for name, width in HIT_STREAMS:
             if name in names:
                 shape = (n, width) if width > 1 else (n,)
                 out[name] = self.hits.array(at, shape, HIT_DTYPES[name])
             at += width * n * 4
-        return {k: out[k] for k in names}
+        views = {k: out[k] for k in names}
+        self._views = (key, views)
+        return dict(views)
 
     def _release(self) -> None:
         # arrays handed out keep their buffers alive; the scene lets go of them here
@@ -99,6 +106,7 @@ class SharedRays:
         if self.set is not None:
             self.set.destroy()
         self.rays = self.hits = self.set = None
+        self._views = None
         self.capacity = 0
 
     def destroy(self) -> None:
