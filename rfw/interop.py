@@ -479,8 +479,13 @@ def is_device_array(a: Any) -> bool:
     if isinstance(a, np.ndarray | int | float | str | bytes) or a is None:
         return False
     # on the instance: PyTorch's CPU tensors have the property and raise AttributeError
-    if hasattr(a, "__cuda_array_interface__"):
+    try:
+        a.__cuda_array_interface__  # noqa: B018 - evaluated for its AttributeError
         return True
+    except AttributeError:
+        pass
+    except Exception:  # a CUDA array that refuses (a tensor that requires grad): device_view
+        return True    # says why
     dev = getattr(a, "__dlpack_device__", None)
     if dev is None or isinstance(a, np.ndarray):
         return False
@@ -512,7 +517,11 @@ def device_view(name: str, a: Any, width: int | None, dtype: Any = np.float32) -
     dtype = np.dtype(dtype)
     want = f"(N, {width})" if width else "(N,)"
     owner = a
-    iface = getattr(a, "__cuda_array_interface__", None)
+    try:
+        iface = getattr(a, "__cuda_array_interface__", None)
+    except Exception as e:  # e.g. PyTorch's for a tensor that requires grad
+        raise RfwError(f"{name}: its __cuda_array_interface__ failed "
+                       f"({' '.join(str(e).split())[:160]}): detach it first") from None
     if iface is not None:
         ptr = int(iface["data"][0])
         shape = tuple(int(s) for s in iface["shape"])

@@ -318,6 +318,10 @@ class RayScene:
             on_gpu = [name for name, a in (("origins", origins), ("directions", directions),
                                            ("t_min", t_min), ("t_max", t_max))
                       if interop.is_device_array(a)]
+            if on_gpu and isinstance(out, dict):
+                raise RfwError(f"{on_gpu[0]} is a CUDA array: out= arrays are filled on the "
+                               f"host; take out=None or 'device' (and copy the hits on the "
+                               f"GPU where they should go)")
             device = mode == "device" or (out is None and bool(on_gpu))
             if on_gpu or device:
                 reason = self.zero_copy_reason

@@ -278,7 +278,9 @@ class Submitter:
         """Submit and wait."""
         dev = self.device.device
         vk.vkResetFences(dev, 1, [self.fence])
-        lib.vkQueueSubmit(self.device.queue, 1, self._info, self.fence)
+        result = lib.vkQueueSubmit(self.device.queue, 1, self._info, self.fence)
+        if result != 0:
+            raise RfwError(f"vkQueueSubmit failed with VkResult {result}")
         vk.vkWaitForFences(dev, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
 
     def destroy(self) -> None:

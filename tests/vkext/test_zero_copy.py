@@ -95,6 +95,9 @@ def test_cuda_arrays_without_a_link_are_one_line(vk_device):
         with pytest.raises(RfwError, match="t_max is a CUDA array") as e:
             scene.cast(o, d, t_max=CudaLike((4,)))
         assert "\n" not in str(e.value)
+        with pytest.raises(RfwError, match="origins is a CUDA array: out= arrays are filled "
+                                           "on the host"):
+            scene.cast(CudaLike((4, 3)), d, out={"t": np.empty(4, np.float32)})
         with pytest.raises(RfwError, match="out is 'device', 'host', None or a dict"):
             scene.cast(o, d, out="gpu")
         scene.cast(o, d)  # the control: host rays still cast
