@@ -321,12 +321,14 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
         out["method"], out["device"] = rs._scene.method, rs.device.name
         out["zero_copy"], out["zero_copy_reason"] = rs.zero_copy, rs.zero_copy_reason
         host_times = []
-        for i in range(args.warmup + min(args.casts, 20)):
-            t0 = time.perf_counter()
-            want = rs.cast(o, d)
-            if i >= args.warmup:
-                host_times.append(time.perf_counter() - t0)
-        out["host_path"] = {**summary(host_times), "last": rs.last}
+        with MapCounter() as maps:  # the counter's control: the host path maps staging
+            for i in range(args.warmup + min(args.casts, 20)):
+                t0 = time.perf_counter()
+                want = rs.cast(o, d)
+                if i >= args.warmup:
+                    host_times.append(time.perf_counter() - t0)
+        out["host_path"] = {**summary(host_times), "last": rs.last,
+                            "maps_during_casts": maps.counts}
         try:
             import embreex  # noqa: F401
 
@@ -350,6 +352,10 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
             copies = {k: interop.copies[k] - before[k] for k in before}
             out["torch"] = {**summary(times), "last": rs.last, "maps_during_casts":
                             maps.counts, "rfw_copies_during_casts": copies}
+            before = dict(interop.copies)
+            rs.cast(ot, dt, out="host")  # the counter's control: hits copied to the host
+            out["torch"]["rfw_copies_of_a_host_cast"] = {
+                k: interop.copies[k] - before[k] for k in before}
             for k in want:
                 same = np.array_equal(got[k].cpu().numpy(), want[k])
                 out["torch"][f"{k}_equal_host_path"] = same
@@ -390,17 +396,26 @@ def profiler_proof(torch: Any, rs: Any, o: Any, d: Any) -> dict[str, Any]:
     try:
         from torch.profiler import ProfilerActivity, profile
 
-        with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
-            for _ in range(5):
-                hits = rs.cast(o, d)
-                torch.from_dlpack(hits["t"]).sum()  # a consumer kernel on the hits
-            torch.cuda.synchronize()
-        names: dict[str, int] = {}
-        for e in prof.events():
-            if "memcpy" in e.name.lower() or "memset" in e.name.lower():
-                names[e.name] = names.get(e.name, 0) + 1
-        dtoh = sum(c for n, c in names.items() if "dtoh" in n.lower().replace(" ", ""))
-        return {"casts": 5, "memcpy_events": names, "device_to_host_memcpys": dtoh}
+        def memcpys(out: str) -> dict[str, int]:
+            with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+                for _ in range(5):
+                    hits = rs.cast(o, d, out=out)
+                    if out == "device":
+                        torch.from_dlpack(hits["t"]).sum()  # a consumer kernel on the hits
+                torch.cuda.synchronize()
+            names: dict[str, int] = {}
+            for e in prof.events():
+                if "memcpy" in e.name.lower() or "memset" in e.name.lower():
+                    names[e.name] = names.get(e.name, 0) + 1
+            return names
+
+        def dtoh(names: dict[str, int]) -> int:
+            return sum(c for n, c in names.items() if "dtoh" in n.lower().replace(" ", ""))
+
+        device, host = memcpys("device"), memcpys("host")  # host: the control, must see DtoH
+        return {"casts": 5, "memcpy_events": device, "device_to_host_memcpys": dtoh(device),
+                "control_out_host_memcpy_events": host,
+                "control_device_to_host_memcpys": dtoh(host)}
     except Exception as e:
         note(f"torch profiler proof not taken ({error_line(e)})")
         return {"error": error_line(e)}
