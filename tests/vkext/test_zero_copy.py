@@ -243,3 +243,29 @@ def test_a_graph_output_through_read_device(vk_device):
     want = result.images["forward.hdr"]
     np.testing.assert_array_equal(np.from_dlpack(a), want)
     assert np.ptp(want[..., :3]) > 0  # a picture, not a cleared image
+
+
+def test_exported_memory_lives_as_long_as_its_arrays(vk_device):
+    if external.EXTENSION not in vk_device.extensions:
+        pytest.skip(f"no {external.EXTENSION}")
+    kept = external.ExportedBuffer(vk_device, 256, ("storage",), link=None, label="kept")
+    alone = external.ExportedBuffer(vk_device, 256, ("storage",), link=None, label="alone")
+    view = interop.DeviceArray(ptr=0, shape=(64,), dtype=np.float32, ordinal=None,
+                               owner=kept)
+    kept.release()
+    alone.release()  # the control: nothing holds it, so it goes at once
+    assert alone.handle is None and kept.handle is not None and kept.held == 1
+    del view
+    gc.collect()
+    assert kept.handle is None and kept.held == 0
+
+
+def test_the_driver_structs_have_cuda_h_and_dlpack_h_sizes():
+    """The ctypes mirrors of the C structs the driver and consumers read (x86-64)."""
+    import ctypes
+
+    assert ctypes.sizeof(interop._ExternalMemoryHandleDesc) == 104
+    assert ctypes.sizeof(interop._ExternalMemoryBufferDesc) == 88
+    assert ctypes.sizeof(interop._DLTensor) == 48
+    assert ctypes.sizeof(interop._DLManagedTensor) == 64
+    assert interop._ExternalMemoryHandleDesc.size.offset == 24
