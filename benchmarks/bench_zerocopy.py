@@ -449,7 +449,7 @@ def image_export(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
             note(f"no image export: {link}")
             return {"error": link}
         img = Image(dev, 1920, 1080, "rgba16float", ("transfer_src", "transfer_dst",
-                                                    "sampled", "color_attachment"),
+                                                    "sampled", "color"),
                     label="bench image")
         img.allocate()
         _clear(dev, img, 0.375)
