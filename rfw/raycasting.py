@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from . import interop
 from .backend import Backend, get_backend, installed
 from .errors import RfwError, RfwTypeError, RfwValueError, check_type, type_name
 from .options import RunOptions
@@ -32,6 +33,7 @@ from .scene.model import Instance, Mesh, Scene
 _default_device: Any = None
 _default_lock = threading.Lock()  # two threads' first scenes make one default device
 METHODS = ("auto", "ray_query", "ray_pipeline")
+OUT_MODES = ("device", "host")
 
 
 def _floats(name: str, a: Any, width: int, *, finite: bool = False,
@@ -97,6 +99,21 @@ def _rays(origins: Any, directions: Any, t_min: Any, t_max: Any, names: tuple[st
     if len(o) != len(d):
         raise RfwError(f"origins has {len(o)} rows, directions {len(d)}")
     return (o, d, *_intervals(t_min, t_max, len(o), names))
+
+
+def _rows(a: Any) -> int:
+    return len(a) if isinstance(a, np.ndarray) else int(a.shape[0])
+
+
+def _out_mode(out: Any) -> str | None:
+    """``out`` as RayScene.cast takes it: a mode name, None or a dict (the dict is checked
+    later)."""
+    if isinstance(out, str):
+        if out not in OUT_MODES:
+            raise RfwValueError(f"out is 'device', 'host', None or a dict of arrays, not "
+                                f"{out!r}")
+        return out
+    return None
 
 
 def _mesh_scene(vertices: Any, indices: Any) -> Scene:
@@ -223,47 +240,131 @@ class RayScene:
         included) and, where the device has timestamps, ``gpu_ms`` of the traces alone."""
         return dict(self._scene.last) if not self.closed else {}
 
+    @property
+    def zero_copy(self) -> bool:
+        """Whether casts with device arrays keep rays and hits on the GPU here (the
+        scene's device shares memory with CUDA); :attr:`zero_copy_reason` says why not."""
+        return self.zero_copy_reason is None
+
+    @property
+    def zero_copy_reason(self) -> str | None:
+        """None where :attr:`zero_copy`, else one line saying why not."""
+        if self.closed:
+            return "the ray scene is closed"
+        sharing = getattr(self._scene, "sharing", None)
+        if sharing is None:
+            return "this backend's ray scenes keep no arrays on the GPU"
+        return sharing()
+
     def cast(self, origins: Any, directions: Any, *, t_min: Any = 0.0,
-             t_max: Any = np.inf, out: dict[str, np.ndarray] | None = None,
-             ) -> dict[str, np.ndarray]:
+             t_max: Any = np.inf, out: dict[str, np.ndarray] | str | None = None,
+             ) -> dict[str, Any]:
         """Closest hit of each ray ``origins[i] + t * directions[i]``, ``t_min <= t <= t_max``.
 
         Parameters
         ----------
         origins, directions
             Real (R, 3) arrays of any layout, converted to float32 as they are copied to
-            the GPU. Directions need not be unit length: ``t`` is in their units.
+            the GPU. Directions need not be unit length: ``t`` is in their units. Or CUDA
+            arrays (PyTorch, CuPy, JAX, anything with ``__cuda_array_interface__`` or a CUDA
+            ``__dlpack__``): C-contiguous float32 (R, 3), on the scene's GPU, copied device
+            to device (see Device arrays).
         t_min, t_max
-            Numbers or (R,) arrays, non-negative; ``t_max`` may be infinite.
+            Numbers or (R,) arrays, non-negative; ``t_max`` may be infinite. With device
+            rays also (R,) float32 CUDA arrays (not checked on the host).
         out
-            Arrays to fill instead of new ones, by name (any of the returned ones): each
-            C-contiguous, writable and of the dtype and shape below. Repeated casts into
-            the same arrays allocate nothing.
+            ``None``: hits of the kind of the rays (device arrays for CUDA rays, else numpy);
+            ``"device"``: :class:`rfw.interop.DeviceArray` hits whatever the rays;
+            ``"host"``: numpy hits whatever the rays; or a dict of numpy arrays to fill
+            instead of new ones, by name (any of the returned ones): each C-contiguous,
+            writable and of the dtype and shape below. Repeated casts into the same arrays
+            allocate nothing.
 
         Returns
         -------
-        dict of numpy arrays
+        dict of numpy arrays (or of :class:`rfw.interop.DeviceArray`, see ``out``)
             ``t`` float32 (R,), ``inf`` where the ray misses; ``primitive`` int32 (R,), the
             triangle (row of ``indices``, or of the instance's mesh), -1 on a miss;
             ``barycentrics`` float32 (R, 2), the weights of the triangle's 2nd and 3rd
             vertices; from :meth:`from_scene`, also ``instance`` int32 (R,).
+
+        Device arrays
+        -------------
+        Where :attr:`zero_copy` (vk on a GPU that CUDA also drives, with
+        ``VK_KHR_external_memory_fd``), device hits are zero-copy views of the scene's
+        hit buffer on the GPU (``.zero_copy`` True, ``.device`` ``"cuda:N"``): nothing
+        crosses to the host, and the next device cast of this scene overwrites them
+        (``torch.from_dlpack(h["t"]).clone()`` to keep them). Rays the shaders refuse are
+        then not raised but flagged: ``t`` NaN, ``primitive`` -2 (origin not finite), -3
+        (direction not finite) or -4 (zero direction). Elsewhere (lavapipe, no CUDA)
+        ``out="device"`` gives host copies behind the same face (``.zero_copy`` False,
+        ``.device`` ``"cpu"``, a CPU ``__dlpack__``), and CUDA rays are refused.
 
         Raises
         ------
         RfwError
             (a ValueError) for a closed scene, arrays of the wrong shape or dtype, rows that
             differ in number, non-finite origins or directions, zero directions, a bad
-            ``t_min``/``t_max`` or unfit ``out`` arrays; the message names the argument.
+            ``t_min``/``t_max`` or unfit ``out`` arrays; for device arrays of the wrong
+            dtype, shape or layout, on another GPU, or given where the scene cannot share
+            memory with CUDA; the message names the argument.
         """
         element = "RayScene.cast"
         scene = self._scene  # another thread may close it meanwhile: its cast then refuses
         if self.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
         try:
-            rays = _rays(origins, directions, t_min, t_max, ("t_min", "t_max"))
-            return scene.cast(*rays, hits=self._keys(), out=self._out(out))
+            mode = _out_mode(out)
+            on_gpu = [name for name, a in (("origins", origins), ("directions", directions),
+                                           ("t_min", t_min), ("t_max", t_max))
+                      if interop.is_device_array(a)]
+            if on_gpu and isinstance(out, dict):
+                raise RfwError(f"{on_gpu[0]} is a CUDA array: out= arrays are filled on the "
+                               f"host; take out=None or 'device' (and copy the hits on the "
+                               f"GPU where they should go)")
+            device = mode == "device" or (out is None and bool(on_gpu))
+            if on_gpu or device:
+                reason = self.zero_copy_reason
+                if reason is None:
+                    got = self._cast_device(scene, origins, directions, t_min, t_max)
+                    return {k: v.numpy() for k, v in got.items()} if mode == "host" else got
+                if on_gpu:
+                    raise RfwError(f"{on_gpu[0]} is a CUDA array, but this ray scene cannot "
+                                   f"share memory with CUDA ({reason}): pass host arrays "
+                                   f"(e.g. tensor.cpu())")
+            rays = _rays(interop.host_of(origins), interop.host_of(directions),
+                         interop.host_of(t_min), interop.host_of(t_max), ("t_min", "t_max"))
+            got = scene.cast(*rays, hits=self._keys(),
+                             out=self._out(out) if mode is None else None)
+            if device:  # the host path behind the device face
+                return {k: interop.DeviceArray.of_host(v) for k, v in got.items()}
+            return got
         except RfwError as e:
             raise e.about(element) from None
+
+    def _cast_device(self, scene: Any, origins: Any, directions: Any, t_min: Any,
+                     t_max: Any) -> dict[str, Any]:
+        """A cast through the backend's GPU-resident buffers: CUDA arrays as views, host
+        arrays checked as the host path checks them."""
+        views = []
+        for name, a in (("origins", origins), ("directions", directions)):
+            views.append(interop.device_view(name, a, 3) if interop.is_device_array(a)
+                         else _floats(name, interop.host_of(a), 3))
+        if _rows(views[0]) != _rows(views[1]):
+            raise RfwError(f"origins has {_rows(views[0])} rows, directions {_rows(views[1])}")
+        n = _rows(views[0])
+        bounds = []
+        for name, a in (("t_min", t_min), ("t_max", t_max)):
+            if interop.is_device_array(a):
+                view = interop.device_view(name, a, None)
+                if view.shape[0] != n:
+                    raise RfwError(f"{name} must have shape ({n},), got {view.shape}")
+                bounds.append(view)
+            else:
+                bounds.append(_interval(name, interop.host_of(a), n))
+        if not any(isinstance(b, interop.CudaView) for b in bounds):
+            bounds = list(_intervals(t_min, t_max, n, ("t_min", "t_max")))
+        return scene.cast_device(*views, *bounds, hits=self._keys())
 
     def _keys(self) -> tuple[str, ...]:
         return ("t", "primitive", "barycentrics") + (("instance",) * self.instances)
@@ -274,7 +375,7 @@ class RayScene:
             return None
         if not isinstance(out, dict):
             raise RfwTypeError(f"out must be a dict of arrays by name, got "
-                               f"{type(out).__name__}")
+                               f"{type(out).__name__} (or 'device', 'host', None)")
         unknown = sorted(set(out) - set(self._keys()), key=str)
         if unknown:
             raise RfwError(f"out has {unknown[0]!r}, which this scene does not return "

@@ -93,6 +93,13 @@ class VkBackend(BackendBase):
             upload_image(executor.device, executor.image(resource), data, layout_after=state,
                          layout_before=state)
 
+    def read_device(self, executor: VkExecutor, resource: str) -> Any:
+        """A graph output as an ``rfw.interop.DeviceArray``: zero-copy where the device
+        shares memory with CUDA, else a host copy (:func:`vkext.external.read_output`)."""
+        from .external import read_output
+
+        return read_output(executor, resource)
+
     def collect(self, executor: VkExecutor) -> dict[str, Any]:
         # before the scene, which owns the acceleration structures, goes; the culling
         # counters come back through the executor's readback, before the executor goes

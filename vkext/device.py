@@ -60,6 +60,8 @@ EXTENSIONS: dict[str, tuple[str | None, str | None, tuple[str, ...]]] = {
     "VK_KHR_ray_tracing_pipeline": ("VkPhysicalDeviceRayTracingPipelineFeaturesKHR",
                                     "rayTracingPipeline", ("VK_KHR_acceleration_structure",)),
     "VK_EXT_mesh_shader": ("VkPhysicalDeviceMeshShaderFeaturesEXT", "meshShader", ()),
+    # memory CUDA maps without a copy (vkext.external)
+    "VK_KHR_external_memory_fd": (None, None, ()),
 }
 
 # features enabled when the device has them; anything with a cost or a dependency on an
@@ -158,6 +160,7 @@ COMMANDS: dict[str, tuple[str, ...]] = {
         "vkCmdEndDebugUtilsLabelEXT", "vkCmdInsertDebugUtilsLabelEXT",
         "vkQueueBeginDebugUtilsLabelEXT", "vkQueueEndDebugUtilsLabelEXT",
         "vkCreateDebugUtilsMessengerEXT", "vkDestroyDebugUtilsMessengerEXT"),
+    "VK_KHR_external_memory_fd": ("vkGetMemoryFdKHR",),
     "VK_EXT_mesh_shader": ("vkCmdDrawMeshTasksEXT", "vkCmdDrawMeshTasksIndirectEXT",
                            "vkCmdDrawMeshTasksIndirectCountEXT"),
     "VK_KHR_deferred_host_operations": (

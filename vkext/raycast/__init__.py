@@ -43,7 +43,8 @@ mapped hits are made visible to the host (``commands.written_for_host``).
 Modules: :mod:`.streams` (the rays' and hits' layout, the checks), :mod:`.copies` (the host's
 copies), :mod:`.placement` (staged or mapped streams), :mod:`.batches` (batch sizes, the
 batch plan), :mod:`.caster` (:class:`Raycaster`, :class:`RayBuffers`), :mod:`.ray_scene`
-(:func:`raycaster`, :class:`RayScene`).
+(:func:`raycaster`, :class:`RayScene`), :mod:`.shared` (casts whose rays and hits stay on the
+GPU, in memory exported to CUDA: ``RayScene.cast_device``).
 """
 
 from .batches import (

@@ -60,6 +60,7 @@ class RayScene:
         self.buffers: RayBuffers | None = None
         self.builds = 0
         self.closed = False
+        self.shared = None  # .shared.SharedRays, made by the first device cast
         empty = all(len(m.indices) == 0 for m in scene.meshes) or not scene.instances
         if not empty:
             self.accel = SceneAccel(device, scene, label=label)
@@ -100,9 +101,29 @@ class RayScene:
         """This scene's last cast's counts and times (see :attr:`Raycaster.last`)."""
         return dict(self._last)
 
+    def sharing(self) -> str | None:
+        """None where casts can keep rays and hits on the GPU (the device shares memory
+        with CUDA: :func:`vkext.external.cuda_link`), else one line saying why not."""
+        from ..external import CudaLink, cuda_link
+
+        link = cuda_link(self.device)
+        return None if isinstance(link, CudaLink) else link
+
+    def cast_device(self, origins: Any, directions: Any, tmin: Any = 0.0, tmax: Any = np.inf,
+                    *, hits: tuple[str, ...] = ("t", "primitive", "instance", "barycentrics"),
+                    ) -> dict[str, Any]:
+        """A cast whose hits stay on the GPU (:func:`.shared.cast_shared`): zero-copy
+        ``rfw.interop.DeviceArray`` views, overwritten by this scene's next device cast."""
+        from .shared import cast_shared
+
+        return cast_shared(self, origins, directions, tmin, tmax, hits)
+
     def destroy(self) -> None:
         with self.lock:  # never while another thread's cast uses the buffers
             self.closed = True
+            if self.shared is not None:
+                self.shared.destroy()
+                self.shared = None
             if self.buffers is not None:
                 self.buffers.destroy()
                 self.buffers = None

@@ -1,0 +1,368 @@
+"""Vulkan memory that CUDA maps: device-local buffers exported as opaque fds
+(``VK_KHR_external_memory_fd``) and imported with the CUDA driver (``rfw.interop``), so rays,
+hits and images reach PyTorch and CuPy without a host copy.
+
+- :func:`cuda_link`: whether a device shares memory with CUDA (the extension, a CUDA driver,
+  and a CUDA device whose UUID is Vulkan's ``deviceUUID``), or why not;
+- :class:`ExportedBuffer`: a dedicated device-local allocation, exported; where there is a link
+  it is imported into CUDA (``cuda_ptr``), else the fd is kept (lavapipe's is a memfd the
+  tests map, the only way to read it there);
+- :func:`ownership`: the queue-family transfers of external memory (acquire before Vulkan
+  uses it, release after), so its contents are defined on both sides;
+- :class:`ImageExport`: an image copied on the GPU into an exported buffer by one recorded
+  command buffer, handed out as a :class:`rfw.interop.DeviceArray`; :func:`read_output` does it
+  for an executor's resource.
+
+Ordering is by fence: the host waits for Vulkan's work before CUDA reads, and
+``cuCtxSynchronize`` before Vulkan reads what CUDA wrote.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import mmap
+import os
+import weakref
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rfw.errors import RfwError
+from rfw.interop import DeviceArray, SharedMemory, cuda
+
+from .allocation import DEVICE_LOCAL, byte_text, find_memory_type
+from .buffers import device_buffer_flags
+from .commands import (
+    FENCE_TIMEOUT_NS,
+    TRANSFER_SRC,
+    CommandPool,
+    ImageBarrier,
+    as_state,
+    barrier,
+    copy_image_to_buffer,
+    readback_bytes,
+    texels,
+)
+from .consts import const, ffi, lib, vk
+from .device import VkDevice
+
+EXTENSION = "VK_KHR_external_memory_fd"
+QUEUE_FAMILY_EXTERNAL = 0xFFFFFFFE  # VK_QUEUE_FAMILY_EXTERNAL (~1U)
+
+
+@dataclass(frozen=True)
+class CudaLink:
+    """A Vulkan device and the CUDA device that is the same GPU."""
+
+    ordinal: int  # the CUDA device ordinal
+    uuid: bytes
+
+
+_links: weakref.WeakKeyDictionary[VkDevice, CudaLink | str] = weakref.WeakKeyDictionary()
+
+
+def device_uuid(device: VkDevice) -> bytes:
+    """Vulkan's ``deviceUUID`` of the device (``VkPhysicalDeviceIDProperties``)."""
+    ids = ffi.new("VkPhysicalDeviceIDProperties*")
+    ids.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ID_PROPERTIES")
+    head = ffi.new("VkPhysicalDeviceProperties2*")
+    head.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2")
+    head.pNext = ids
+    vk.vkGetPhysicalDeviceProperties2(device.physical_device, head)
+    return bytes(ffi.buffer(ids.deviceUUID, 16))
+
+
+def cuda_link(device: VkDevice) -> CudaLink | str:
+    """The device's :class:`CudaLink`, or one line saying why it has none (found once per
+    device)."""
+    got = _links.get(device)
+    if got is None:
+        got = _links[device] = _find_link(device)
+    return got
+
+
+def _find_link(device: VkDevice) -> CudaLink | str:
+    if EXTENSION not in device.extensions:
+        return f"{device.name} has no {EXTENSION}"
+    try:
+        driver = cuda()
+        uuid = device_uuid(device)
+        ordinal = driver.ordinal_of_uuid(uuid)
+    except RfwError as e:
+        return e.message
+    if ordinal is None:
+        return (f"no CUDA device is {device.name} (deviceUUID {uuid.hex()}; CUDA has "
+                f"{driver.devices()} device(s))")
+    return CudaLink(ordinal, uuid)
+
+
+class ExportedBuffer(SharedMemory):
+    """A device-local buffer in a dedicated allocation exported as an opaque fd; with
+    ``link`` imported into CUDA (``cuda_ptr``). Arrays of it (:meth:`array`) keep it alive:
+    the owner calls :meth:`release` when done and the memory goes with the last array (or
+    with the device)."""
+
+    def __init__(self, device: VkDevice, size: int, usage: tuple[str, ...], *,
+                 link: CudaLink | None, label: str = "exported"):
+        super().__init__()
+        if EXTENSION not in device.extensions:
+            raise RfwError(f"{device.name} has no {EXTENSION}: its memory cannot be exported")
+        self.device, self.label, self.link = device, label, link
+        self.bytes = int(size)
+        self.handle = self.memory = None
+        self.fd: int | None = None
+        self.cuda_ptr = self._external = None
+        self._map: mmap.mmap | None = None
+        handle_type = const("VK_EXTERNAL_MEMORY_HANDLE_TYPE_OPAQUE_FD_BIT")
+        dev = device.device
+        try:
+            ext = ffi.new("VkExternalMemoryBufferCreateInfo*")
+            ext.sType = const("VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO")
+            ext.handleTypes = handle_type
+            info = ffi.new("VkBufferCreateInfo*")
+            info.sType = const("VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO")
+            info.pNext, info.size = ext, self.bytes
+            info.usage = device_buffer_flags(device, usage)
+            info.sharingMode = vk.VK_SHARING_MODE_EXCLUSIVE
+            self.handle = vk.vkCreateBuffer(dev, info, None)
+            device.register(self)
+            device.set_name(self.handle, "BUFFER", label)
+            req = vk.vkGetBufferMemoryRequirements(dev, self.handle)
+            self.size = int(req.size)
+            type_index = find_memory_type(device, int(req.memoryTypeBits), [DEVICE_LOCAL])
+            self.memory = self._allocate(type_index, handle_type)
+            vk.vkBindBufferMemory(dev, self.handle, self.memory, 0)
+            get = ffi.new("VkMemoryGetFdInfoKHR*")
+            get.sType = const("VK_STRUCTURE_TYPE_MEMORY_GET_FD_INFO_KHR")
+            get.memory, get.handleType = self.memory, handle_type
+            self.fd = int(device.fn.vkGetMemoryFdKHR(dev, get))
+            if link is not None:
+                fd, self.fd = self.fd, None  # CUDA owns it once imported
+                try:
+                    self._external, self.cuda_ptr = cuda().import_memory(fd, self.size,
+                                                                         link.ordinal)
+                except BaseException:
+                    os.close(fd)
+                    raise
+        except BaseException:
+            self.free()
+            raise
+
+    def _allocate(self, type_index: int, handle_type: int) -> Any:
+        dedicated = ffi.new("VkMemoryDedicatedAllocateInfo*")
+        dedicated.sType = const("VK_STRUCTURE_TYPE_MEMORY_DEDICATED_ALLOCATE_INFO")
+        dedicated.buffer = self.handle
+        export = ffi.new("VkExportMemoryAllocateInfo*")
+        export.sType = const("VK_STRUCTURE_TYPE_EXPORT_MEMORY_ALLOCATE_INFO")
+        export.handleTypes, export.pNext = handle_type, dedicated
+        info = ffi.new("VkMemoryAllocateInfo*")
+        info.sType = const("VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO")
+        info.allocationSize, info.memoryTypeIndex, info.pNext = self.size, type_index, export
+        if "buffer_device_address" in self.device.caps:
+            flags = ffi.new("VkMemoryAllocateFlagsInfo*")
+            flags.sType = const("VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO")
+            flags.flags = const("VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT")
+            dedicated.pNext = flags
+        try:
+            return vk.vkAllocateMemory(self.device.device, info, None)
+        except (vk.VkErrorOutOfDeviceMemory, vk.VkErrorOutOfHostMemory) as e:
+            raise RfwError(f"{self.label}: the driver refused {byte_text(self.size)} of "
+                           f"exportable memory ({type(e).__name__})") from None
+
+    def binding(self, offset: int = 0, size: int | None = None) -> tuple[Any, int, int]:
+        """(handle, offset, range) as ``BindingSet.write`` takes a buffer."""
+        return (self.handle, offset, self.bytes - offset if size is None else size)
+
+    def array(self, offset: int, shape: tuple[int, ...], dtype: Any) -> DeviceArray:
+        """A zero-copy view at ``offset`` bytes (needs the CUDA link)."""
+        if self.cuda_ptr is None:
+            raise RfwError(f"{self.label} is not mapped into CUDA")
+        dtype = np.dtype(dtype)
+        if offset + int(np.prod(shape)) * dtype.itemsize > self.bytes:
+            raise ValueError(f"{self.label}: a view of {shape} {dtype} at {offset} overruns it")
+        return DeviceArray(ptr=self.cuda_ptr + offset, shape=shape, dtype=dtype,
+                           ordinal=self.link.ordinal, owner=self)
+
+    def host_view(self) -> np.ndarray:
+        """The exported bytes through a mapping of the fd (no link: e.g. lavapipe's memfd),
+        for tests of the export itself; raises where the fd cannot be mapped."""
+        if self.fd is None:
+            raise RfwError(f"{self.label}: its fd went to CUDA")
+        if self._map is None:
+            self._map = mmap.mmap(self.fd, os.fstat(self.fd).st_size)
+        head = np.frombuffer(self._map, np.uint64, count=2)
+        # llvmpipe's memfd starts with a header: (file size, offset of the data)
+        offset = int(head[1]) if int(head[0]) == len(self._map) else 0
+        return np.frombuffer(self._map, np.uint8, count=self.bytes, offset=offset)
+
+    def destroy(self) -> None:
+        """With the device (it registers): free now, whatever still holds it."""
+        self.free()
+
+    def free(self) -> None:
+        if self.cuda_ptr is not None and self.link is not None:
+            ptr, ext, self.cuda_ptr = self.cuda_ptr, self._external, None
+            with contextlib.suppress(RfwError):  # at exit CUDA may be gone before us
+                cuda().free_import(ext, ptr, self.link.ordinal)
+        if self._map is not None:
+            with contextlib.suppress(BufferError):  # a numpy view of it lives: it stays
+                self._map.close()
+            self._map = None
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+        alive = self.device.alive
+        if self.handle is not None and alive:
+            vk.vkDestroyBuffer(self.device.device, self.handle, None)
+        if self.memory is not None and alive:
+            vk.vkFreeMemory(self.device.device, self.memory, None)
+        self.handle = self.memory = None
+        self.device.unregister(self)
+
+    def __repr__(self) -> str:
+        where = f"cuda:{self.link.ordinal}" if self.cuda_ptr is not None else "fd"
+        return f"<ExportedBuffer '{self.label}' {self.bytes} B -> {where}>"
+
+
+def ownership(device: VkDevice, cmd: Any, buffers: list[ExportedBuffer], *,
+              acquire: bool) -> None:
+    """Record the queue-family transfer of ``buffers`` from (``acquire``) or to the external
+    world, ordered against every command before or after."""
+    if not buffers:
+        return
+    ours = device.queue_family
+    all_commands = const("VK_PIPELINE_STAGE_2_ALL_COMMANDS_BIT")
+    memory = const("VK_ACCESS_2_MEMORY_READ_BIT") | const("VK_ACCESS_2_MEMORY_WRITE_BIT")
+    bars = ffi.new("VkBufferMemoryBarrier2[]", len(buffers))
+    for b, buf in zip(bars, buffers, strict=True):
+        b.sType = const("VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER_2")
+        if acquire:
+            b.srcQueueFamilyIndex, b.dstQueueFamilyIndex = QUEUE_FAMILY_EXTERNAL, ours
+            b.dstStageMask, b.dstAccessMask = all_commands, memory
+        else:
+            b.srcQueueFamilyIndex, b.dstQueueFamilyIndex = ours, QUEUE_FAMILY_EXTERNAL
+            b.srcStageMask, b.srcAccessMask = all_commands, memory
+        b.buffer, b.offset, b.size = buf.handle, 0, const("VK_WHOLE_SIZE")
+    dep = ffi.new("VkDependencyInfo*")
+    dep.sType = const("VK_STRUCTURE_TYPE_DEPENDENCY_INFO")
+    dep.bufferMemoryBarrierCount, dep.pBufferMemoryBarriers = len(buffers), bars
+    lib.vkCmdPipelineBarrier2(cmd, dep)
+
+
+class Submitter:
+    """One command buffer and fence, submitted and waited for again and again."""
+
+    def __init__(self, device: VkDevice, *, label: str):
+        self.device = device
+        self.pool = CommandPool(device, transient=False, label=f"{label}:commands")
+        self.cmd = self.pool.allocate(1)[0]
+        self.fence = vk.vkCreateFence(device.device, vk.VkFenceCreateInfo(), None)
+        self.key: Any = None
+        self._info = ffi.new("VkSubmitInfo*")
+        self._info.sType = const("VK_STRUCTURE_TYPE_SUBMIT_INFO")
+        self._cmds = ffi.new("VkCommandBuffer[1]", [self.cmd])
+        self._info.commandBufferCount, self._info.pCommandBuffers = 1, self._cmds
+        device.register(self)
+
+    def begin(self) -> Any:
+        vk.vkResetCommandBuffer(self.cmd, 0)
+        vk.vkBeginCommandBuffer(self.cmd, vk.VkCommandBufferBeginInfo())
+        return self.cmd
+
+    def end(self, key: Any) -> None:
+        vk.vkEndCommandBuffer(self.cmd)
+        self.key = key
+
+    def run(self) -> None:
+        """Submit and wait."""
+        dev = self.device.device
+        vk.vkResetFences(dev, 1, [self.fence])
+        result = lib.vkQueueSubmit(self.device.queue, 1, self._info, self.fence)
+        if result != 0:
+            raise RfwError(f"vkQueueSubmit failed with VkResult {result}")
+        vk.vkWaitForFences(dev, 1, [self.fence], vk.VK_TRUE, FENCE_TIMEOUT_NS)
+
+    def destroy(self) -> None:
+        if self.fence is not None and self.device.alive:
+            vk.vkDestroyFence(self.device.device, self.fence, None)
+        self.fence = None
+        if self.pool is not None:
+            self.pool.destroy()
+            self.pool = None
+        self.device.unregister(self)
+
+
+class ImageExport:
+    """An image copied on the GPU into an :class:`ExportedBuffer` (its bytes as
+    ``copy_image_to_buffer`` packs them) by a command buffer recorded once; :meth:`read`
+    submits it, waits, and returns the (h, w, channels) :class:`DeviceArray` of the buffer
+    (the same memory every read: the next read overwrites it). ``layout_now`` is the state
+    the image is in when the copy runs, ``layout_after`` the one it is left in."""
+
+    def __init__(self, device: VkDevice, image: Any, *, layout_now: Any, layout_after: Any,
+                 link: CudaLink | None, label: str = ""):
+        self.device, self.image = device, image
+        self.label = label or f"{image.label}:export"
+        size = readback_bytes(image)
+        probe = texels(np.zeros(size, np.uint8), image)  # the format's shape and dtype
+        self.shape, self.dtype = probe.shape, probe.dtype
+        self.buffer = ExportedBuffer(device, size, ("transfer_dst",), link=link,
+                                     label=self.label)
+        try:
+            self.submitter = Submitter(device, label=self.label)
+            now = as_state(layout_now, source=True)
+            after = as_state(layout_after if layout_after is not None else TRANSFER_SRC,
+                             source=False)
+            cmd = self.submitter.begin()
+            ownership(device, cmd, [self.buffer], acquire=True)
+            barrier(cmd, [ImageBarrier(image, now, TRANSFER_SRC)])
+            copy_image_to_buffer(cmd, image, self.buffer)  # it reads the handle alone
+            if after != TRANSFER_SRC:
+                barrier(cmd, [ImageBarrier(image, TRANSFER_SRC, after)])
+            ownership(device, cmd, [self.buffer], acquire=False)
+            self.submitter.end(image.handle)
+        except BaseException:
+            self.buffer.release()
+            raise
+        # without a link (tests on lavapipe) only run() and buffer.host_view() serve
+        self.view = self.buffer.array(0, self.shape, self.dtype) if link is not None else None
+
+    def run(self) -> None:
+        """The copy, submitted and waited for."""
+        self.submitter.run()
+
+    def read(self) -> DeviceArray:
+        self.run()
+        return self.view
+
+    def destroy(self) -> None:
+        self.submitter.destroy()
+        self.buffer.release()
+        self.view = None  # the buffer goes with the last array of it
+
+
+_exports: weakref.WeakKeyDictionary[Any, dict[str, ImageExport]] = weakref.WeakKeyDictionary()
+
+
+def read_output(executor: Any, resource: str) -> DeviceArray:
+    """A vk executor's image ``resource`` (a graph output) as a :class:`DeviceArray`, after
+    every frame in flight: zero-copy where the device shares memory with CUDA (the export
+    recorded once per executor and image, so a later read is one submit), else a host copy
+    (``zero_copy`` False)."""
+    executor.drain()
+    device = executor.device
+    link = cuda_link(device)
+    if resource in executor.buffers or not isinstance(link, CudaLink):
+        return DeviceArray.of_host(executor.read(resource))
+    image = executor.image(resource)
+    made = _exports.setdefault(executor, {})
+    export = made.get(resource)
+    if export is None or export.image is not image or export.submitter.key != image.handle:
+        if export is not None:
+            export.destroy()
+        state = executor._final.get(resource)
+        export = made[resource] = ImageExport(
+            device, image, layout_now=state or "UNDEFINED", layout_after=state, link=link,
+            label=f"{resource}:export")
+    return export.read()

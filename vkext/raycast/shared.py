@@ -1,0 +1,213 @@
+"""Casts whose rays and hits stay on the GPU: :class:`SharedRays`, the ray and hit buffers of
+a scene exported to CUDA (``vkext.external``), and :func:`cast_shared`, one cast through them.
+
+The caller's CUDA rays are copied device to device (``cuMemcpyDtoDAsync``, after
+``cuCtxSynchronize`` so every stream's writes landed) into the exported ray buffer, which the
+trace reads as it is; the trace writes the exported hit buffer, and the hits go back as
+zero-copy :class:`rfw.interop.DeviceArray` views of it once the fence is waited for. Nothing
+is mapped, staged or copied to the host. All rays of a cast are one dispatch (the buffers
+grow to the largest cast, never shrink). The buffers change hands by queue-family transfers
+(acquired from the external world before the trace, released after).
+
+Rays the shaders refuse (non-finite origin or direction, zero direction) are not checked on
+the host (that would read the hits back): their ``t`` is NaN and ``primitive`` the code of
+``streams.INVALID`` (-2, -3, -4).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import time
+from typing import Any
+
+import numpy as np
+
+from rfw.errors import RfwError
+from rfw.interop import CudaView, DeviceArray, cuda
+
+from ..commands import TimestampPool
+from ..external import CudaLink, ExportedBuffer, Submitter, cuda_link, ownership
+from ..rt import BindingSet
+from .streams import HIT_STREAMS, HIT_WORDS, RAY_WORDS
+
+HIT_DTYPES = {"t": np.float32, "primitive": np.int32, "instance": np.int32,
+              "barycentrics": np.float32}
+
+
+class SharedRays:
+    """A scene's exported ray and hit buffers and the command buffer casting through them
+    (recorded again only when the cast differs from the last: size, intervals, buffers)."""
+
+    def __init__(self, caster: Any, tlas: Any, link: CudaLink, *, label: str = "raycast"):
+        self.caster, self.device, self.tlas, self.link = caster, caster.device, tlas, link
+        self.label = label
+        self.capacity = self.generation = 0
+        self.rays = self.hits = self.set = None
+        self._views: tuple[Any, dict[str, DeviceArray]] | None = None
+        self.submitter = Submitter(self.device, label=f"{label}:shared")
+        self.timer = TimestampPool(self.device, 2, label=f"{label}:shared timestamps") \
+            if "timestamp" in self.device.caps else None
+
+    def reserve(self, n: int) -> None:
+        if n <= self.capacity:
+            return
+        self._release()
+        self.rays = ExportedBuffer(self.device, n * RAY_WORDS * 4, ("storage",),
+                                   link=self.link, label=f"{self.label}.shared rays")
+        self.hits = ExportedBuffer(self.device, n * HIT_WORDS * 4, ("storage",),
+                                   link=self.link, label=f"{self.label}.shared hits")
+        self.set = BindingSet(self.caster.pipeline.layout,
+                              label=f"{self.label}:shared descriptors")
+        self.set.write(tlas=self.tlas, rays=self.rays.binding(), hits=self.hits.binding())
+        self.capacity, self.generation = n, self.generation + 1
+
+    def record(self, n: int, sbt: Any, per_ray: bool, tmin: float, tmax: float) -> None:
+        key = (self.generation, n, per_ray, tmin, tmax, id(sbt))
+        if self.submitter.key == key:
+            return
+        cmd = self.submitter.begin()
+        shared = [self.rays, self.hits]
+        ownership(self.device, cmd, shared, acquire=True)
+        if self.timer is not None:
+            self.timer.reset(cmd)
+            self.timer.write(cmd, "ALL_COMMANDS", 0)
+        self.caster._record(cmd, self.set, sbt, n, per_ray, tmin, tmax)
+        if self.timer is not None:
+            self.timer.write(cmd, "ALL_COMMANDS", 1)
+        ownership(self.device, cmd, shared, acquire=False)
+        self.submitter.end(key)
+
+    def gpu_ms(self) -> float | None:
+        if self.timer is None:
+            return None
+        a, b = self.timer.results(0, 2)
+        return max(0, int(b) - int(a)) / 1e6
+
+    def hit_views(self, n: int, names: tuple[str, ...]) -> dict[str, DeviceArray]:
+        """The views of ``n`` hits, made once per buffer and size (the same memory)."""
+        key = (self.generation, n, names)
+        if self._views is not None and self._views[0] == key:
+            return dict(self._views[1])
+        out, at = {}, 0
+        for name, width in HIT_STREAMS:
+            if name in names:
+                shape = (n, width) if width > 1 else (n,)
+                out[name] = self.hits.array(at, shape, HIT_DTYPES[name])
+            at += width * n * 4
+        views = {k: out[k] for k in names}
+        self._views = (key, views)
+        return dict(views)
+
+    def _release(self) -> None:
+        # arrays handed out keep their buffers alive; the scene lets go of them here
+        for buf in (self.rays, self.hits):
+            if buf is not None:
+                buf.release()
+        if self.set is not None:
+            self.set.destroy()
+        self.rays = self.hits = self.set = None
+        self._views = None
+        self.capacity = 0
+
+    def destroy(self) -> None:
+        self._release()
+        if self.timer is not None:
+            self.timer.destroy()
+            self.timer = None
+        self.submitter.destroy()
+
+
+def link_of(device: Any) -> CudaLink:
+    link = cuda_link(device)
+    if not isinstance(link, CudaLink):
+        raise RfwError(f"device arrays need a Vulkan device that shares memory with CUDA: "
+                       f"{link}")
+    return link
+
+
+def _check_on(name: str, view: Any, link: CudaLink, device_name: str) -> None:
+    if isinstance(view, CudaView) and view.ordinal != link.ordinal:
+        raise RfwError(f"{name} is on cuda:{view.ordinal}, but the ray scene's device "
+                       f"({device_name}) is cuda:{link.ordinal}: move it there first "
+                       f"(e.g. tensor.to('cuda:{link.ordinal}'))")
+
+
+def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView | np.ndarray,
+                tmin: Any, tmax: Any, hits: tuple[str, ...]) -> dict[str, DeviceArray]:
+    """One cast of ``scene`` (a ``vkext.raycast.RayScene``) whose hits stay on the GPU.
+
+    ``origins``/``directions``: (R, 3) float32 as :class:`CudaView` (copied device to device)
+    or host arrays (copied host to device); ``tmin``/``tmax``: numbers, or (R,) float32 as
+    :class:`CudaView` or host arrays. Returns zero-copy views of the scene's hit buffer,
+    overwritten by its next cast."""
+    device = scene.device
+    link = link_of(device)
+    for name, v in (("origins", origins), ("directions", directions), ("t_min", tmin),
+                    ("t_max", tmax)):
+        _check_on(name, v, link, device.name)
+    n = len(origins) if isinstance(origins, np.ndarray) else origins.shape[0]
+    drv = cuda()
+    with scene.lock:
+        if scene.closed:
+            raise RfwError("the ray scene is closed: make a new rfw.RayScene")
+        wall = time.perf_counter()
+        shared = scene.shared
+        if shared is None:
+            shared = scene.shared = SharedRays(scene.caster, scene.accel.tlas
+                                               if scene.accel is not None else None, link,
+                                               label=scene.label) \
+                if scene.accel is not None else None
+        if shared is None:  # nothing to hit: misses written on the host, copied up
+            return _misses(scene, n, hits, link)
+        shared.reserve(max(n, 1))
+        per_ray = not (np.ndim(tmin) == 0 and not isinstance(tmin, CudaView)
+                       and np.ndim(tmax) == 0 and not isinstance(tmax, CudaView))
+        base = shared.rays.cuda_ptr
+        jobs = [(origins, 0), (directions, 12 * n)]
+        if per_ray:
+            jobs += [(_stream(tmin, n), 24 * n), (_stream(tmax, n), 28 * n)]
+        with drv.push(link.ordinal):
+            drv.call("cuCtxSynchronize")  # the caller's work on any stream is done
+            for src, offset in jobs:
+                if isinstance(src, CudaView):
+                    drv.call("cuMemcpyDtoDAsync_v2", ctypes.c_ulonglong(base + offset),
+                             ctypes.c_ulonglong(src.ptr), ctypes.c_size_t(n * 4 * (
+                                 3 if src.shape[1:] else 1)), ctypes.c_void_p(0))
+                else:
+                    drv.copy_htod(base + offset, np.ascontiguousarray(src, np.float32),
+                                  link.ordinal)
+            drv.call("cuCtxSynchronize")  # the copies landed before Vulkan reads
+        t_in = time.perf_counter()
+        sbt = scene.caster._table(scene.accel.hit_records) \
+            if scene.method == "ray_pipeline" else None
+        lo, hi = (0.0, 0.0) if per_ray else (float(tmin), float(tmax))
+        shared.record(n, sbt, per_ray, lo, hi)
+        shared.submitter.run()
+        done = time.perf_counter()
+        out = shared.hit_views(n, hits)
+        scene._last = {"method": scene.method, "rays": n, "batches": 1, "path": "zero_copy",
+                       "wall_ms": (done - wall) * 1e3, "copy_in_ms": (t_in - wall) * 1e3,
+                       "submit_wait_ms": (done - t_in) * 1e3}
+        gpu = shared.gpu_ms()
+        if gpu is not None:
+            scene._last.update(gpu_ms=gpu, mrays_per_s=n / max(gpu, 1e-9) / 1e3)
+        return out
+
+
+def _stream(x: Any, n: int) -> Any:
+    """A per-ray interval: a CudaView as it is, else (n,) float32 on the host."""
+    if isinstance(x, CudaView):
+        return x
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(x, np.float32), (n,)))
+
+
+def _misses(scene: Any, n: int, hits: tuple[str, ...], link: CudaLink) -> dict[str, Any]:
+    from .streams import hit_arrays
+
+    arrays = hit_arrays(n, hits)
+    for name, value in (("t", np.inf), ("primitive", -1), ("instance", -1),
+                        ("barycentrics", 0.0)):
+        if name in arrays:
+            arrays[name][...] = value
+    scene._last = {"method": scene.method, "rays": n, "batches": 0, "path": "host"}
+    return {k: DeviceArray.of_host(arrays[k]) for k in hits}
