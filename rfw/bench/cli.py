@@ -186,8 +186,8 @@ def run(args: argparse.Namespace) -> int:
     # the runs and the report are staged: the folder's earlier bench is replaced only by a
     # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
     folder = OutputFolder(out)
-    for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", REPORT_MD,
-                 REPORT_HTML):
+    for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", "attribution.csv",
+                 REPORT_MD, REPORT_HTML):
         folder.target(name)  # a FIFO or device there is refused before any run
     with folder:
         try:
