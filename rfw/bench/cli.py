@@ -235,7 +235,7 @@ def _keep_partial(folder: OutputFolder, total: int, error: BaseException) -> Non
         f"stopped by {type(error).__name__}: {error}"
     with signals_held(), contextlib.suppress(OSError):
         # an unfinished report would pass for a whole one: only the runs are kept
-        for name in (REPORT_MD, REPORT_HTML, "results.csv"):
+        for name in (REPORT_MD, REPORT_HTML, "results.csv", "attribution.csv"):
             (folder.staging / name).unlink(missing_ok=True)
         (folder.staging / PARTIAL_NOTE).write_text(
             f"rfw bench {why} after {done} of {total} runs: these are its results so far "
