@@ -25,7 +25,8 @@ INTRO = ("The frame total's GPU ms change split into what each pass contributes,
          "without timers); the parts add up to the frame total's change. Means per frame, not "
          "medians (only means add up, so the frame change can differ from the medians' change "
          "above). 95% CI of each difference: a bootstrap that resamples each side's runs, then "
-         "frames in each run, reading the frame total and every pass from the same frames; "
+         "frames in each run, reading the frame total and every pass from the same frames, "
+         "widened for few runs (by sqrt(R/(R-1)) and Student's t); "
          "`*` where the CI excludes 0, `(n.s.)` where it holds 0 (within the noise), no mark "
          "with too few frames or runs on either side (`(n=3<6: no mark)`). Every number is "
          "also in `attribution.csv`.")
