@@ -203,8 +203,8 @@ def run(args: argparse.Namespace) -> int:
     # the runs and the report are staged: the folder's earlier bench is replaced only by a
     # complete new one; an interrupted or failed bench keeps what it ran as partial-<time>/
     folder = OutputFolder(out)
-    for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", REPORT_MD,
-                 REPORT_HTML, BUNDLE):
+    for name in ("results.jsonl", "results.csv", "truth.json", "truth.csv", "attribution.csv",
+                 REPORT_MD, REPORT_HTML, BUNDLE):
         folder.target(name)  # a FIFO or device there is refused before any run
     with folder:
         try:
@@ -258,7 +258,7 @@ def _keep_partial(folder: OutputFolder, total: int, error: BaseException) -> Non
         f"stopped by {type(error).__name__}: {error}"
     with signals_held(), contextlib.suppress(OSError):
         # an unfinished report would pass for a whole one: only the runs are kept
-        for name in (REPORT_MD, REPORT_HTML, "results.csv", BUNDLE):
+        for name in (REPORT_MD, REPORT_HTML, "results.csv", "attribution.csv", BUNDLE):
             (folder.staging / name).unlink(missing_ok=True)
         (folder.staging / PARTIAL_NOTE).write_text(
             f"rfw bench {why} after {done} of {total} runs: these are its results so far "

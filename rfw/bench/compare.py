@@ -7,7 +7,8 @@ flagged: the verdict says why. OLD and NEW measured differently (size, frames, w
 scene, settings, executor, device) are refused unless ``--allow-mismatch``.
 With ``--out`` it also writes ``compare.md`` and a self-contained ``compare.html`` there: every
 change with its significance, and each variant's NEW image against its OLD one (PSNR, FLIP,
-difference image with its legend)."""
+difference image with its legend), and each variant's frame GPU ms change split into its
+passes' parts (:mod:`rfw.bench.attribution`), also as ``attribution.csv``."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from typing import Any
 
 from ..errors import RfwError, check_number, naming
 from ..fileio import inside
+from .attribution import Attribution, attribute, summary_line, write_csv
 from .inputs import input_changes
 from .report import device_of
 from .runner import load_results
@@ -251,12 +253,15 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
     found, notes = _changes(old_summaries, new_summaries)
     single = one_sided(old_summaries, new_summaries)
     inputs = input_changes(old_records, new_records)
+    costs = attributions(old_summaries, new_summaries)
     for line in differ:
         print(f"MISMATCH: {line}")
     if out is not None:
         md, page = write_compare(old, new, old_summaries, new_summaries, out, found=found,
                                  notes=notes, differ=differ, threshold=threshold,
-                                 diff_scale=diff_scale, single=single, inputs=inputs)
+                                 diff_scale=diff_scale, single=single, inputs=inputs,
+                                 costs=costs)
+        write_csv(out / "attribution.csv", costs)
         print(f"wrote {md}, {page}")
     flagged = [(c, c.verdict(threshold)) for c in found]
     rows = [(c, v) for c, v in flagged if show_all or v in ("regression", "improvement")]
@@ -282,6 +287,10 @@ def compare(old: Path, new: Path, *, threshold: float = 0.05, fail_on_regression
             cells = [f"{s['median']:>10.3f}" if s else f"{'-':>10}" for s in (o.old, o.new)]
             print(f"  {name:<{w}} {cells[0]} {cells[1]} {'-':>8}  {o.verdict}  "
                   f"[{o.side.lower()} {o.stats['ci_lo']:.3f}-{o.stats['ci_hi']:.3f}]")
+    if costs:
+        print("  frame GPU ms NEW - OLD, pass by pass (means, 95% CI; see compare.md):")
+    for at in costs:
+        print(f"    {summary_line(at)}")
     regressions = sum(1 for _, v in flagged if v == "regression")
     improvements = sum(1 for _, v in flagged if v == "improvement")
     few = sum(1 for c, _ in flagged if c.too_few)
@@ -309,6 +318,19 @@ def _one_sided_count(single: list[OneSided]) -> str:
     return ", ".join(parts)
 
 
+def attributions(old: list[VariantSummary], new: list[VariantSummary]) -> list[Attribution]:
+    """Each variant measured on both sides: its frame GPU ms change NEW - OLD, pass by pass."""
+    olds = {v.label: v for v in old if v.ok}
+    out = []
+    for v in new:
+        if v.ok and v.kind == "rfw" and v.label in olds:
+            at = attribute(olds[v.label].records, v.records, variant=v.label, baseline="OLD",
+                           device=", ".join(dict.fromkeys(device_of(r) for r in v.records)))
+            if at is not None:
+                out.append(at)
+    return out
+
+
 def _run_folder(path: Path) -> Path:
     return path if path.is_dir() else path.parent
 
@@ -317,14 +339,15 @@ def write_compare(old: Path, new: Path, old_summaries: list[VariantSummary],
                   new_summaries: list[VariantSummary], out: Path, *, found: list[Change],
                   notes: list[str], differ: list[str], threshold: float = 0.05,
                   diff_scale: str = "own", single: list[OneSided] | None = None,
-                  inputs: list[str] | None = None) -> tuple[Path, Path]:
+                  inputs: list[str] | None = None,
+                  costs: list[Attribution] | None = None) -> tuple[Path, Path]:
     """``out/compare.md`` and ``out/compare.html``: per-pass changes with significance and
     the image differences between the two runs (images copied into ``out/images``); an image
     rendered from another camera than its OLD one is not compared. ``found`` and ``notes``:
     :func:`changes` of the two summaries, ``differ``: their :func:`mismatches`, as
     :func:`compare` computed them; ``single``: their :func:`one_sided` entries (every
-    metric is listed), ``inputs``: :func:`rfw.bench.inputs.input_changes`. ``diff_scale``: as
-    in :func:`rfw.bench.report.write_report`."""
+    metric is listed), ``inputs``: :func:`rfw.bench.inputs.input_changes`, ``costs``: their
+    :func:`attributions`. ``diff_scale``: as in :func:`rfw.bench.report.write_report`."""
     from .images import compare as compare_images
     from .images import load_png, save_png
     from .report import Doc, Img, change_text, ci, db, diff_cell, image_camera, ms, write_diffs
@@ -360,6 +383,14 @@ def write_compare(old: Path, new: Path, old_summaries: list[VariantSummary],
               o.verdict] for o in single or []]
     doc.table(["variant", "pass", "metric", "OLD ms", "OLD 95% CI", "NEW ms", "NEW 95% CI",
                "change", "verdict"], rows)
+    if costs:
+        from .report.attribution import INTRO, attribution_tables
+
+        doc.h(2, "Frame change, pass by pass")
+        doc.p("Each variant's NEW against its OLD. " + INTRO)
+        for at in costs:
+            doc.h(3, at.variant)
+            attribution_tables(doc, [at], base="OLD", own="NEW", titles=False)
     olds = {v.label: v for v in old_summaries if v.ok and v.image}
     news = {v.label: v for v in new_summaries if v.ok and v.image}
     both = [k for k in olds if k in news]

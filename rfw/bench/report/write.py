@@ -11,6 +11,7 @@ from ...fileio import atomic_write
 from ..path_chart import path_charts
 from ..runner import load_results
 from ..summary import VariantSummary, summarize_results
+from .attribution import _attribution
 from .charts import _charts
 from .devices import _by_device, _devices, _report_devices, split_devices
 from .document import Doc, Img
@@ -63,6 +64,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     if truth_given and not (out_dir / "truth.json").is_file():
         raise ValueError(f"--reference {reference}: this bench has no references (it ran "
                          "without --reference pathtrace; run it again with it)")
+    _attribution(doc, out_dir, rfw, pooled, None if truth_given else reference)
     _images(doc, out_dir, rfw, None if truth_given else reference, pooled,
             diff_scale=diff_scale, parts=parts)
     truth_rows = _truth(doc, out_dir, pooled)
