@@ -239,3 +239,26 @@ def test_regenerate_then_compare(monkeypatch, tmp_path):
         check_golden(shifted(image, 1), "x", FakeAdapter(), tmp_path / "art")
     assert {p.name for p in (tmp_path / "art").iterdir()} == {"actual.png", "expected.png",
                                                              "diff.png"}
+
+
+def _vendor_pairs():
+    names = ("llvmpipe-llvm15-256bit-mesa-25.0", "nvidia-h200-580.159.04")
+    lavapipe, nvidia = (golden_util.GOLDEN / a for a in names)
+    return [(p, nvidia / p.name) for p in sorted(lavapipe.glob("*.png"))
+            if (nvidia / p.name).exists()]
+
+
+def test_vendor_bounds_hold_between_lavapipe_and_the_h200():
+    """rfw.golden.VENDOR_BOUNDS (what `rfw bench replay` allows across devices) holds every
+    golden both adapters have; the CPU bounds reject most of them (the control: another
+    vendor is not another CPU), and a 3 % brighter H200 render is still caught."""
+    from rfw.golden import VENDOR_BOUNDS
+
+    pairs = _vendor_pairs()
+    assert len(pairs) >= 20
+    diffs = [image_diff(read_png(b), read_png(a)) for a, b in pairs]
+    assert [d.violations(VENDOR_BOUNDS) for d in diffs] == [[]] * len(diffs)
+    assert sum(bool(d.violations(BOUNDS)) for d in diffs) >= len(diffs) // 2
+    a, b = next((a, b) for a, b in pairs if a.name == "deferred__courtyard.png")
+    brighter = np.clip(np.rint(read_png(b).astype(np.float32) * [1.03, 1.03, 1.03, 1]), 0, 255)
+    assert image_diff(brighter.astype(np.uint8), read_png(a)).violations(VENDOR_BOUNDS)

@@ -6,10 +6,13 @@ replay writes the same bytes there) and scenes, with its size, frames, warm-up, 
 order and backends, into ``DIR`` as a bench of its own (``results.jsonl``, ``runs/``, its
 report and ``bundle.tar``), the original unpacked beside it in ``DIR/original/``. Then:
 
-- images, run by run: on the same adapter (device, driver and backend as the bundle's run
-  recorded them) they must be bit-identical, and where they are not the pixels that differ
-  are named (how many, where, the first one's values); on another adapter they must agree
-  within the golden scheme (:mod:`rfw.golden`, the bounds of the test suite's goldens);
+- images, run by run (:func:`rule_for`): on the same adapter (device, driver and backend as
+  the bundle's run recorded them, and the CPU for llvmpipe) they must be bit-identical, and
+  where they are not the pixels that differ are named (how many, where, the first one's
+  values); llvmpipe on another processor must agree within the golden scheme
+  (:data:`rfw.golden.BOUNDS`, the bounds of the test suite's goldens across CPUs); another
+  device or driver within the bounds measured between vendors
+  (:data:`rfw.golden.VENDOR_BOUNDS`, which catch only coarse changes);
 - graphs and SPIR-V: each variant's graph built again against the bundle's, each SPIR-V
   module's hash against the bundle's (what changed, when an image did);
 - timings: ``rfw bench compare DIR/original DIR`` (written to ``DIR/compare/``).
@@ -165,11 +168,30 @@ def _adapter(r: dict[str, Any]) -> tuple[Any, Any, Any]:
     return r.get("device"), r.get("driver"), r.get("backend")
 
 
+def _cpu_driver(r: dict[str, Any]) -> bool:
+    # llvmpipe/lavapipe compile shaders for the host CPU: the same device name renders
+    # differently on another processor
+    return "llvmpipe" in str(r.get("device", "")).lower()
+
+
+def rule_for(old: dict[str, Any], new: dict[str, Any]) -> str:
+    """How a replayed image is judged against the original: ``bit-identical`` on the same
+    adapter (device, driver, backend, and the CPU for a CPU driver), ``golden`` (the
+    suite's bounds, :data:`rfw.golden.BOUNDS`) for the same CPU driver on another
+    processor, ``vendor`` (:data:`rfw.golden.VENDOR_BOUNDS`) for another device or
+    driver."""
+    if _adapter(old) != _adapter(new):
+        return "vendor"
+    if _cpu_driver(old) and old.get("cpu") != new.get("cpu"):
+        return "golden"
+    return "bit-identical"
+
+
 def judge(old: list[dict[str, Any]], new: list[dict[str, Any]], old_dir: Path,
           new_dir: Path) -> dict[str, Any]:
     """Each original run's image against the replay's run of the same variant and repeat:
     bit-identical on the same adapter, within the golden scheme on another."""
-    from ..golden import mismatch
+    from ..golden import BOUNDS, VENDOR_BOUNDS, mismatch
 
     now = {(r.get("variant_id"), r.get("repeat")): r for r in new}
     images = []
@@ -187,17 +209,18 @@ def judge(old: list[dict[str, Any]], new: list[dict[str, Any]], old_dir: Path,
             continue
         a = _rgba(inside(old_dir, r["image"]))
         b = _rgba(inside(new_dir, again["image"]))
-        same = _adapter(r) == _adapter(again)
+        rule = rule_for(r, again)
         row["replay_adapter"] = list(_adapter(again))
         if a.shape != b.shape:
-            row.update(agree=False, rule="bit-identical" if same else "golden",
-                       detail=f"shapes differ: {a.shape} vs {b.shape}")
-        elif same:
-            row.update(rule="bit-identical", **pixels_differ(a, b))
+            row.update(agree=False, rule=rule, detail=f"shapes differ: {a.shape} vs {b.shape}")
+        elif rule == "bit-identical":
+            row.update(rule=rule, **pixels_differ(a, b))
         else:
-            why = mismatch(b, a)
-            row.update(rule="golden", agree=not why,
-                       detail=why or "within the golden scheme")
+            bounds = BOUNDS if rule == "golden" else VENDOR_BOUNDS
+            why = mismatch(b, a, bounds)
+            row.update(rule=rule, agree=not why, detail=why or (
+                "within the golden scheme (another CPU)" if rule == "golden"
+                else "within the bounds between vendors"))
         images.append(row)
     failed = [f"{r.get('variant')} #{int(r.get('repeat', 0)) + 1}: {r['error']}"
               for r in new if r.get("error")]
