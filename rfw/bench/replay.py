@@ -345,4 +345,11 @@ def report(bundle_path: Path, out: Path) -> int:
                        f"{digests[name][:12]})")
             same = False
         print(f"wrote {folder.out / name}: {verdict}")
+    if not same:
+        from .runner import _commit
+
+        then, now = (bundle.manifest.get("rfw") or {}).get("commit"), _commit()[0]
+        if then and now and then != now:
+            print(f"  the bundle was written by rfw {then[:12]}, this is {now[:12]}: the "
+                  "report's code may differ (check out that commit for the same bytes)")
     return 0 if same else 1
