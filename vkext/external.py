@@ -362,7 +362,7 @@ class FrameExports:
 
     ``link`` None (no CUDA: lavapipe) still records the copies (``record_without_cuda``:
     tests read them through the buffers' fds). The copies are timed apart (two timestamps
-    per slot): ``gpu_ms`` lists each frame's, read when its array is taken."""
+    per slot): :meth:`read_timer` reads the last frame's into ``gpu_ms``."""
 
     def __init__(self, executor: Any, names: tuple[str, ...], link: CudaLink | None):
         self.executor, self.device, self.names, self.link = executor, executor.device, names, link
@@ -418,11 +418,6 @@ class FrameExports:
         slot = self.last
         if slot is None:
             raise RfwError(f"no frame has copied '{name}' into exported memory yet")
-        timer = self.timers.get(id(slot))
-        if timer is not None and id(slot) not in self._timed:
-            self._timed.add(id(slot))
-            a, b = timer.results(0, 2)
-            self.gpu_ms.append(max(0, int(b) - int(a)) / 1e6)
         key = (id(slot), name)
         view = self.views.get(key)
         if view is None:
@@ -430,6 +425,19 @@ class FrameExports:
             probe = texels(np.zeros(readback_bytes(image), np.uint8), image)
             view = self.views[key] = self.buffers[key].array(0, probe.shape, probe.dtype)
         return view
+
+    def read_timer(self) -> float | None:
+        """The last finished frame's copy time in GPU ms (appended to ``gpu_ms`` once per
+        frame; None without timestamps). Apart from :meth:`array`, which reads nothing."""
+        slot = self.last
+        timer = self.timers.get(id(slot)) if slot is not None else None
+        if timer is None:
+            return None
+        if id(slot) not in self._timed:
+            self._timed.add(id(slot))
+            a, b = timer.results(0, 2)
+            self.gpu_ms.append(max(0, int(b) - int(a)) / 1e6)
+        return self.gpu_ms[-1]
 
     def destroy(self) -> None:
         for timer in self.timers.values():

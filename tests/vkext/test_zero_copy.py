@@ -356,6 +356,9 @@ def test_frames_copy_their_outputs_into_exported_memory(vk_device):
         seen.append((np.array_equal(got, want), other is not None and
                      np.array_equal(texels(np.array(other.host_view()), image), want)))
         mine.host_view()[:] = 0  # the next frame on this slot must write it again
+        with pytest.raises(RfwError, match="not mapped into CUDA"):
+            fe.array("forward.hdr")  # no link here
+        assert fe.read_timer() >= 0 and len(fe.gpu_ms) == k
 
     render(cfg, device=vk_device, backend="vk", each_frame=each)
     assert [s[0] for s in seen] == [True, True]
