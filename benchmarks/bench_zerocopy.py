@@ -12,8 +12,12 @@ Measures, in one run (results as JSON into ``$OUT/bench_zerocopy.json``, or ``--
   against the host path's.
 - ``image``: a 1920x1080 RGBA16F output to a torch tensor: from the render done (frames
   drained) to the tensor usable (``torch.cuda.synchronize``), median over frames; through
-  ``rfw.interop.read_device`` in a real vk render of ``forward.hdr`` and through
-  ``vkext.external.ImageExport`` of a cleared image; checked against the host readback.
+  ``vkext.external.ImageExport`` of a cleared image, and in a real vk render of
+  ``forward.hdr`` through ``rfw.interop.read_device`` twice: per read (a submit of the copy
+  and a wait) and in-frame (``rfw.interop.device_outputs``: the frame's own command buffer
+  copies it, ordered by the frame's fence), with the frame's GPU ms with and without that
+  copy (``cost``); each checked against the host readback inside the frame. Rays also
+  come as strided tensors (transposed, a slice of (N, 8)), gathered on the device.
 - ``copies``: no device-to-host copy during the timed casts, shown four ways: rfw's own
   counters (``rfw.interop.copies``), every ``vkMapMemory`` and ``Buffer.map`` call counted
   (no host-visible staging touched), ``cuPointerGetAttribute`` of the tensor's pointer
