@@ -12,8 +12,12 @@ Measures, in one run (results as JSON into ``$OUT/bench_zerocopy.json``, or ``--
   against the host path's.
 - ``image``: a 1920x1080 RGBA16F output to a torch tensor: from the render done (frames
   drained) to the tensor usable (``torch.cuda.synchronize``), median over frames; through
-  ``rfw.interop.read_device`` in a real vk render of ``forward.hdr`` and through
-  ``vkext.external.ImageExport`` of a cleared image; checked against the host readback.
+  ``vkext.external.ImageExport`` of a cleared image, and in a real vk render of
+  ``forward.hdr`` through ``rfw.interop.read_device`` twice: per read (a submit of the copy
+  and a wait) and in-frame (``rfw.interop.device_outputs``: the frame's own command buffer
+  copies it, ordered by the frame's fence), with the frame's GPU ms with and without that
+  copy (``cost``); each checked against the host readback inside the frame. Rays also
+  come as strided tensors (transposed, a slice of (N, 8)), gathered on the device.
 - ``copies``: no device-to-host copy during the timed casts, shown four ways: rfw's own
   counters (``rfw.interop.copies``), every ``vkMapMemory`` and ``Buffer.map`` call counted
   (no host-visible staging touched), ``cuPointerGetAttribute`` of the tensor's pointer
@@ -25,7 +29,8 @@ Targets (issue 24): <= 0.65 ms per cast, >= 30x Embree, <= 50 us for the image.
 What cannot run (no torch, no CuPy, no embreex, no CUDA link) is one line in ``notes`` and on
 stderr, and the rest goes on. ``--probe`` runs each step of the zero-copy path separately
 (device, CUDA driver, UUID match, export and import, torch, CuPy, a small device cast, an
-image export) and reports which one fails, with the error.
+image export, 921,600 rays from contiguous and strided torch tensors, a real render's output
+read per read, copied in the frame, and after the render) and reports which one fails.
 
 Usage (from the repository root, after ``source benchmarks/device_env.sh``)::
 
@@ -220,6 +225,81 @@ def probe() -> dict[str, Any]:
             raise RuntimeError(f"the export read {got.shape} {got[0, 0]}")
         return {"shape": list(got.shape)}
 
+    @step("cast_921600_rays", ("uuid_match",))
+    def _():
+        import torch
+        from bench_rt import flatten, primary_rays
+
+        import rfw
+        from rfw.scene import default_scene
+
+        scene = default_scene()
+        v, f = flatten(scene)
+        o, d = primary_rays(scene, (1280, 720))
+        res: dict[str, Any] = {"rays": len(o)}
+        with rfw.RayScene(v, f, device=state["device"]) as rs:
+            want = rs.cast(o, d)
+            oc = torch.from_numpy(np.ascontiguousarray(o)).cuda()
+            dc = torch.from_numpy(np.ascontiguousarray(d)).cuda()
+            for name, (os_, ds_) in {"contiguous": (oc, dc),
+                                     **strided_rays(torch, oc, dc)}.items():
+                try:
+                    got = rs.cast(os_, ds_)
+                    t = torch.from_dlpack(got["t"]).cpu().numpy()
+                    res[name] = {"zero_copy": got["t"].zero_copy, "wall_ms": rs.last["wall_ms"],
+                                 "copy_in_ms": rs.last["copy_in_ms"],
+                                 "t_equal_host": bool(np.array_equal(t, want["t"]))}
+                except Exception as e:  # each layout named on its own
+                    res[name] = {"error": error_line(e)}
+        bad = [k for k, r in res.items() if isinstance(r, dict)
+               and (r.get("error") or not r.get("t_equal_host"))]
+        if bad:
+            raise RuntimeError(f"layouts failed: {bad}: {res}")
+        return res
+
+    @step("render_output", ("uuid_match",))
+    def _():
+        import torch
+
+        from rfw import interop
+        from rfw.config import apply_overrides, load_config
+        from rfw.render import render
+
+        cfg = apply_overrides(load_config(ROOT / "configs" / "forward.toml"),
+                              ["size=64x36", "frames=4"])
+        cfg = replace(cfg, outputs=["forward.hdr"])
+        seen: dict[str, Any] = {}
+        held: list[Any] = []
+
+        def each(k: int, frame: Any) -> None:
+            stage = "per_read" if k == 0 else "in_frame"
+            try:
+                if k == 1:  # frame 0 was read per read; frame 1 on copy in the frame
+                    seen["device_outputs"] = interop.device_outputs(frame, ["forward.hdr"])
+                    return
+                a = interop.read_device(frame, "forward.hdr")
+                t = torch.from_dlpack(a)
+                same = bool(np.array_equal(t.cpu().numpy(), frame.read("forward.hdr")))
+                seen[stage] = {"zero_copy": a.zero_copy, "equal_host_readback": same}
+                held.append((t, frame.read("forward.hdr")))
+            except Exception as e:
+                seen[stage] = {"error": error_line(e)}
+
+        # its own device, destroyed when it returns: the tensor must outlive it (run last,
+        # an unmapped read may poison the CUDA context)
+        render(cfg, backend="vk", each_frame=each)
+        try:
+            t, want = held[-1]
+            seen["after_render"] = {"equal": bool(np.array_equal(t.cpu().numpy(), want))}
+        except Exception as e:
+            seen["after_render"] = {"error": error_line(e)}
+        bad = [k for k in ("per_read", "in_frame", "after_render")
+               if (seen.get(k) or {}).get("error") or (seen.get(k) or {}).get(
+                   "equal_host_readback", (seen.get(k) or {}).get("equal")) is not True]
+        if bad:
+            raise RuntimeError(f"stages failed: {bad}: {seen}")
+        return seen
+
     out = {"probe": steps, "first_failure": next((k for k, v in steps.items()
                                                    if not v["ok"]), None)}
     for key in ("array",):
@@ -343,8 +423,10 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
             note(f"no zero-copy ray casts: {rs.zero_copy_reason}")
             return out
         if torch is not None:
-            ot = torch.from_numpy(o).cuda()
-            dt = torch.from_numpy(d).cuda()
+            # primary_rays' arrays are transposed views (strides (4, 4N)): the contiguous
+            # rows are made explicitly, the strided ones are timed apart below
+            ot = torch.from_numpy(np.ascontiguousarray(o)).cuda()
+            dt = torch.from_numpy(np.ascontiguousarray(d)).cuda()
             before = dict(interop.copies)
             with MapCounter() as maps:
                 times, got = timed_casts(rs, ot, dt, args.casts, args.warmup,
@@ -363,6 +445,17 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
                     note(f"device hits '{k}' differ from the host path's")
             out["torch"]["pointer"] = pointer_proof(rs, got["t"])
             out["torch"]["profiler"] = profiler_proof(torch, rs, ot, dt)
+            for name, (os_, ds_) in strided_rays(torch, ot, dt).items():
+                try:
+                    times, got = timed_casts(rs, os_, ds_, args.casts, args.warmup,
+                                             torch.from_dlpack, torch.cuda.synchronize)
+                    out[f"torch_{name}"] = {
+                        **summary(times), "strides": [list(os_.stride()), list(ds_.stride())],
+                        "last": rs.last, "t_equal_host_path": bool(np.array_equal(
+                            got["t"].cpu().numpy(), want["t"]))}
+                except Exception as e:
+                    note(f"strided rays '{name}' failed ({error_line(e)})")
+                    out[f"torch_{name}"] = {"error": error_line(e)}
         if cupy is not None:
             oc, dc = cupy.asarray(o), cupy.asarray(d)
             sync = cupy.cuda.runtime.deviceSynchronize
@@ -373,6 +466,18 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
     finally:
         rs.close()
     return out
+
+
+def strided_rays(torch: Any, o: Any, d: Any) -> dict[str, tuple[Any, Any]]:
+    """The same rays as strided device views: transposed (strides (1, N) elements) and the
+    first three columns of (N, 8) tensors (row stride 8)."""
+    def wide(x: Any) -> Any:
+        w = torch.zeros((x.shape[0], 8), dtype=x.dtype, device=x.device)
+        w[:, :3] = x
+        return w[:, :3]
+
+    return {"transposed": (o.t().contiguous().t(), d.t().contiguous().t()),
+            "slice_of_n8": (wide(o), wide(d))}
 
 
 def pointer_proof(rs: Any, tensor: Any) -> dict[str, Any]:
@@ -431,7 +536,16 @@ def image_section(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
         note("no torch: the image rows are skipped")
         return out
     out["export"] = image_export(args, torch)
-    out["render"] = image_render(args, torch)
+    out["render"] = image_render(args, torch, in_frame=False)
+    out["render_in_frame"] = image_render(args, torch, in_frame=True)
+    per, inf = out["render"], out["render_in_frame"]
+    if "frame_gpu_ms_passes" in per and "frame_gpu_ms_passes" in inf:
+        copy = inf.get("in_frame_copy_gpu_ms") or 0.0
+        out["cost"] = {"frame_gpu_ms_without_copy": per["frame_gpu_ms_passes"],
+                       "frame_gpu_ms_with_in_frame_copy": inf["frame_gpu_ms_passes"] + copy,
+                       "in_frame_copy_gpu_ms": inf.get("in_frame_copy_gpu_ms"),
+                       "per_read_us": per.get("median_us"),
+                       "in_frame_read_us": inf.get("median_us")}
     return out
 
 
@@ -479,9 +593,14 @@ def image_export(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
         dev.destroy()
 
 
-def image_render(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
-    """forward.hdr of a real vk render, read in each_frame through rfw.interop.read_device:
-    the frames drained (the render done), then timed to the tensor usable."""
+def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dict[str, Any]:
+    """forward.hdr of a real vk render as a torch tensor, in each_frame through
+    rfw.interop.read_device: the frames drained (the render done), then timed to the tensor
+    usable. ``in_frame``: after frame 0, ``rfw.interop.device_outputs`` makes each frame's
+    own command buffer copy the output into exported memory (ordered by the frame's fence),
+    so the read is the wrapper alone; else each read submits the copy and waits (the old
+    path). The tensor is checked against the host readback inside the frame (the device
+    goes with the render)."""
     from rfw import interop
     from rfw.config import apply_overrides, load_config
     from rfw.render import render
@@ -493,6 +612,10 @@ def image_render(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
     keep: dict[str, Any] = {}
 
     def each(k: int, frame: Any) -> None:
+        if in_frame and k == 0:
+            keep["why_not"] = interop.device_outputs(frame, ["forward.hdr"])["forward.hdr"]
+            if keep["why_not"]:
+                note(f"no in-frame device output: {keep['why_not']}")
         frame.drain()  # the render done
         torch.cuda.synchronize()
         t0 = time.perf_counter()
@@ -501,22 +624,37 @@ def image_render(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
         torch.cuda.synchronize()
         if k >= args.warmup:
             times.append(time.perf_counter() - t0)
-        keep.update(array=a, tensor=t)
+        if k == args.warmup:  # checked here: the arrays die with the render's device
+            keep["zero_copy"], keep["device"] = a.zero_copy, a.device
+            if t is not None:
+                keep["equal_host_readback"] = bool(np.array_equal(
+                    t.cpu().numpy(), frame.read("forward.hdr")))
+        ex = frame.executors.get("vk")
+        exports = getattr(ex, "frame_exports", None)
+        if exports is not None and exports.last is not None:  # after the timed read
+            exports.read_timer()
+            keep["copy_gpu_ms"] = list(exports.gpu_ms)
 
     try:
         result = render(cfg, backend="vk", each_frame=each)
-        a, t = keep["array"], keep["tensor"]
         res = {**summary(times), "median_us": statistics.median(times) * 1e6,
-               "zero_copy": a.zero_copy, "device": a.device, "frames": len(times)}
-        if t is not None:
-            res["equal_host_readback"] = bool(np.array_equal(
-                t.cpu().numpy(), result.images["forward.hdr"]))
-        else:
-            note("read_device took the host path in the render")
+               "frames": len(times), "frame_gpu_ms_passes": result.gpu_ms_total,
+               **{k: keep.get(k) for k in ("zero_copy", "device", "equal_host_readback")}}
+        if in_frame:
+            copy = keep.get("copy_gpu_ms") or []
+            res["in_frame_copy_gpu_ms"] = statistics.median(copy[args.warmup:] or copy) \
+                if copy else None
+            res["copy_gpu_ms_n"] = len(copy)
+            res["why_not"] = keep.get("why_not")
+        if keep.get("equal_host_readback") is False:
+            note(f"render image ({'in-frame' if in_frame else 'per-read'}) differs from "
+                 f"the host readback")
         return res
     except Exception as e:
-        note(f"render image read failed ({error_line(e)})")
-        return {"error": error_line(e)}
+        note(f"render image read ({'in-frame' if in_frame else 'per-read'}) failed "
+             f"({error_line(e)})")
+        return {"error": error_line(e), "where": traceback.format_exc().strip()
+                .splitlines()[-4:]}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -526,7 +664,7 @@ def verdicts(rec: dict[str, Any]) -> dict[str, Any]:
     rays, img = rec.get("rays", {}), rec.get("image", {})
     cast = rays.get("torch", {}).get("median_ms")
     embree = rays.get("embree", {}).get("median_ms")
-    image = img.get("render", {}).get("median_us") or img.get("export", {}).get("median_us")
+    image = img.get("render_in_frame", {}).get("median_us")
     torch_rec = rays.get("torch", {})
     out = {"cast_ms": cast, "cast_ms_target": TARGETS["cast_ms"],
            "cast_ok": cast is not None and cast <= TARGETS["cast_ms"],

@@ -169,6 +169,21 @@ class CudaDriver:
             self.call("cuCtxSynchronize")  # a DtoD copy may return before it is done
         copies["device_to_device"] += 1
 
+    def gather(self, plan: list[Copy2D], stream: int = 0) -> None:
+        """Queue ``plan``'s copies (device to device) on ``stream`` of the current context."""
+        for c in plan:
+            if c.height == 1:
+                self.call("cuMemcpyDtoDAsync_v2", ctypes.c_ulonglong(c.dst),
+                          ctypes.c_ulonglong(c.src), ctypes.c_size_t(c.width),
+                          ctypes.c_void_p(stream))
+                continue
+            m = _Memcpy2D()
+            m.srcMemoryType = m.dstMemoryType = _CU_MEMORYTYPE_DEVICE
+            m.srcDevice, m.srcPitch = c.src, c.src_pitch
+            m.dstDevice, m.dstPitch = c.dst, c.dst_pitch
+            m.WidthInBytes, m.Height = c.width, c.height
+            self.call("cuMemcpy2DAsync_v2", ctypes.byref(m), ctypes.c_void_p(stream))
+
     def copy_htod(self, dst: int, src: np.ndarray, ordinal: int) -> None:
         src = np.ascontiguousarray(src)
         with self.push(ordinal):
@@ -463,13 +478,74 @@ class SharedMemory:
 
 @dataclass(frozen=True)
 class CudaView:
-    """A caller's CUDA array as rfw reads it: C-contiguous memory on device ``ordinal``."""
+    """A caller's CUDA array as rfw reads it: ``shape`` of ``dtype`` on device ``ordinal``,
+    element ``strides`` in bytes (None: C-contiguous); :func:`gather_copies` says how to
+    copy it into contiguous memory."""
 
     ptr: int
     shape: tuple[int, ...]
     dtype: np.dtype
     ordinal: int
     owner: Any  # keeps the memory alive while rfw copies it
+    strides: tuple[int, ...] | None = None
+
+
+class _Memcpy2D(ctypes.Structure):
+    # cuda.h's CUDA_MEMCPY2D
+    _fields_ = [("srcXInBytes", ctypes.c_size_t), ("srcY", ctypes.c_size_t),
+                ("srcMemoryType", ctypes.c_int), ("srcHost", ctypes.c_void_p),
+                ("srcDevice", ctypes.c_ulonglong), ("srcArray", ctypes.c_void_p),
+                ("srcPitch", ctypes.c_size_t),
+                ("dstXInBytes", ctypes.c_size_t), ("dstY", ctypes.c_size_t),
+                ("dstMemoryType", ctypes.c_int), ("dstHost", ctypes.c_void_p),
+                ("dstDevice", ctypes.c_ulonglong), ("dstArray", ctypes.c_void_p),
+                ("dstPitch", ctypes.c_size_t),
+                ("WidthInBytes", ctypes.c_size_t), ("Height", ctypes.c_size_t)]
+
+
+@dataclass(frozen=True)
+class Copy2D:
+    """One pitched copy (``cuMemcpy2D``'s terms): ``height`` rows of ``width`` bytes, row
+    ``r`` from ``src + r * src_pitch`` to ``dst + r * dst_pitch``."""
+
+    src: int
+    src_pitch: int
+    dst: int
+    dst_pitch: int
+    width: int
+    height: int
+
+
+def gather_copies(ptr: int, shape: tuple[int, ...], strides: tuple[int, ...] | None,
+                  itemsize: int, dst: int) -> list[Copy2D]:
+    """The copies that gather an (N,) or (N, W) array at ``ptr`` with element ``strides``
+    (bytes; None: C-contiguous) into C-contiguous memory at ``dst``: one linear copy if it
+    is contiguous, one pitched copy if its rows are (a slice of a wider array), else one
+    pitched copy per column (a transposed view)."""
+    n = int(shape[0])
+    w = int(shape[1]) if len(shape) > 1 else 1
+    row = w * itemsize
+    if n == 0 or row == 0:
+        return []
+    if strides is None:
+        return [Copy2D(ptr, n * row, dst, n * row, n * row, 1)]
+    s0 = int(strides[0]) if n > 1 else row
+    s1 = int(strides[1]) if len(shape) > 1 and w > 1 else itemsize
+    if s1 == itemsize and s0 == row:
+        return [Copy2D(ptr, n * row, dst, n * row, n * row, 1)]
+    if s1 == itemsize and s0 >= row:
+        return [Copy2D(ptr, s0, dst, row, row, n)]
+    return [Copy2D(ptr + j * s1, s0, dst + j * itemsize, row, itemsize, n) for j in range(w)]
+
+
+def run_copies_on_host(copies: list[Copy2D], src: np.ndarray, dst: np.ndarray) -> None:
+    """``copies`` done on host bytes (``src``/``dst`` uint8, pointers as offsets into them):
+    what ``cuMemcpy2D`` does on the device, for tests where there is no CUDA."""
+    for c in copies:
+        rows = np.arange(c.height, dtype=np.int64)[:, None]
+        cols = np.arange(c.width, dtype=np.int64)[None, :]
+        dst[(c.dst + rows * c.dst_pitch + cols).ravel()] = \
+            src[(c.src + rows * c.src_pitch + cols).ravel()]
 
 
 def is_device_array(a: Any) -> bool:
@@ -512,8 +588,10 @@ def host_of(a: Any) -> Any:
 
 
 def device_view(name: str, a: Any, width: int | None, dtype: Any = np.float32) -> CudaView:
-    """``a`` (a CUDA array) checked as C-contiguous ``dtype`` of shape (N, width) (or (N,)
-    with ``width`` None); one :class:`RfwError` line naming ``name`` otherwise."""
+    """``a`` (a CUDA array) checked as ``dtype`` of shape (N, width) (or (N,) with ``width``
+    None), any element strides that are positive multiples of the item size (a transposed
+    view, a slice of a wider array: :func:`gather_copies`); one :class:`RfwError` line
+    naming ``name`` otherwise."""
     dtype = np.dtype(dtype)
     want = f"(N, {width})" if width else "(N,)"
     owner = a
@@ -536,20 +614,49 @@ def device_view(name: str, a: Any, width: int | None, dtype: Any = np.float32) -
         ptr, shape, strides, got, (_, ordinal) = _read_capsule(owner)
         owner = (a, owner)
     if got != dtype:
-        raise RfwError(f"{name} is a device array of dtype {got}; it must be {dtype} "
+        raise RfwError(f"{name} is a device array of dtype {got}; rfw takes {dtype} only "
                        f"(convert it on the GPU, e.g. tensor.float())")
     if (width and (len(shape) != 2 or shape[1] != width)) or (not width and len(shape) != 1):
         raise RfwError(f"{name} is a device array of shape {shape}; it must be {want}")
     contiguous = tuple(int(np.prod(shape[i + 1:], dtype=np.int64)) * dtype.itemsize
                        for i in range(len(shape)))
-    if strides is not None and shape[0] > 1 and tuple(strides) != contiguous:
-        raise RfwError(f"{name} is a device array with strides {tuple(strides)}; it must be "
-                       f"C-contiguous (e.g. tensor.contiguous())")
-    if shape[0]:  # where it lives, from the driver (the interface need not say)
-        kind, ordinal = cuda().pointer(ptr)
-        if kind != _CU_MEMORYTYPE_DEVICE:
-            raise RfwError(f"{name} is not in CUDA device memory (memory type {kind})")
-    return CudaView(ptr, shape, dtype, int(ordinal or 0), owner)
+    strides = None if strides is None or tuple(strides) == contiguous else \
+        tuple(int(x) for x in strides)
+    if strides is not None:
+        # any element strides that are positive multiples of the item size: gathered on the
+        # device (gather_copies); a single row or column's stride does not matter
+        used = [x for x, n in zip(strides, shape, strict=True) if n > 1]
+        if any(x <= 0 or x % dtype.itemsize for x in used):
+            raise RfwError(f"{name} is a device array with strides {tuple(strides)} bytes; "
+                           f"rfw takes positive multiples of {dtype.itemsize} (no broadcast "
+                           f"or reversed views: e.g. tensor.contiguous())")
+    return CudaView(ptr, shape, dtype, int(ordinal or 0), owner, strides)
+
+
+def device_outputs(frame: Any, names: Any) -> dict[str, str | None]:
+    """Let a running :class:`rfw.frame.Frame`'s next frames copy the graph outputs ``names``
+    into exported memory inside their own submission (vk with a CUDA link), so that
+    :func:`read_device` after a frame is the wrapper alone (no submit, no wait of its own:
+    ordered by the frame's fence, which finishing the frame waits for anyway). ``()``
+    stops it. Returns, by output, None (the frames copy it) or why not (read_device then
+    copies as before)."""
+    names = tuple(names)
+    out: dict[str, str | None] = {}
+    by_owner: dict[str, list[str]] = {}
+    for n in names:
+        if n not in frame.frame_plan.owner:
+            raise RfwError(f"device_outputs: '{n}' is not a resource of the graph")
+        by_owner.setdefault(frame.frame_plan.owner[n], []).append(n)
+    for owner in frame.executors:
+        backend = frame.backends.get(owner)
+        export = getattr(backend, "export_outputs", None)
+        mine = by_owner.get(owner, [])
+        if export is None:
+            out.update({n: f"the {owner} backend copies through the host" for n in mine})
+            continue
+        why = export(frame.executors[owner], mine)
+        out.update({n: why for n in mine})
+    return out
 
 
 def read_device(frame: Any, resource: str) -> DeviceArray:
@@ -557,7 +664,9 @@ def read_device(frame: Any, resource: str) -> DeviceArray:
     ``each_frame(k, frame)``) as a :class:`DeviceArray`, after its frames in flight: on vk
     with a GPU that CUDA shares memory with, copied on the GPU into exported memory
     (``zero_copy`` True; the same memory each read of the frame's resource, so the next
-    read overwrites it); elsewhere a host copy (``zero_copy`` False)."""
+    read overwrites it; after :func:`device_outputs` the copy the frame made itself, one
+    buffer per frame in flight, nothing submitted here); elsewhere a host copy
+    (``zero_copy`` False)."""
     frame.drain()
     owner = frame.frame_plan.owner[resource]
     backend = frame.backends.get(owner)

@@ -100,6 +100,13 @@ class VkBackend(BackendBase):
 
         return read_output(executor, resource)
 
+    def export_outputs(self, executor: VkExecutor, names: Any) -> str | None:
+        """From the next frame on, the frames copy the images ``names`` into exported memory
+        themselves (:func:`vkext.external.export_outputs`): None, or why they do not."""
+        from .external import export_outputs
+
+        return export_outputs(executor, names)
+
     def collect(self, executor: VkExecutor) -> dict[str, Any]:
         # before the scene, which owns the acceleration structures, goes; the culling
         # counters come back through the executor's readback, before the executor goes

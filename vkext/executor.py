@@ -229,6 +229,9 @@ class VkExecutor(ExecutorCore):
         # acceleration structures by plan resource, published by the passes that build them
         self.accels: dict[str, Any] = {}
         self.transients = None
+        # graph outputs the frames copy into exported memory (vkext.external.export_outputs)
+        self.frame_exports: Any = None
+        self._ending = False
         self.allocator: BlockAllocator | None = None
         self.programs = self.descriptors = self.ring = None
         self.bundles: BundleCache | None = None
@@ -612,7 +615,10 @@ class VkExecutor(ExecutorCore):
         its fence, then read its timestamps. A flush (not ``last``) that submits splits the
         frame (no longer one submit kept for replay); the frame's last submit records what
         the slot's command buffer now holds, for a frame to replay."""
+        self._ending = last
         fence = self._send_frame()
+        if last and fence is not None and self.frame_exports is not None:
+            self.frame_exports.submitted(slot)  # the frame copied its device outputs
         if not last:
             if fence is None:
                 return None
@@ -640,6 +646,8 @@ class VkExecutor(ExecutorCore):
             return None
         self._recording = False
         try:
+            if self._ending and self.frame_exports is not None:  # outputs to exported memory
+                self.frame_exports.record(self.cmd, slot)
             _check(lib.vkEndCommandBuffer(self.cmd))
         except BaseException:
             self.pool.reset()
@@ -738,6 +746,9 @@ class VkExecutor(ExecutorCore):
         slot.destroy(self.device)
 
     def _release(self) -> None:
+        if self.frame_exports is not None:
+            self.frame_exports.destroy()
+            self.frame_exports = None
         for obj in (self.bundles, self.sets, self.programs, getattr(self, "queues", None),
                     self.transients, self.allocator):
             if obj is not None:

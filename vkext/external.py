@@ -197,14 +197,22 @@ class ExportedBuffer(SharedMemory):
         return np.frombuffer(self._map, np.uint8, count=self.bytes, offset=offset)
 
     def destroy(self) -> None:
-        """With the device (it registers): free now, whatever still holds it."""
-        self.free()
+        """With the device (it registers): the Vulkan side goes now (the device is going);
+        the CUDA import of the memory stays while arrays of it live (the payload is the
+        import's too) and goes with the last of them. Freeing it here, as this once did,
+        left a tensor of a finished render pointing at unmapped memory (torch's
+        ``cudaErrorInvalidValue`` on the first read after ``render`` returned)."""
+        self._free_vulkan()
+        self.release()
 
     def free(self) -> None:
         if self.cuda_ptr is not None and self.link is not None:
             ptr, ext, self.cuda_ptr = self.cuda_ptr, self._external, None
             with contextlib.suppress(RfwError):  # at exit CUDA may be gone before us
                 cuda().free_import(ext, ptr, self.link.ordinal)
+        self._free_vulkan()
+
+    def _free_vulkan(self) -> None:
         if self._map is not None:
             with contextlib.suppress(BufferError):  # a numpy view of it lives: it stays
                 self._map.close()
@@ -345,12 +353,141 @@ class ImageExport:
 _exports: weakref.WeakKeyDictionary[Any, dict[str, ImageExport]] = weakref.WeakKeyDictionary()
 
 
+class FrameExports:
+    """Graph outputs copied into exported memory by the frame's own command buffer: at its
+    end (after the last pass, before ``vkEndCommandBuffer``) each image goes to a buffer of
+    the frame's slot (one per slot: a frame in flight never overwrites another's), so once
+    the frame's fence is waited for (the wait the frame does anyway) the output is a
+    :class:`DeviceArray` of memory CUDA already maps: no submit, no wait of its own.
+
+    ``link`` None (no CUDA: lavapipe) still records the copies (``record_without_cuda``:
+    tests read them through the buffers' fds). The copies are timed apart (two timestamps
+    per slot): :meth:`read_timer` reads the last frame's into ``gpu_ms``."""
+
+    def __init__(self, executor: Any, names: tuple[str, ...], link: CudaLink | None):
+        self.executor, self.device, self.names, self.link = executor, executor.device, names, link
+        self.buffers: dict[tuple[int, str], ExportedBuffer] = {}
+        self.timers: dict[int, Any] = {}
+        self.views: dict[tuple[int, str], DeviceArray] = {}
+        self.last: Any = None  # the slot of the last frame submitted with the copies
+        self.gpu_ms: list[float] = []
+        self._timed: set[int] = set()
+
+    def buffer(self, slot: Any, name: str) -> ExportedBuffer:
+        key = (id(slot), name)
+        buf = self.buffers.get(key)
+        if buf is None:
+            image = self.executor.image(name)
+            buf = self.buffers[key] = ExportedBuffer(
+                self.device, readback_bytes(image), ("transfer_dst",), link=self.link,
+                label=f"{name}:frame export")
+        return buf
+
+    def record(self, cmd: Any, slot: Any) -> None:
+        """The copies, at the end of the frame's command buffer ``cmd``."""
+        from .commands import TimestampPool
+
+        ex = self.executor
+        bufs = [self.buffer(slot, n) for n in self.names]
+        timer = self.timers.get(id(slot))
+        if timer is None and "timestamp" in self.device.caps:
+            timer = self.timers[id(slot)] = TimestampPool(self.device, 2,
+                                                          label="rfw:frame export timestamps")
+        if timer is not None:
+            timer.reset(cmd)
+            timer.write(cmd, "ALL_COMMANDS", 0)
+        ownership(self.device, cmd, bufs, acquire=True)
+        for name, buf in zip(self.names, bufs, strict=True):
+            image, state = ex.image(name), ex._final.get(name)
+            now = as_state(state or "UNDEFINED", source=True)
+            barrier(cmd, [ImageBarrier(image, now, TRANSFER_SRC)])
+            copy_image_to_buffer(cmd, image, buf)
+            after = as_state(state, source=False) if state is not None else None
+            if after is not None and after != TRANSFER_SRC:
+                barrier(cmd, [ImageBarrier(image, TRANSFER_SRC, after)])
+        ownership(self.device, cmd, bufs, acquire=False)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 1)
+
+    def submitted(self, slot: Any) -> None:
+        self.last = slot
+        self._timed.discard(id(slot))
+
+    def array(self, name: str) -> DeviceArray:
+        """The last finished frame's ``name`` (the caller waited for its fence)."""
+        slot = self.last
+        if slot is None:
+            raise RfwError(f"no frame has copied '{name}' into exported memory yet")
+        key = (id(slot), name)
+        view = self.views.get(key)
+        if view is None:
+            image = self.executor.image(name)
+            probe = texels(np.zeros(readback_bytes(image), np.uint8), image)
+            view = self.views[key] = self.buffers[key].array(0, probe.shape, probe.dtype)
+        return view
+
+    def read_timer(self) -> float | None:
+        """The last finished frame's copy time in GPU ms (appended to ``gpu_ms`` once per
+        frame; None without timestamps). Apart from :meth:`array`, which reads nothing."""
+        slot = self.last
+        timer = self.timers.get(id(slot)) if slot is not None else None
+        if timer is None:
+            return None
+        if id(slot) not in self._timed:
+            self._timed.add(id(slot))
+            a, b = timer.results(0, 2)
+            self.gpu_ms.append(max(0, int(b) - int(a)) / 1e6)
+        return self.gpu_ms[-1]
+
+    def destroy(self) -> None:
+        for timer in self.timers.values():
+            timer.destroy()
+        for buf in self.buffers.values():
+            buf.release()  # arrays handed out keep theirs
+        self.timers, self.buffers, self.views, self.last = {}, {}, {}, None
+
+
+def export_outputs(executor: Any, names: Any, *, record_without_cuda: bool = False) -> str | None:
+    """From the next frame on, copy the images ``names`` of a vk executor into exported
+    memory inside each frame's submission (:class:`FrameExports`); ``()`` stops it. Returns
+    None, or why the frames record no copy (no CUDA link: :func:`read_output` then reads
+    through the host)."""
+    names = tuple(dict.fromkeys(names))
+    for n in names:
+        if n in executor.buffers or n not in executor.images:
+            raise RfwError(f"device outputs are images of the plan: '{n}' is not one")
+    if names and getattr(executor, "queues", None) is not None:
+        raise RfwError("device outputs need the frame on one queue (async compute is on)")
+    link = cuda_link(executor.device)
+    link = link if isinstance(link, CudaLink) else None
+    executor.drain()
+    old = getattr(executor, "frame_exports", None)
+    if old is not None:
+        old.destroy()
+    executor.frame_exports = None
+    for slot in executor.in_flight.slots:  # command buffers held for replay lack (or have) them
+        slot.holds = None
+    if not names:
+        return None
+    if link is None and not record_without_cuda:
+        return cuda_link(executor.device)
+    if EXTENSION not in executor.device.extensions:
+        return f"{executor.device.name} has no {EXTENSION}"
+    executor.frame_exports = FrameExports(executor, names, link)
+    return None
+
+
 def read_output(executor: Any, resource: str) -> DeviceArray:
     """A vk executor's image ``resource`` (a graph output) as a :class:`DeviceArray`, after
-    every frame in flight: zero-copy where the device shares memory with CUDA (the export
-    recorded once per executor and image, so a later read is one submit), else a host copy
-    (``zero_copy`` False)."""
+    every frame in flight: zero-copy where the device shares memory with CUDA. Where the
+    frames copy it themselves (:func:`export_outputs`), the last frame's copy (nothing
+    submitted here); else the export recorded once per executor and image, so a read is one
+    submit and a wait. Without a link a host copy (``zero_copy`` False)."""
     executor.drain()
+    frames = getattr(executor, "frame_exports", None)
+    if frames is not None and frames.link is not None and resource in frames.names \
+            and frames.last is not None:
+        return frames.array(resource)
     device = executor.device
     link = cuda_link(device)
     if resource in executor.buffers or not isinstance(link, CudaLink):

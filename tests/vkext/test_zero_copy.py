@@ -104,10 +104,12 @@ def test_cuda_arrays_without_a_link_are_one_line(vk_device):
 
 
 @pytest.mark.parametrize(("array", "message"), [
-    (CudaLike((4, 3), "<f8"), "origins is a device array of dtype float64; it must be "
-                              "float32"),
+    (CudaLike((4, 3), "<f8"), "origins is a device array of dtype float64; rfw takes "
+                              "float32 only"),
     (CudaLike((4, 4)), r"origins is a device array of shape \(4, 4\); it must be \(N, 3\)"),
-    (CudaLike((4, 3), strides=(4, 16)), r"strides \(4, 16\); it must be C-contiguous"),
+    (CudaLike((4, 3), strides=(0, 4)), r"strides \(0, 4\) bytes; rfw takes positive "
+                                       r"multiples of 4"),
+    (CudaLike((4, 3), strides=(12, 6)), r"strides \(12, 6\) bytes"),
 ])
 def test_bad_device_arrays_are_one_line(array, message):
     with pytest.raises(RfwError, match=message):
@@ -269,3 +271,95 @@ def test_the_driver_structs_have_cuda_h_and_dlpack_h_sizes():
     assert ctypes.sizeof(interop._DLTensor) == 48
     assert ctypes.sizeof(interop._DLManagedTensor) == 64
     assert interop._ExternalMemoryHandleDesc.size.offset == 24
+    assert ctypes.sizeof(interop._Memcpy2D) == 128  # CUDA_MEMCPY2D
+    assert interop._Memcpy2D.dstXInBytes.offset == 56
+
+
+@pytest.mark.parametrize("make", [
+    lambda a: a,                                   # contiguous: one linear copy
+    lambda a: np.ascontiguousarray(a.T).T,         # a transposed view: a copy per column
+    lambda a: np.pad(a, ((0, 0), (0, 5)))[:, :3],  # a slice of an (N, 8) array: one pitched
+    lambda a: np.pad(a, ((0, 0), (2, 3)))[:, 2:5],  # ... at an offset
+    lambda a: a[::2],                              # every other row
+])
+def test_strided_rays_are_gathered_by_the_copies_planned(make):
+    """gather_copies' descriptors (cuMemcpy2D's terms) run on host bytes: the gathered
+    buffer is the array made contiguous; the control: the descriptors of a contiguous
+    array over the same memory gather something else."""
+    rays = np.arange(60, dtype=np.float32).reshape(20, 3) * 1.5 + 0.25
+    view = make(rays)
+    base = view.base if view.base is not None else view
+    while base.base is not None:
+        base = base.base
+    raw = np.frombuffer(base.tobytes(), np.uint8)
+    ptr = view.ctypes.data - base.ctypes.data
+    strides = None if view.flags.c_contiguous else view.strides
+    copies = interop.gather_copies(ptr, view.shape, strides, 4, 0)
+    out = np.zeros(view.nbytes, np.uint8)
+    interop.run_copies_on_host(copies, raw, out)
+    np.testing.assert_array_equal(out.view(np.float32).reshape(view.shape), view)
+    if strides is not None:
+        assert len(copies) in (1, 3)
+        wrong = np.zeros_like(out)
+        interop.run_copies_on_host(interop.gather_copies(ptr, view.shape, None, 4, 0), raw,
+                                   wrong)
+        assert not np.array_equal(wrong, out)
+
+
+def test_a_column_stream_and_single_rows_need_one_copy():
+    assert interop.gather_copies(64, (10,), (32,), 4, 0) == [
+        interop.Copy2D(64, 32, 0, 4, 4, 10)]
+    assert interop.gather_copies(8, (1, 3), (10**6, 4), 4, 0) == [
+        interop.Copy2D(8, 12, 0, 12, 12, 1)]
+    assert interop.gather_copies(8, (0, 3), (4, 0), 4, 0) == []
+
+
+def test_strided_rays_on_the_host_path_equal_contiguous_ones(vk_device):
+    o, d = _rays(64)
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as scene:
+        want = scene.cast(o, d)
+        wide = np.pad(o, ((0, 0), (0, 5)))[:, :3]
+        got = scene.cast(interop.DeviceArray.of_host(wide), np.ascontiguousarray(d.T).T,
+                         out="device")
+        for k in want:
+            np.testing.assert_array_equal(got[k].numpy(), want[k], err_msg=k)
+        moved = scene.cast(np.ascontiguousarray((o + 0.3).T).T, d)  # the control
+        assert not np.array_equal(moved["t"], want["t"])
+
+
+def test_frames_copy_their_outputs_into_exported_memory(vk_device):
+    """export_outputs: each frame's own command buffer copies the output into its slot's
+    exported buffer (read here through lavapipe's memfd); the control: the buffer of the
+    slot the frame did not use keeps the zeros written into it."""
+    if external.EXTENSION not in vk_device.extensions:
+        pytest.skip(f"no {external.EXTENSION}")
+    from vkext.commands import texels
+
+    cfg = apply_overrides(load_config(FORWARD), ["size=40x24", "frames=3"])
+    cfg = replace(cfg, outputs=["forward.hdr"])
+    seen = []
+
+    def each(k, frame):
+        ex = frame.executors["vk"]
+        if k == 0:
+            assert interop.device_outputs(frame, ["forward.hdr"])["forward.hdr"]  # no CUDA
+            assert external.export_outputs(ex, ["forward.hdr"],
+                                           record_without_cuda=True) is None
+            return
+        frame.drain()
+        fe = ex.frame_exports
+        image = ex.image("forward.hdr")
+        mine = fe.buffer(fe.last, "forward.hdr")
+        other = next((b for (sid, _), b in fe.buffers.items() if sid != id(fe.last)), None)
+        want = ex.read("forward.hdr")
+        got = texels(np.array(mine.host_view()), image)
+        seen.append((np.array_equal(got, want), other is not None and
+                     np.array_equal(texels(np.array(other.host_view()), image), want)))
+        mine.host_view()[:] = 0  # the next frame on this slot must write it again
+        with pytest.raises(RfwError, match="not mapped into CUDA"):
+            fe.array("forward.hdr")  # no link here
+        assert fe.read_timer() >= 0 and len(fe.gpu_ms) == k
+
+    render(cfg, device=vk_device, backend="vk", each_frame=each)
+    assert [s[0] for s in seen] == [True, True]
+    assert seen[0][1] is False  # frame 1's slot alone was written (the other never was)

@@ -1,7 +1,8 @@
 """Casts whose rays and hits stay on the GPU: :class:`SharedRays`, the ray and hit buffers of
 a scene exported to CUDA (``vkext.external``), and :func:`cast_shared`, one cast through them.
 
-The caller's CUDA rays are copied device to device (``cuMemcpyDtoDAsync``, after
+The caller's CUDA rays are copied device to device (``cuMemcpyDtoDAsync``, or
+``cuMemcpy2DAsync`` gathering a strided view: ``rfw.interop.gather_copies``; after
 ``cuCtxSynchronize`` so every stream's writes landed) into the exported ray buffer, which the
 trace reads as it is; the trace writes the exported hit buffer, and the hits go back as
 zero-copy :class:`rfw.interop.DeviceArray` views of it once the fence is waited for. Nothing
@@ -16,14 +17,13 @@ the host (that would read the hits back): their ``t`` is NaN and ``primitive`` t
 
 from __future__ import annotations
 
-import ctypes
 import time
 from typing import Any
 
 import numpy as np
 
 from rfw.errors import RfwError
-from rfw.interop import CudaView, DeviceArray, cuda
+from rfw.interop import CudaView, DeviceArray, copies, cuda, gather_copies
 
 from ..commands import TimestampPool
 from ..external import CudaLink, ExportedBuffer, Submitter, cuda_link, ownership
@@ -169,10 +169,10 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
         with drv.push(link.ordinal):
             drv.call("cuCtxSynchronize")  # the caller's work on any stream is done
             for src, offset in jobs:
-                if isinstance(src, CudaView):
-                    drv.call("cuMemcpyDtoDAsync_v2", ctypes.c_ulonglong(base + offset),
-                             ctypes.c_ulonglong(src.ptr), ctypes.c_size_t(n * 4 * (
-                                 3 if src.shape[1:] else 1)), ctypes.c_void_p(0))
+                if isinstance(src, CudaView):  # strided views gathered by pitched copies
+                    drv.gather(gather_copies(src.ptr, src.shape, src.strides, 4,
+                                             base + offset))
+                    copies["device_to_device"] += 1
                 else:
                     drv.copy_htod(base + offset, np.ascontiguousarray(src, np.float32),
                                   link.ordinal)
