@@ -77,14 +77,21 @@ class CudaDriver:
         except OSError as e:
             raise RfwError(f"CUDA is not available: cannot load {library} ({e})") from None
         self._contexts: dict[int, ctypes.c_void_p] = {}
+        self._fns: dict[str, Any] = {}
         self._lock = threading.Lock()
+        # driver calls by name since load (what a cast costs: benchmarks count them)
+        self.calls: dict[str, int] = {}
         self.call("cuInit", ctypes.c_uint(0))
 
     def call(self, name: str, *args: Any) -> None:
-        fn = getattr(self.lib, name, None)
+        fn = self._fns.get(name)
         if fn is None:
-            raise RfwError(f"CUDA: {name} is missing from the driver")
-        fn.restype = ctypes.c_int
+            fn = getattr(self.lib, name, None)
+            if fn is None:
+                raise RfwError(f"CUDA: {name} is missing from the driver")
+            fn.restype = ctypes.c_int
+            self._fns[name] = fn
+        self.calls[name] = self.calls.get(name, 0) + 1
         result = fn(*args)
         if result != 0:
             raise RfwError(f"CUDA: {name} failed with CUresult {result} ({self.error(result)})")
