@@ -10,6 +10,13 @@ is mapped, staged or copied to the host. All rays of a cast are one dispatch (th
 grow to the largest cast, never shrink). The buffers change hands by queue-family transfers
 (acquired from the external world before the trace, released after).
 
+:meth:`SharedRays.device_rays` hands the ray buffer itself out as writable device arrays: a
+cast of exactly those views (:meth:`SharedRays.in_place`) copies nothing in and needs one
+``cuCtxSynchronize`` (the caller's writes landed). The command buffer is recorded once per
+buffer, size and interval; the submit and the fence wait go straight to the loader
+(``Submitter``); the GPU time is read from the timestamps only when ``last`` is asked for.
+``last["phases_us"]`` has the cast's own clock: copy in, record, submit and wait, hit views.
+
 Rays the shaders refuse (non-finite origin or direction, zero direction) are not checked on
 the host (that would read the hits back): their ``t`` is NaN and ``primitive`` the code of
 ``streams.INVALID`` (-2, -3, -4).
