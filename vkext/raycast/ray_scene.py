@@ -105,9 +105,9 @@ class RayScene:
         with self.lock:
             shared, self._pending_gpu = self._pending_gpu, None
             if shared is not None and shared is self.shared:  # the last device cast's
-                gpu = shared.gpu_ms()
-                self._last.update(gpu_ms=gpu, mrays_per_s=self._last["rays"]
-                                  / max(gpu, 1e-9) / 1e3)
+                parts = shared.gpu_parts()
+                self._last.update(parts, mrays_per_s=self._last["rays"]
+                                  / max(parts["gpu_ms"], 1e-9) / 1e3)
             return dict(self._last)
 
     def device_rays(self, n: int) -> tuple[Any, Any]:

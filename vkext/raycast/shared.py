@@ -53,7 +53,8 @@ class SharedRays:
         self._views: tuple[Any, dict[str, DeviceArray]] | None = None
         self._rays: tuple[Any, tuple[Any, Any]] | None = None
         self.submitter = Submitter(self.device, label=f"{label}:shared")
-        self.timer = TimestampPool(self.device, 2, label=f"{label}:shared timestamps") \
+        # stamps: before the acquire, before the trace, after it, after the release
+        self.timer = TimestampPool(self.device, 4, label=f"{label}:shared timestamps") \
             if "timestamp" in self.device.caps else None
 
     def reserve(self, n: int) -> None:
@@ -75,21 +76,34 @@ class SharedRays:
             return
         cmd = self.submitter.begin()
         shared = [self.rays, self.hits]
+        timer = self.timer
+        if timer is not None:
+            timer.reset(cmd)
+            timer.write(cmd, "ALL_COMMANDS", 0)
         ownership(self.device, cmd, shared, acquire=True)
-        if self.timer is not None:
-            self.timer.reset(cmd)
-            self.timer.write(cmd, "ALL_COMMANDS", 0)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 1)
         self.caster._record(cmd, self.set, sbt, n, per_ray, tmin, tmax)
-        if self.timer is not None:
-            self.timer.write(cmd, "ALL_COMMANDS", 1)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 2)
         ownership(self.device, cmd, shared, acquire=False)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 3)
         self.submitter.end(key)
 
     def gpu_ms(self) -> float | None:
+        """The last cast's trace in GPU ms (between the ownership barriers)."""
+        parts = self.gpu_parts()
+        return None if parts is None else parts["gpu_ms"]
+
+    def gpu_parts(self) -> dict[str, float] | None:
+        """The last cast's GPU ms: the trace (``gpu_ms``), the acquire barrier before it and
+        the release after it (``gpu_acquire_ms``, ``gpu_release_ms``)."""
         if self.timer is None:
             return None
-        a, b = self.timer.results(0, 2)
-        return max(0, int(b) - int(a)) / 1e6
+        a, b, c, d = (int(x) for x in self.timer.results(0, 4))
+        return {"gpu_ms": max(0, c - b) / 1e6, "gpu_acquire_ms": max(0, b - a) / 1e6,
+                "gpu_release_ms": max(0, d - c) / 1e6}
 
     @property
     def base(self) -> int:
@@ -219,6 +233,7 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
         with drv.push(link.ordinal):
             # the caller's work on any stream is done (its writes into device_rays included)
             drv.call("cuCtxSynchronize")
+            t_sync = clock()
             for src, offset in jobs:
                 if isinstance(src, CudaView):  # strided views gathered by pitched copies
                     drv.gather(gather_copies(src.ptr, src.shape, src.strides, 4,
@@ -227,6 +242,7 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
                 else:
                     drv.copy_htod(base + offset, np.ascontiguousarray(src, np.float32),
                                   link.ordinal)
+            t_copies = clock()
             if jobs:
                 drv.call("cuCtxSynchronize")  # the copies landed before Vulkan reads
         t_in = clock()
@@ -245,6 +261,9 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
                        "rays_in_place": own, "wall_ms": (done - t0) / 1e6,
                        "copy_in_ms": (t_in - t0) / 1e6, "submit_wait_ms": (done - t_in) / 1e6,
                        "phases_us": {"copy_in": (t_in - t0) / 1e3,
+                                     "copy_in_first_sync": (t_sync - t0) / 1e3,
+                                     "copy_in_queue_copies": (t_copies - t_sync) / 1e3,
+                                     "copy_in_last_sync": (t_in - t_copies) / 1e3,
                                      "record": (t_rec - t_in) / 1e3,
                                      "submit_wait": (done - t_rec) / 1e3,
                                      "hit_views": (t_out - done) / 1e3}}
