@@ -251,6 +251,19 @@ def probe() -> dict[str, Any]:
                                  "t_equal_host": bool(np.array_equal(t, want["t"]))}
                 except Exception as e:  # each layout named on its own
                     res[name] = {"error": error_line(e)}
+            try:  # rays written into the scene's own buffer: cast in place
+                ro, rd = rs.device_rays(len(o))
+                torch.from_dlpack(ro).copy_(oc)
+                torch.from_dlpack(rd).copy_(dc)
+                got = rs.cast(ro, rd)
+                t = torch.from_dlpack(got["t"]).cpu().numpy()
+                res["device_rays"] = {"in_place": rs.last.get("rays_in_place"),
+                                      "wall_ms": rs.last["wall_ms"],
+                                      "copy_in_ms": rs.last["copy_in_ms"],
+                                      "t_equal_host": bool(np.array_equal(t, want["t"]))
+                                      and rs.last.get("rays_in_place") is True}
+            except Exception as e:
+                res["device_rays"] = {"error": error_line(e)}
         bad = [k for k, r in res.items() if isinstance(r, dict)
                and (r.get("error") or not r.get("t_equal_host"))]
         if bad:
@@ -368,19 +381,41 @@ class MapCounter:
 
 
 def timed_casts(scene: Any, o: Any, d: Any, casts: int, warmup: int, wrap: Any,
-                sync: Any) -> tuple[list[float], Any]:
-    """Wall per cast: sync, cast, wrap the hits (from_dlpack), sync."""
+                sync: Any, *, write: Any = None,
+                phases: list[dict[str, float]] | None = None) -> tuple[list[float], Any]:
+    """Wall per cast: sync, (``write``: the rays written in place, a row of its own), cast,
+    wrap the hits (from_dlpack), sync. ``phases``: each timed cast's ``phases_us`` (the
+    cast's own clock, read after the timed region)."""
     got = None
     times = []
     for i in range(warmup + casts):
         sync()
         t0 = time.perf_counter()
+        if write is not None:
+            write()
         hits = scene.cast(o, d)
         got = {k: wrap(v) for k, v in hits.items()}
         sync()
         if i >= warmup:
             times.append(time.perf_counter() - t0)
+            if phases is not None:
+                phases.append(dict(scene._scene._last.get("phases_us") or {}))
     return times, got
+
+
+def median_phases(phases: list[dict[str, float]]) -> dict[str, float]:
+    keys = sorted({k for p in phases for k in p})
+    return {k: statistics.median(p[k] for p in phases if k in p) for k in keys}
+
+
+def calls_of_a_cast(rs: Any, o: Any, d: Any) -> dict[str, int]:
+    """CUDA driver calls (rfw.interop.CudaDriver.calls) of one cast of ``o``, ``d``."""
+    from rfw import interop
+
+    drv = interop.cuda()
+    before = dict(drv.calls)
+    rs.cast(o, d)
+    return {k: v - before.get(k, 0) for k, v in drv.calls.items() if v != before.get(k, 0)}
 
 
 def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, Any]:
@@ -428,12 +463,16 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
             ot = torch.from_numpy(np.ascontiguousarray(o)).cuda()
             dt = torch.from_numpy(np.ascontiguousarray(d)).cuda()
             before = dict(interop.copies)
+            phases: list[dict[str, float]] = []
             with MapCounter() as maps:
                 times, got = timed_casts(rs, ot, dt, args.casts, args.warmup,
-                                         torch.from_dlpack, torch.cuda.synchronize)
+                                         torch.from_dlpack, torch.cuda.synchronize,
+                                         phases=phases)
             copies = {k: interop.copies[k] - before[k] for k in before}
             out["torch"] = {**summary(times), "last": rs.last, "maps_during_casts":
-                            maps.counts, "rfw_copies_during_casts": copies}
+                            maps.counts, "rfw_copies_during_casts": copies,
+                            "phases_us_median": median_phases(phases),
+                            "cuda_calls_per_cast": calls_of_a_cast(rs, ot, dt)}
             before = dict(interop.copies)
             rs.cast(ot, dt, out="host")  # the counter's control: hits copied to the host
             out["torch"]["rfw_copies_of_a_host_cast"] = {
@@ -456,16 +495,64 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
                 except Exception as e:
                     note(f"strided rays '{name}' failed ({error_line(e)})")
                     out[f"torch_{name}"] = {"error": error_line(e)}
+            try:
+                out["torch_device_rays"], out["torch_device_rays_written"] = \
+                    device_rays_rows(args, torch, rs, ot, dt, want)
+            except Exception as e:
+                note(f"device_rays rows failed ({error_line(e)})")
+                out["torch_device_rays"] = {"error": error_line(e), "where": traceback
+                                            .format_exc().strip().splitlines()[-4:]}
         if cupy is not None:
             oc, dc = cupy.asarray(o), cupy.asarray(d)
             sync = cupy.cuda.runtime.deviceSynchronize
             times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync)
-            out["cupy"] = {**summary(times), "last": rs.last,
+            out["cupy"] = {**summary(times), "last": rs.last, "strides": [oc.strides, dc.strides],
                            "t_equal_host_path": bool(np.array_equal(cupy.asnumpy(got["t"]),
                                                                     want["t"]))}
+            # cupy.asarray keeps primary_rays' transposed layout (above): C-contiguous here
+            oc, dc = cupy.asarray(np.ascontiguousarray(o)), cupy.asarray(np.ascontiguousarray(d))
+            times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync)
+            out["cupy_contiguous"] = {
+                **summary(times), "last": rs.last, "strides": [oc.strides, dc.strides],
+                "t_equal_host_path": bool(np.array_equal(cupy.asnumpy(got["t"]), want["t"]))}
     finally:
         rs.close()
     return out
+
+
+def device_rays_rows(args: argparse.Namespace, torch: Any, rs: Any, ot: Any, dt: Any,
+                     want: dict[str, np.ndarray]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Rays written by torch into ``rs.device_rays(n)`` (the scene's exported ray buffer),
+    cast in place (no copy in): the timed region as the torch row's (sync, cast, wrap,
+    sync), the rays written once before; then with the write (``copy_`` from the ray
+    tensors, as generating them there would) inside the timed region."""
+    from rfw import interop
+
+    n = ot.shape[0]
+    ro, rd = rs.device_rays(n)
+    to, td = torch.from_dlpack(ro), torch.from_dlpack(rd)
+    to.copy_(ot)
+    td.copy_(dt)
+    torch.cuda.synchronize()
+    rows = []
+    for write in (None, lambda: (to.copy_(ot), td.copy_(dt))):
+        before = dict(interop.copies)
+        phases: list[dict[str, float]] = []
+        times, got = timed_casts(rs, ro, rd, args.casts, args.warmup, torch.from_dlpack,
+                                 torch.cuda.synchronize, write=write, phases=phases)
+        copies = {k: interop.copies[k] - before[k] for k in before}
+        row = {**summary(times), "last": rs.last, "rfw_copies_during_casts": copies,
+               "phases_us_median": median_phases(phases),
+               "rays_ptr_is_exported_buffer": to.data_ptr() == rs._scene.shared.rays.cuda_ptr,
+               **{f"{k}_equal_host_path": bool(np.array_equal(got[k].cpu().numpy(), want[k]))
+                  for k in want}}
+        if write is None:
+            row["cuda_calls_per_cast"] = calls_of_a_cast(rs, ro, rd)
+        rows.append(row)
+        if not all(row[f"{k}_equal_host_path"] for k in want):
+            note(f"device_rays hits ({'written' if write else 'in place'}) differ from the "
+                 f"host path's")
+    return rows[0], rows[1]
 
 
 def strided_rays(torch: Any, o: Any, d: Any) -> dict[str, tuple[Any, Any]]:
@@ -610,6 +697,7 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dic
     cfg = replace(cfg, outputs=["forward.hdr"])
     times: list[float] = []
     keep: dict[str, Any] = {}
+    parts: dict[str, list[float]] = {}
 
     def each(k: int, frame: Any) -> None:
         if in_frame and k == 0:
@@ -624,6 +712,17 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dic
         torch.cuda.synchronize()
         if k >= args.warmup:
             times.append(time.perf_counter() - t0)
+            # the same steps timed one by one after the timed read (where the time goes)
+            c0 = time.perf_counter()
+            a = interop.read_device(frame, "forward.hdr")
+            c1 = time.perf_counter()
+            t = torch.from_dlpack(a) if a.zero_copy else None
+            c2 = time.perf_counter()
+            torch.cuda.synchronize()
+            c3 = time.perf_counter()
+            for part, v in (("read_device", c1 - c0), ("from_dlpack", c2 - c1),
+                            ("synchronize", c3 - c2)):
+                parts.setdefault(part, []).append(v * 1e6)
         if k == args.warmup:  # checked here: the arrays die with the render's device
             keep["zero_copy"], keep["device"] = a.zero_copy, a.device
             if t is not None:
@@ -639,6 +738,7 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dic
         result = render(cfg, backend="vk", each_frame=each)
         res = {**summary(times), "median_us": statistics.median(times) * 1e6,
                "frames": len(times), "frame_gpu_ms_passes": result.gpu_ms_total,
+               "parts_us_median": {k: statistics.median(v) for k, v in parts.items()},
                **{k: keep.get(k) for k in ("zero_copy", "device", "equal_host_readback")}}
         if in_frame:
             copy = keep.get("copy_gpu_ms") or []
@@ -679,6 +779,11 @@ def verdicts(rec: dict[str, Any]) -> dict[str, Any]:
            if torch_rec else None}
     out["embree_ok"] = out["embree_ratio"] is not None and \
         out["embree_ratio"] >= TARGETS["embree_ratio"]
+    for row in ("torch_device_rays", "torch_device_rays_written"):
+        ms = rays.get(row, {}).get("median_ms")
+        out[f"{row}_ms"] = ms
+        out[f"{row}_ok"] = ms is not None and ms <= TARGETS["cast_ms"]
+        out[f"{row}_embree_ratio"] = embree / ms if ms and embree else None
     return out
 
 

@@ -77,14 +77,21 @@ class CudaDriver:
         except OSError as e:
             raise RfwError(f"CUDA is not available: cannot load {library} ({e})") from None
         self._contexts: dict[int, ctypes.c_void_p] = {}
+        self._fns: dict[str, Any] = {}
         self._lock = threading.Lock()
+        # driver calls by name since load (what a cast costs: benchmarks count them)
+        self.calls: dict[str, int] = {}
         self.call("cuInit", ctypes.c_uint(0))
 
     def call(self, name: str, *args: Any) -> None:
-        fn = getattr(self.lib, name, None)
+        fn = self._fns.get(name)
         if fn is None:
-            raise RfwError(f"CUDA: {name} is missing from the driver")
-        fn.restype = ctypes.c_int
+            fn = getattr(self.lib, name, None)
+            if fn is None:
+                raise RfwError(f"CUDA: {name} is missing from the driver")
+            fn.restype = ctypes.c_int
+            self._fns[name] = fn
+        self.calls[name] = self.calls.get(name, 0) + 1
         result = fn(*args)
         if result != 0:
             raise RfwError(f"CUDA: {name} failed with CUresult {result} ({self.error(result)})")
@@ -314,6 +321,13 @@ def _destroy_capsule(capsule: int) -> None:
 def _capsule(owner: Any, ptr: int, shape: tuple[int, ...], dtype: np.dtype,
              device: tuple[int, int]) -> Any:
     """A dlpack capsule of C-contiguous memory at ``ptr`` that keeps ``owner`` alive."""
+    return _capsule_of(_template(ptr, shape, dtype, device), owner)
+
+
+def _template(ptr: int, shape: tuple[int, ...], dtype: np.dtype,
+              device: tuple[int, int]) -> tuple[bytes, Any]:
+    """The bytes of a DLManagedTensor of ``ptr`` and the dims array its shape points at
+    (kept alive by whoever keeps the template: :class:`DeviceArray` makes it once)."""
     managed = _DLManagedTensor()
     dims = (ctypes.c_int64 * max(1, len(shape)))(*shape)
     t = managed.dl_tensor
@@ -323,9 +337,14 @@ def _capsule(owner: Any, ptr: int, shape: tuple[int, ...], dtype: np.dtype,
     t.shape = dims
     t.strides = ctypes.POINTER(ctypes.c_int64)()  # NULL: C-contiguous
     managed.deleter = _delete
+    return bytes(managed), dims
+
+
+def _capsule_of(template: tuple[bytes, Any], owner: Any) -> Any:
+    managed = _DLManagedTensor.from_buffer_copy(template[0])
     address = ctypes.addressof(managed)
     with _live_lock:
-        _live[address] = (owner, managed, dims)
+        _live[address] = (owner, managed, template[1])
     return _capsule_new(address, _NAME, _destroy_capsule)
 
 
@@ -373,6 +392,7 @@ class DeviceArray:
                  owner: Any, host: np.ndarray | None = None):
         self.ptr, self.shape, self.dtype = int(ptr), tuple(int(s) for s in shape), np.dtype(dtype)
         self._ordinal, self._owner, self._host = ordinal, owner, host
+        self._dl: tuple[bytes, Any] | None = None  # the capsule's template, made once
         hold = getattr(owner, "hold", None)
         if hold is not None:  # the exported memory lives while any view of it does
             hold(self)
@@ -421,7 +441,9 @@ class DeviceArray:
             raise BufferError("rfw's DeviceArray shares its memory (copy=True is not offered)")
         if dl_device is not None and tuple(dl_device) != self.__dlpack_device__():
             raise BufferError(f"this array lives on {self.device}")
-        return _capsule(self, self.ptr, self.shape, self.dtype, self.__dlpack_device__())
+        if self._dl is None:
+            self._dl = _template(self.ptr, self.shape, self.dtype, self.__dlpack_device__())
+        return _capsule_of(self._dl, self)
 
     def numpy(self) -> np.ndarray:
         """The values on the host: the array itself (cpu) or a copy (cuda)."""

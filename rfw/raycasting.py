@@ -342,6 +342,30 @@ class RayScene:
         except RfwError as e:
             raise e.about(element) from None
 
+    def device_rays(self, n: int) -> tuple[Any, Any]:
+        """(origins, directions) for ``n`` rays: writable (n, 3) float32
+        :class:`rfw.interop.DeviceArray` to fill (``torch.from_dlpack(o).copy_(rays)``,
+        or generate them there) and pass to :meth:`cast` as they are.
+
+        Where :attr:`zero_copy`, they are the scene's own ray buffer on the GPU, so such a
+        cast copies nothing in (``last["rays_in_place"]``); the same memory each call, and
+        a cast of more rays moves the buffer (older views still cast, copied in like any
+        array). Elsewhere they are host arrays behind the same face (``device`` ``"cpu"``,
+        write them through ``.numpy()``), cast through the host path."""
+        element = "RayScene.device_rays"
+        n = int(n)
+        if n < 1:
+            raise RfwError(f"n must be positive, got {n}", element=element)
+        if self.closed:
+            raise RfwError("the ray scene is closed: make a new rfw.RayScene", element=element)
+        if self.zero_copy_reason is None and getattr(self._scene, "accel", None) is not None:
+            try:
+                return self._scene.device_rays(n)
+            except RfwError as e:
+                raise e.about(element) from None
+        return tuple(interop.DeviceArray.of_host(np.zeros((n, 3), np.float32))
+                     for _ in range(2))
+
     def _cast_device(self, scene: Any, origins: Any, directions: Any, t_min: Any,
                      t_max: Any) -> dict[str, Any]:
         """A cast through the backend's GPU-resident buffers: CUDA arrays as views, host

@@ -363,3 +363,62 @@ def test_frames_copy_their_outputs_into_exported_memory(vk_device):
     render(cfg, device=vk_device, backend="vk", each_frame=each)
     assert [s[0] for s in seen] == [True, True]
     assert seen[0][1] is False  # frame 1's slot alone was written (the other never was)
+
+
+def test_device_rays_are_the_ray_buffer_a_cast_reads_in_place(vk_device):
+    """``SharedRays.device_rays`` on lavapipe's memfd: rays written into the views are what
+    the trace reads, with nothing copied in (``in_place``); the controls: a copy of the
+    views, and views made for another ray count, are not in place, and other rays written
+    into the views give other hits."""
+    if external.EXTENSION not in vk_device.extensions:
+        pytest.skip(f"no {external.EXTENSION}")
+    from rfw.raycasting import _mesh_scene
+
+    scene = _mesh_scene(_TRI, _FACES)
+    vscene = VkRayScene(vk_device, scene)
+    o, d = _rays(120)
+    n = len(o)
+    shared = SharedRays(vscene.caster, vscene.accel.tlas, None, label="test device rays")
+    try:
+        want = vscene.cast(o, d, 0.0, 5.0, hits=("t", "primitive"))
+        ro, rd = shared.device_rays(n)
+        assert shared.device_rays(n) == (ro, rd)  # made once per buffer and size
+        assert shared.in_place(n, ro, rd)
+        assert not shared.in_place(n, interop.DeviceArray.of_host(ro.numpy().copy()), rd)
+        assert not shared.in_place(n, rd, ro)
+        small = shared.device_rays(n // 2)
+        assert not shared.in_place(n, *small) and shared.in_place(n // 2, *small)
+        sbt = vscene.caster._table(vscene.accel.hit_records) \
+            if vscene.method == "ray_pipeline" else None
+        ro, rd = shared.device_rays(n)
+        for rays, same in ((o, True), (o + np.float32([0.9, 0, 0]), False)):
+            ro.numpy()[:], rd.numpy()[:] = rays, d
+            shared.record(n, sbt, False, 0.0, 5.0)
+            shared.submitter.run()
+            hits = shared.hits.host_view()
+            got = {"t": hits[:4 * n].view(np.float32), "primitive": hits[4 * n:8 * n].view(
+                np.int32)}
+            assert all(np.array_equal(got[k], want[k]) for k in want) is same
+            del hits, got
+        del ro, rd, small
+    finally:
+        shared.destroy()
+        vscene.destroy()
+
+
+def test_device_rays_without_cuda_are_host_arrays_cast_on_the_host(vk_device):
+    """``rfw.RayScene.device_rays`` where nothing is shared with CUDA (lavapipe): host
+    arrays behind the DeviceArray face; written and cast they give the numpy cast's hits,
+    and other rays written give other hits (the control)."""
+    o, d = _rays(90)
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as rs:
+        want = rs.cast(o, d)
+        ro, rd = rs.device_rays(len(o))
+        assert (ro.device, ro.zero_copy, ro.shape, ro.dtype) == ("cpu", False, (90, 3),
+                                                                 np.float32)
+        for rays, same in ((o, True), (o + np.float32([0.9, 0, 0]), False)):
+            ro.numpy()[:], rd.numpy()[:] = rays, d
+            got = rs.cast(ro, rd)
+            assert all(np.array_equal(got[k], want[k]) for k in want) is same
+        with pytest.raises(RfwError, match="n must be positive"):
+            rs.device_rays(0)

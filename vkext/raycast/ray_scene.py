@@ -61,6 +61,7 @@ class RayScene:
         self.builds = 0
         self.closed = False
         self.shared = None  # .shared.SharedRays, made by the first device cast
+        self._pending_gpu = None  # the SharedRays whose timestamps `last` still has to read
         empty = all(len(m.indices) == 0 for m in scene.meshes) or not scene.instances
         if not empty:
             self.accel = SceneAccel(device, scene, label=label)
@@ -87,6 +88,7 @@ class RayScene:
                 if name in arrays:
                     arrays[name][...] = value
             self._last = {"method": self.method, "rays": len(origins), "batches": 0}
+            self._pending_gpu = None
             return {k: arrays[k] for k in hits}
         with self.lock:  # the caster is the device's: its last is this cast's only here
             if self.closed:  # closed by another thread while this one waited
@@ -94,12 +96,37 @@ class RayScene:
             got = self.caster.cast(self.accel, self.buffers, origins, directions, tmin,
                                    tmax, batch=self.batch, hits=hits, out=out)
             self._last = dict(self.caster.last)
+            self._pending_gpu = None
             return got
 
     @property
     def last(self) -> dict[str, Any]:
         """This scene's last cast's counts and times (see :attr:`Raycaster.last`)."""
-        return dict(self._last)
+        with self.lock:
+            shared, self._pending_gpu = self._pending_gpu, None
+            if shared is not None and shared is self.shared:  # the last device cast's
+                parts = shared.gpu_parts()
+                self._last.update(parts, mrays_per_s=self._last["rays"]
+                                  / max(parts["gpu_ms"], 1e-9) / 1e3)
+            return dict(self._last)
+
+    def device_rays(self, n: int) -> tuple[Any, Any]:
+        """(origins, directions): writable (n, 3) float32 device arrays that are this
+        scene's exported ray buffer (:meth:`.shared.SharedRays.device_rays`): write rays
+        into them (``torch.from_dlpack(o).copy_(...)``) and :meth:`cast_device` them, and
+        nothing is copied in. Valid until a cast of more rays grows the buffer (older views
+        then still work, copied like any caller's array)."""
+        from .shared import SharedRays, link_of
+
+        with self.lock:
+            if self.closed:
+                raise RfwError("the ray scene is closed: make a new rfw.RayScene")
+            if self.accel is None:
+                raise RfwError("a ray scene with nothing to hit has no ray buffer")
+            if self.shared is None:
+                self.shared = SharedRays(self.caster, self.accel.tlas,
+                                         link_of(self.device), label=self.label)
+            return self.shared.device_rays(n)
 
     def sharing(self) -> str | None:
         """None where casts can keep rays and hits on the GPU (the device shares memory

@@ -10,6 +10,13 @@ is mapped, staged or copied to the host. All rays of a cast are one dispatch (th
 grow to the largest cast, never shrink). The buffers change hands by queue-family transfers
 (acquired from the external world before the trace, released after).
 
+:meth:`SharedRays.device_rays` hands the ray buffer itself out as writable device arrays: a
+cast of exactly those views (:meth:`SharedRays.in_place`) copies nothing in and needs one
+``cuCtxSynchronize`` (the caller's writes landed). The command buffer is recorded once per
+buffer, size and interval; the submit and the fence wait go straight to the loader
+(``Submitter``); the GPU time is read from the timestamps only when ``last`` is asked for.
+``last["phases_us"]`` has the cast's own clock: copy in, record, submit and wait, hit views.
+
 Rays the shaders refuse (non-finite origin or direction, zero direction) are not checked on
 the host (that would read the hits back): their ``t`` is NaN and ``primitive`` the code of
 ``streams.INVALID`` (-2, -3, -4).
@@ -44,8 +51,10 @@ class SharedRays:
         self.capacity = self.generation = 0
         self.rays = self.hits = self.set = None
         self._views: tuple[Any, dict[str, DeviceArray]] | None = None
+        self._rays: tuple[Any, tuple[Any, Any]] | None = None
         self.submitter = Submitter(self.device, label=f"{label}:shared")
-        self.timer = TimestampPool(self.device, 2, label=f"{label}:shared timestamps") \
+        # stamps: before the acquire, before the trace, after it, after the release
+        self.timer = TimestampPool(self.device, 4, label=f"{label}:shared timestamps") \
             if "timestamp" in self.device.caps else None
 
     def reserve(self, n: int) -> None:
@@ -67,21 +76,74 @@ class SharedRays:
             return
         cmd = self.submitter.begin()
         shared = [self.rays, self.hits]
+        timer = self.timer
+        if timer is not None:
+            timer.reset(cmd)
+            timer.write(cmd, "ALL_COMMANDS", 0)
         ownership(self.device, cmd, shared, acquire=True)
-        if self.timer is not None:
-            self.timer.reset(cmd)
-            self.timer.write(cmd, "ALL_COMMANDS", 0)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 1)
         self.caster._record(cmd, self.set, sbt, n, per_ray, tmin, tmax)
-        if self.timer is not None:
-            self.timer.write(cmd, "ALL_COMMANDS", 1)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 2)
         ownership(self.device, cmd, shared, acquire=False)
+        if timer is not None:
+            timer.write(cmd, "ALL_COMMANDS", 3)
         self.submitter.end(key)
 
     def gpu_ms(self) -> float | None:
+        """The last cast's trace in GPU ms (between the ownership barriers)."""
+        parts = self.gpu_parts()
+        return None if parts is None else parts["gpu_ms"]
+
+    def gpu_parts(self) -> dict[str, float] | None:
+        """The last cast's GPU ms: the trace (``gpu_ms``), the acquire barrier before it and
+        the release after it (``gpu_acquire_ms``, ``gpu_release_ms``)."""
         if self.timer is None:
             return None
-        a, b = self.timer.results(0, 2)
-        return max(0, int(b) - int(a)) / 1e6
+        a, b, c, d = (int(x) for x in self.timer.results(0, 4))
+        return {"gpu_ms": max(0, c - b) / 1e6, "gpu_acquire_ms": max(0, b - a) / 1e6,
+                "gpu_release_ms": max(0, d - c) / 1e6}
+
+    @property
+    def base(self) -> int:
+        """Where the ray buffer starts as callers' arrays point at it: the CUDA pointer,
+        or without a link (lavapipe) the host address of its memfd mapping."""
+        if self.rays.cuda_ptr is not None:
+            return self.rays.cuda_ptr
+        return int(self.rays.host_view().ctypes.data)
+
+    def device_rays(self, n: int) -> tuple[Any, Any]:
+        """(origins, directions): writable (n, 3) float32 views of the ray buffer itself,
+        where a cast of ``n`` rays reads them (made once per buffer and size). A cast of
+        exactly these views copies nothing in (:meth:`in_place`). Zero-copy
+        :class:`DeviceArray` with a link; without one (lavapipe) host arrays of the
+        buffer's memfd mapping, for tests."""
+        self.reserve(max(n, 1))
+        key = (self.generation, n)
+        if self._rays is not None and self._rays[0] == key:
+            return self._rays[1]
+        if self.rays.cuda_ptr is not None:
+            pair = (self.rays.array(0, (n, 3), np.float32),
+                    self.rays.array(12 * n, (n, 3), np.float32))
+        else:
+            words = self.rays.host_view().view(np.float32)
+            pair = tuple(DeviceArray.of_host(words[k * 3 * n:(k + 1) * 3 * n].reshape(n, 3))
+                         for k in (0, 1))
+        self._rays = (key, pair)
+        return pair
+
+    def in_place(self, n: int, origins: Any, directions: Any) -> bool:
+        """Whether ``origins``/``directions`` (CudaView or DeviceArray) are the ray
+        buffer's own (n, 3) views where a cast of ``n`` rays reads them: nothing to copy."""
+        if self.rays is None or n > self.capacity:
+            return False
+        base = self.base
+        for view, at in ((origins, base), (directions, base + 12 * n)):
+            if getattr(view, "ptr", None) != at or tuple(view.shape) != (n, 3) \
+                    or getattr(view, "strides", None) is not None:
+                return False
+        return True
 
     def hit_views(self, n: int, names: tuple[str, ...]) -> dict[str, DeviceArray]:
         """The views of ``n`` hits, made once per buffer and size (the same memory)."""
@@ -147,10 +209,11 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
         _check_on(name, v, link, device.name)
     n = len(origins) if isinstance(origins, np.ndarray) else origins.shape[0]
     drv = cuda()
+    clock = time.perf_counter_ns
     with scene.lock:
         if scene.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene")
-        wall = time.perf_counter()
+        t0 = clock()
         shared = scene.shared
         if shared is None:
             shared = scene.shared = SharedRays(scene.caster, scene.accel.tlas
@@ -163,11 +226,14 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
         per_ray = not (np.ndim(tmin) == 0 and not isinstance(tmin, CudaView)
                        and np.ndim(tmax) == 0 and not isinstance(tmax, CudaView))
         base = shared.rays.cuda_ptr
-        jobs = [(origins, 0), (directions, 12 * n)]
+        own = shared.in_place(n, origins, directions)  # scene.device_rays: nothing to copy
+        jobs = [] if own else [(origins, 0), (directions, 12 * n)]
         if per_ray:
             jobs += [(_stream(tmin, n), 24 * n), (_stream(tmax, n), 28 * n)]
         with drv.push(link.ordinal):
-            drv.call("cuCtxSynchronize")  # the caller's work on any stream is done
+            # the caller's work on any stream is done (its writes into device_rays included)
+            drv.call("cuCtxSynchronize")
+            t_sync = clock()
             for src, offset in jobs:
                 if isinstance(src, CudaView):  # strided views gathered by pitched copies
                     drv.gather(gather_copies(src.ptr, src.shape, src.strides, 4,
@@ -176,21 +242,32 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
                 else:
                     drv.copy_htod(base + offset, np.ascontiguousarray(src, np.float32),
                                   link.ordinal)
-            drv.call("cuCtxSynchronize")  # the copies landed before Vulkan reads
-        t_in = time.perf_counter()
+            t_copies = clock()
+            if jobs:
+                drv.call("cuCtxSynchronize")  # the copies landed before Vulkan reads
+        t_in = clock()
         sbt = scene.caster._table(scene.accel.hit_records) \
             if scene.method == "ray_pipeline" else None
         lo, hi = (0.0, 0.0) if per_ray else (float(tmin), float(tmax))
         shared.record(n, sbt, per_ray, lo, hi)
+        t_rec = clock()
         shared.submitter.run()
-        done = time.perf_counter()
+        done = clock()
         out = shared.hit_views(n, hits)
+        t_out = clock()
+        # gpu_ms is read from the timestamps when `last` is asked for (RayScene.last), not
+        # here: vkGetQueryPoolResults is a wrapped call the cast need not wait for
         scene._last = {"method": scene.method, "rays": n, "batches": 1, "path": "zero_copy",
-                       "wall_ms": (done - wall) * 1e3, "copy_in_ms": (t_in - wall) * 1e3,
-                       "submit_wait_ms": (done - t_in) * 1e3}
-        gpu = shared.gpu_ms()
-        if gpu is not None:
-            scene._last.update(gpu_ms=gpu, mrays_per_s=n / max(gpu, 1e-9) / 1e3)
+                       "rays_in_place": own, "wall_ms": (done - t0) / 1e6,
+                       "copy_in_ms": (t_in - t0) / 1e6, "submit_wait_ms": (done - t_in) / 1e6,
+                       "phases_us": {"copy_in": (t_in - t0) / 1e3,
+                                     "copy_in_first_sync": (t_sync - t0) / 1e3,
+                                     "copy_in_queue_copies": (t_copies - t_sync) / 1e3,
+                                     "copy_in_last_sync": (t_in - t_copies) / 1e3,
+                                     "record": (t_rec - t_in) / 1e3,
+                                     "submit_wait": (done - t_rec) / 1e3,
+                                     "hit_views": (t_out - done) / 1e3}}
+        scene._pending_gpu = shared if shared.timer is not None else None
         return out
 
 
