@@ -1,7 +1,8 @@
 """``rfw bench compare OLD NEW [--out DIR]``: per-pass changes beyond the noise.
 
-A change is flagged when the 95% CIs of the two medians do not overlap *and* the relative
-change of the median exceeds the threshold; slower is a regression, faster an improvement.
+A change is flagged when it is significant (:func:`rfw.bench.stats.significant`: the 95% CI
+of the ratio of the run medians excludes 1) *and* the relative change of the median exceeds
+the threshold; slower is a regression, faster an improvement.
 With too few samples or runs on either side (:func:`rfw.bench.stats.no_mark`) nothing is
 flagged: the verdict says why. OLD and NEW measured differently (size, frames, warm-up,
 scene, settings, executor, device) are refused unless ``--allow-mismatch``.
@@ -20,7 +21,7 @@ from ..fileio import inside
 from .inputs import input_changes
 from .report import device_of
 from .runner import load_results
-from .stats import MIN_RUNS, MIN_SAMPLES, no_mark
+from .stats import MIN_RUNS, MIN_SAMPLES, no_mark, significant
 from .summary import VariantSummary, summarize_results
 
 METRICS = ("gpu_ms", "cpu_ms")  # per pass; frames add wall_ms
@@ -51,7 +52,7 @@ class Change:
     def verdict(self, threshold: float) -> str:
         if self.too_few:
             return f"too few samples ({self.too_few})"
-        if self.overlap or abs(self.relative) <= threshold:
+        if not significant(self.old, self.new) or abs(self.relative) <= threshold:
             return "same"
         return "regression" if self.relative > 0 else "improvement"
 

@@ -232,19 +232,16 @@ def noise(s: dict[str, Any] | None) -> dict[str, Any] | None:
 
 
 def power(s: dict[str, Any] | None, change: float = 0.02, *, runs: int | None = None,
-          frames: int | None = None, level: float = 0.95, draws: int = 4000,
-          seed: int = SEED) -> float | None:
+          frames: int | None = None, level: float = 0.95) -> float | None:
     """The chance that :func:`significant` marks a change of the median by ``change`` (0.02:
     2%) between two sides with the noise of ``s`` (:func:`noise`), ``runs`` runs of
-    ``frames`` frames each (default: those of ``s``): a seeded Monte Carlo of Welch's test
-    on normal log run medians whose variance is :func:`run_variance`, made median-unbiased
-    (:func:`_median_unbiased`). None where :func:`noise` is."""
+    ``frames`` frames each (default: those of ``s``): :func:`welch_power` at the variance
+    :func:`run_variance`, made median-unbiased (:func:`_median_unbiased`). None where :func:`noise` is."""
     n = noise(s)
     if n is None:
         return None
     var = run_variance(n, frames) * _median_unbiased(n["runs"])
-    return welch_power(var, int(runs or n["runs"]), change, level=level, draws=draws,
-                       seed=seed)
+    return welch_power(var, int(runs or n["runs"]), change, level=level)
 
 
 def _median_unbiased(runs: int) -> float:
@@ -254,7 +251,7 @@ def _median_unbiased(runs: int) -> float:
     states too much power as often as too little (from the plain variance it is too much
     more often, most at 2-3 runs)."""
     if runs not in _MEDIAN_CHI2:
-        draws = np.random.default_rng(SEED).chisquare(runs - 1, 400_000)
+        draws = np.random.default_rng(SEED).chisquare(runs - 1, 200_000)
         _MEDIAN_CHI2[runs] = (runs - 1) / float(np.median(draws))
     return _MEDIAN_CHI2[runs]
 
@@ -269,21 +266,36 @@ def run_variance(n: dict[str, Any], frames: int | None = None) -> float:
     return n["between"] ** 2 + n["frames_var"] * n["frames"] / int(frames or n["frames"])
 
 
-def welch_power(var: float, runs: int, change: float, *, level: float = 0.95,
-                draws: int = 4000, seed: int = SEED) -> float:
+def welch_power(var: float, runs: int, change: float, *, level: float = 0.95) -> float:
     """The chance that Welch's t-test at ``level`` rejects between two sides of ``runs``
     normal log run medians of variance ``var``, one shifted by ``log(1 + change)``: a seeded
-    Monte Carlo of the test (its sample variances and degrees of freedom included)."""
+    Monte Carlo of the test (its sample variances and degrees of freedom included) of
+    :data:`DRAWS` draws. Scaled by the noise, the test depends on ``runs`` and
+    ``log(1 + change) / sqrt(2 var / runs)`` alone, so the draws are made once per ``runs``."""
     if runs < 2:
         return 0.0
-    rng = np.random.default_rng(seed)
-    d = np.log1p(change) + (var * 2 / runs) ** 0.5 * rng.standard_normal(draws)
-    va, vb = var * rng.chisquare(runs - 1, size=(2, draws)) / (runs - 1) / runs
-    se = np.sqrt(va + vb)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        df = np.nan_to_num((va + vb) ** 2 / ((va**2 + vb**2) / (runs - 1)), nan=runs - 1.0)
-        hit = np.abs(d) > _t_crit(df, level) * se
-    return float(hit.mean())
+    if var <= 0:
+        return 1.0 if change else 0.0
+    z, bound = _welch_draws(runs, level)
+    return float((np.abs(np.log1p(change) / (2 * var / runs) ** 0.5 + z) > bound).mean())
+
+
+DRAWS = 4000
+_DRAWS: dict[tuple[int, float], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _welch_draws(runs: int, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Welch's test on two sides of ``runs`` standard normal values, in units of the SD of
+    the difference of their means: that difference's noise ``z``, and the ``bound`` its
+    shifted value must pass (the t quantile of the draw's degrees of freedom x its SE)."""
+    key = (runs, level)
+    if key not in _DRAWS:
+        rng = np.random.default_rng(SEED)
+        z = rng.standard_normal(DRAWS)
+        va, vb = rng.chisquare(runs - 1, size=(2, DRAWS)) / (runs - 1)
+        df = (va + vb) ** 2 / ((va**2 + vb**2) / (runs - 1))
+        _DRAWS[key] = z, _t_crit(df, level) * np.sqrt((va + vb) / 2)
+    return _DRAWS[key]
 
 
 def needed(s: dict[str, Any] | None, change: float = 0.02, *, target: float = 0.8,

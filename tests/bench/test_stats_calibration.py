@@ -157,3 +157,28 @@ def test_runs_needed_give_the_power():
     print(f"runs needed at 10 frames: {runs}; detected {hits}/100 (99% CI {lo:.2f}-{hi:.2f})"
           f", the model at the true noise {exact:.2f}")
     assert lo <= 0.8 <= hi
+
+
+def test_report_prints_the_power_table(tmp_path):
+    from rfw.bench.report import write_report
+    from rfw.bench.report.power import power_rows
+    from rfw.bench.runner import load_results
+    from rfw.bench.summary import summarize_results
+
+    from .synthetic import results
+
+    out = results(tmp_path / "b", {"d@wgpu": {"gbuffer": 10.0, "lighting": 2.0}}, noise=0.03)
+    md = write_report(out)[0].read_text()
+    section = md.split("## Power: what a 2% change takes")[1].split("\n## ")[0]
+    v = summarize_results(load_results(out))[0]
+    rows = power_rows(v)
+    assert [r["what"] for r in rows] == ["frame", "gbuffer", "lighting"]
+    for r in rows:  # the table says what needed() says of each pass's GPU ms
+        s = v.frame["gpu_ms"] if r["what"] == "frame" else next(
+            p["gpu_ms"] for p in v.passes if p["name"] == r["what"])
+        assert needed(s, 0.02)["power"] == r["power"]
+        line = next(x for x in section.splitlines() if x.startswith(f"| d@wgpu | {r['what']} |"))
+        assert f"| 3 x 20 | {r['between']:.2%} | {r['within']:.2%} | {r['power']:.0%} |" in line
+    # negative control: one run measures no noise between runs, so there is no table
+    one = results(tmp_path / "one", {"d@wgpu": {"gbuffer": 10.0}}, repeats=1, noise=0.03)
+    assert "## Power" not in write_report(one)[0].read_text()

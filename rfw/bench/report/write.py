@@ -17,6 +17,7 @@ from .document import Doc, Img
 from .images import _images
 from .method import _method
 from .peers import _peers
+from .power import _power
 from .tables import (
     _counters,
     _environment,
@@ -55,6 +56,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
+    _power(doc, rfw)
     from ..truth import parse as parse_truth
 
     # --reference pathtrace[:SPP]: the images are compared with the first variant, as without
