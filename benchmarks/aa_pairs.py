@@ -133,14 +133,18 @@ def analyse(records: list[dict[str, Any]], per_side: int) -> dict[str, Any]:
 
 
 def noise_table(records: list[dict[str, Any]]) -> dict[str, Any]:
-    """The noise of all runs together, per pass's GPU ms: between and within runs."""
+    """The noise of all runs together, per pass's GPU ms: between and within runs, and the
+    lag-1 autocorrelation of the log run medians in run order (the rule takes runs as
+    independent; a machine whose load drifts over several runs makes neighbours alike)."""
     out = {}
-    runs = [r["frame"]["gpu_ms"] for r in records]
-    out["frame"] = noise(summarize(runs))
     names = list(dict.fromkeys(p["name"] for r in records for p in r.get("passes", [])))
-    for name in names:
-        s = summarize([p["gpu_ms"] for r in records for p in r["passes"] if p["name"] == name])
-        out[name] = noise(s)
+    for name in ["frame", *names]:
+        runs = [r["frame"]["gpu_ms"] if name == "frame" else
+                next(p["gpu_ms"] for p in r["passes"] if p["name"] == name) for r in records]
+        out[name] = noise(summarize(runs))
+        if out[name]:
+            x = np.log([np.median(g) for g in runs])
+            out[name]["lag1"] = float(np.corrcoef(x[:-1], x[1:])[0, 1])
     return out
 
 
@@ -152,8 +156,10 @@ def markdown(result: dict[str, Any]) -> str:
     lines = [f"# A/A pairs: {result['config']} at {result['size']}, {result['frames']} frames",
              "", f"{result['runs']} runs (one process each) on {result['device']}; "
              f"wall time {result['wall_s']:.0f} s. {result['note']}", ""]
-    lines += ["Noise of all runs (log scale): between runs / within a run (one frame):", ""]
-    lines += [f"- {k}: {pct(v and v['between'])} / {pct(v and v['within'])}"
+    lines += ["GPU ms noise of all runs (log scale): between runs / within a run (one frame) "
+              "/ lag-1 autocorrelation of the run medians in run order:", ""]
+    lines += [f"- {k}: {pct(v and v['between'])} / {pct(v and v['within'])} / "
+              + ("-" if not v or v.get("lag1") is None else f"{v['lag1']:+.2f}")
               for k, v in result["noise"].items()]
     for a in result["analyses"]:
         p = a["pooled"]

@@ -349,8 +349,8 @@ def write_compare(old: Path, new: Path, old_summaries: list[VariantSummary],
     doc.bullets(list(inputs or []))
     doc.h(2, "Per pass")
     doc.p("Medians and 95% CIs of OLD and NEW (GPU and CPU ms over frames, wall ms per frame "
-          "one number per run). `change`: `*` where the CIs do not overlap, `(n.s.)` where "
-          f"they do (within the noise), no mark below {MIN_SAMPLES} samples or {MIN_RUNS} "
+          "one number per run). `change`: `*` where the 95% CI of the ratio of the run "
+          "medians excludes 1 (Welch's t-test), `(n.s.)` where not (within the noise), no mark below {MIN_SAMPLES} samples or {MIN_RUNS} "
           "runs on either side (`(n=3<6: no mark)`: too few to say); `verdict`: a significant "
           "change larger than the threshold; `added`/`removed`: a pass (or variant) "
           "measured in NEW or OLD only, with its cost on that side.")

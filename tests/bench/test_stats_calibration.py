@@ -182,3 +182,27 @@ def test_report_prints_the_power_table(tmp_path):
     # negative control: one run measures no noise between runs, so there is no table
     one = results(tmp_path / "one", {"d@wgpu": {"gbuffer": 10.0}}, repeats=1, noise=0.03)
     assert "## Power" not in write_report(one)[0].read_text()
+
+
+def test_t_quantiles_and_the_ratio_ci():
+    from rfw.bench.stats import difference, t_quantile
+
+    # Student's t 97.5% points (tables): 1, 2, 4, 30 degrees of freedom; many: the normal
+    for df, q in [(1, 12.7062), (2, 4.3027), (4, 2.7764), (30, 2.0423), (1e5, 1.9600)]:
+        assert t_quantile(0.975, df) == pytest.approx(q, abs=2e-4)
+    a = summarize([[10.0, 10.1], [10.2, 10.3], [9.9, 10.0]])
+    b = summarize([[11.0, 11.1], [11.2, 11.3], [10.9, 11.0]])
+    d = difference(a, b)
+    ra = np.log([10.05, 10.25, 9.95])
+    rb = np.log([11.05, 11.25, 10.95])
+    assert d["ratio"] == pytest.approx(np.exp(rb.mean() - ra.mean()))
+    va, vb = ra.var(ddof=1) / 3, rb.var(ddof=1) / 3
+    df = (va + vb) ** 2 / ((va**2 + vb**2) / 2)  # Welch-Satterthwaite: near 4, equal noise
+    assert d["lo"] < d["ratio"] < d["hi"] and d["df"] == pytest.approx(df) and 3.9 < df <= 4
+    half = t_quantile(0.975, df) * np.sqrt(va + vb)
+    assert np.log(d["hi"] / d["ratio"]) == pytest.approx(half)
+    assert significant(a, b) and not significant(a, a)
+    # identical runs measure no variance between them: the frames' spread stands in for it
+    same = [[9.0, 10.0, 11.0]] * 3
+    assert not significant(summarize(same), summarize([[9.1, 10.1, 11.1]] * 3))
+    assert significant(summarize(same), summarize([[13.0, 14.0, 15.0]] * 3))  # +40%

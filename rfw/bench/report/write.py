@@ -56,7 +56,6 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
         for c in charts:
             doc.image(c)
     _pass_tables(doc, rfw)
-    _power(doc, rfw)
     from ..truth import parse as parse_truth
 
     # --reference pathtrace[:SPP]: the images are compared with the first variant, as without
@@ -73,6 +72,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     _peers(doc, out_dir, rfw, peers)
     _devices(doc, pooled, parts=parts)
     _failures(doc, variants)
+    _power(doc, rfw)  # late: its rows repeat the variants' labels
     _method(doc, records, _report_devices(pooled))
     md, page = out_dir / "report.md", out_dir / "report.html"
     # whole or not at all: 'rfw bench report' rewrites them in place
