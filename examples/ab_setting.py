@@ -65,7 +65,7 @@ def main() -> int:
               f"{change_text(sa, sb)}")
     moved = [n for n in a if n != "total" and significant(a[n], b.get(n))]
     why = no_mark(a["total"], b["total"])
-    print(f"beyond the noise (95% CIs apart): {', '.join(moved) or 'no pass'}" if not why else
+    print(f"beyond the noise (95% CI of the ratio clear of 1): {', '.join(moved) or 'no pass'}" if not why else
           f"no marks: {why} (use --repeats {MIN_SAMPLES} or more)")
     for name in last["A"].images:  # the image side of the A/B
         da = last["A"].images[name].astype(np.float64)

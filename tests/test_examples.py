@@ -61,7 +61,8 @@ def test_ab_setting(tmp_path):
         assert 100 * (low - 1) - 0.05 <= change <= 100 * (high - 1) + 0.05
         assert mark in ("*", "(n.s.)")  # 6 renders a side: enough for a mark
     # the summary line names exactly the passes marked * (no timing is asserted)
-    moved = re.search(r"^beyond the noise \(95% CIs apart\): (.+)$", done.stdout, re.MULTILINE)
+    moved = re.search(r"^beyond the noise \(95% CI of the ratio clear of 1\): (.+)$", done.stdout,
+                      re.MULTILINE)
     marked = [n for n, (_, mark) in rows.items() if mark == "*" and n != "total"]
     assert moved[1] == (", ".join(marked) or "no pass")
     changed = re.search(rf"image tonemap\.ldr: mean \|B-A\| ({NUMBER}), ({NUMBER})% of pixels",
@@ -218,7 +219,8 @@ def test_notebook_runs_and_shows_results(tmp_path):
                        rf"\[{NUMBER}-{NUMBER}\] ms: [-+]\d+\.\d% (\*|\(n\.s\.\))'", ab)
     assert [name for name, _ in marks] == ["gbuffer", "lighting", "tonemap"], ab
     moved = ", ".join(name for name, mark in marks if mark == "*") or "none"
-    assert results[5]["data"]["text/plain"] == f"'changed significantly (95% CIs apart): {moved}'"
+    assert results[5]["data"]["text/plain"] == (
+        f"'changed significantly (95% CI of the ratio clear of 1): {moved}'")
     chart = results[6]["data"]
     assert chart["text/plain"].startswith("<Figure") and "image/png" in chart
     for data in shown:

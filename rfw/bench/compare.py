@@ -1,7 +1,8 @@
 """``rfw bench compare OLD NEW [--out DIR]``: per-pass changes beyond the noise.
 
-A change is flagged when the 95% CIs of the two medians do not overlap *and* the relative
-change of the median exceeds the threshold; slower is a regression, faster an improvement.
+A change is flagged when it is significant (:func:`rfw.bench.stats.significant`: the 95% CI
+of the ratio of the run medians excludes 1) *and* the relative change of the median exceeds
+the threshold; slower is a regression, faster an improvement.
 With too few samples or runs on either side (:func:`rfw.bench.stats.no_mark`) nothing is
 flagged: the verdict says why. OLD and NEW measured differently (size, frames, warm-up,
 scene, settings, executor, device) are refused unless ``--allow-mismatch``.
@@ -22,7 +23,7 @@ from .attribution import Attribution, attribute, summary_line, write_csv
 from .inputs import input_changes
 from .report import device_of
 from .runner import load_results
-from .stats import MIN_RUNS, MIN_SAMPLES, no_mark
+from .stats import MIN_RUNS, MIN_SAMPLES, no_mark, significant
 from .summary import VariantSummary, summarize_results
 
 METRICS = ("gpu_ms", "cpu_ms")  # per pass; frames add wall_ms
@@ -53,7 +54,7 @@ class Change:
     def verdict(self, threshold: float) -> str:
         if self.too_few:
             return f"too few samples ({self.too_few})"
-        if self.overlap or abs(self.relative) <= threshold:
+        if not significant(self.old, self.new) or abs(self.relative) <= threshold:
             return "same"
         return "regression" if self.relative > 0 else "improvement"
 
@@ -371,8 +372,8 @@ def write_compare(old: Path, new: Path, old_summaries: list[VariantSummary],
     doc.bullets(list(inputs or []))
     doc.h(2, "Per pass")
     doc.p("Medians and 95% CIs of OLD and NEW (GPU and CPU ms over frames, wall ms per frame "
-          "one number per run). `change`: `*` where the CIs do not overlap, `(n.s.)` where "
-          f"they do (within the noise), no mark below {MIN_SAMPLES} samples or {MIN_RUNS} "
+          "one number per run). `change`: `*` where the 95% CI of the ratio of the run "
+          "medians excludes 1 (Welch's t-test), `(n.s.)` where not (within the noise), no mark below {MIN_SAMPLES} samples or {MIN_RUNS} "
           "runs on either side (`(n=3<6: no mark)`: too few to say); `verdict`: a significant "
           "change larger than the threshold; `added`/`removed`: a pass (or variant) "
           "measured in NEW or OLD only, with its cost on that side.")

@@ -8,7 +8,8 @@ attached on its own. ``results.csv`` (beside ``results.jsonl``) holds the summar
 The parts: :mod:`~.write` (the sections in order, the files written), :mod:`~.document`
 (the document model and the numbers as cell text), :mod:`~.devices` (rows per device),
 :mod:`~.tables`, :mod:`~.charts`, :mod:`~.images` (each variant's image against the
-reference's), :mod:`~.peers` and :mod:`~.method` ("How this was measured").
+reference's), :mod:`~.power` (the runs and frames a 2% change needs), :mod:`~.peers` and
+:mod:`~.method` ("How this was measured").
 """
 
 from ..stats import change_text

@@ -18,6 +18,7 @@ from .document import Doc, Img
 from .images import _images
 from .method import _method
 from .peers import _peers
+from .power import _power
 from .tables import (
     _counters,
     _environment,
@@ -73,6 +74,7 @@ def write_report(out_dir: Path, *, reference: str | int | None = None,
     _peers(doc, out_dir, rfw, peers)
     _devices(doc, pooled, parts=parts)
     _failures(doc, variants)
+    _power(doc, rfw)  # late: its rows repeat the variants' labels
     _method(doc, records, _report_devices(pooled))
     md, page = out_dir / "report.md", out_dir / "report.html"
     # whole or not at all: 'rfw bench report' rewrites them in place
