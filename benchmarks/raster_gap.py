@@ -119,9 +119,9 @@ VARIANTS: dict[str, tuple[str, str, dict[str, str], tuple[str, ...], str]] = {
     "vk_lp1": ("rfw", "vk", {"LP_NUM_THREADS": "1"}, (), "vk, LP_NUM_THREADS=1"),
     "mgl_lp1": ("mgl", "gl", {"LP_NUM_THREADS": "1"}, (), "moderngl, LP_NUM_THREADS=1"),
 }
-DEFAULT = ("mgl", "vk", "wgpu", "vk_nots", "vk_fif1", "vk_d24", "vk_vin2", "vk_nonrm", "vk_nobundle",
-           "vk_arena1", "vk_notrim", "wgpu_arena1", "vk_arena1_vin2", "mgl_streams",
-           "mgl_d32f")
+# the table of benchmarks/results/2026-12-03/raster_gap/README.md, in one run
+DEFAULT = ("mgl", "vk", "wgpu", "vk_nots", "vk_fif1", "vk_d24", "vk_vin2", "vk_notrim",
+           "vk_bake", "vk_bare", "vk_cof", "mgl_inst", "mgl_streams", "mgl_d32f")
 
 
 # --- child: one variant's frames -------------------------------------------------------------
