@@ -124,6 +124,7 @@ READERS: dict[str, Callable[[], Any]] = {
     "RFW_VK_FRAME_SPAN": lambda: flag("RFW_VK_FRAME_SPAN"),
     "RFW_VK_ASYNC_QUEUE": lambda: choice("RFW_VK_ASYNC_QUEUE", ASYNC_QUEUES, "family"),
     "RFW_RAYCAST_MAPPED": lambda: choice("RFW_RAYCAST_MAPPED", RAYCAST_PLACEMENTS, "auto"),
+    "RFW_CUDA": lambda: flag("RFW_CUDA", True),
 }
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from rfw import env
 from rfw.errors import RfwError
 from rfw.interop import DeviceArray, SharedMemory, cuda
 
@@ -38,10 +39,8 @@ from .commands import (
     FENCE_TIMEOUT_NS,
     TRANSFER_SRC,
     CommandPool,
-    ImageBarrier,
     as_state,
-    barrier,
-    copy_image_to_buffer,
+    copy_image_out,
     readback_bytes,
     texels,
 )
@@ -88,6 +87,8 @@ def cuda_link(device: VkDevice) -> CudaLink | str:
 
 
 def _find_link(device: VkDevice) -> CudaLink | str:
+    if not env.get("RFW_CUDA"):
+        return "sharing memory with CUDA is off (RFW_CUDA=0)"
     if EXTENSION not in device.extensions:
         return f"{device.name} has no {EXTENSION}"
     try:
@@ -352,10 +353,7 @@ class ImageExport:
                              source=False)
             cmd = self.submitter.begin()
             ownership(device, cmd, [self.buffer], acquire=True)
-            barrier(cmd, [ImageBarrier(image, now, TRANSFER_SRC)])
-            copy_image_to_buffer(cmd, image, self.buffer)  # it reads the handle alone
-            if after != TRANSFER_SRC:
-                barrier(cmd, [ImageBarrier(image, TRANSFER_SRC, after)])
+            copy_image_out(cmd, image, self.buffer, now, after)  # it reads the handle alone
             ownership(device, cmd, [self.buffer], acquire=False)
             self.submitter.end(image.handle)
         except BaseException:
@@ -428,11 +426,8 @@ class FrameExports:
         for name, buf in zip(self.names, bufs, strict=True):
             image, state = ex.image(name), ex._final.get(name)
             now = as_state(state or "UNDEFINED", source=True)
-            barrier(cmd, [ImageBarrier(image, now, TRANSFER_SRC)])
-            copy_image_to_buffer(cmd, image, buf)
             after = as_state(state, source=False) if state is not None else None
-            if after is not None and after != TRANSFER_SRC:
-                barrier(cmd, [ImageBarrier(image, TRANSFER_SRC, after)])
+            copy_image_out(cmd, image, buf, now, after)
         ownership(self.device, cmd, bufs, acquire=False)
         if timer is not None:
             timer.write(cmd, "ALL_COMMANDS", 1)

@@ -211,7 +211,7 @@ ENV_READERS = {
     "rfw/spirv.py": "RFW_CACHE_SPIRV", "rfw/meshlets.py": "RFW_CACHE_MESHLETS",
     "rfw/bench/truth.py": "RFW_CACHE_TRUTH",
     "rfw/view.py": "RFW_VIEW_FORMAT", "rfw/bench/runner.py": "RFW_COMMIT",
-    "vkext/raycast/placement.py": "RFW_RAYCAST_MAPPED",
+    "vkext/raycast/placement.py": "RFW_RAYCAST_MAPPED", "vkext/external.py": "RFW_CUDA",
 }
 # the edges: where a run starts and its options are built
 EDGES = {

@@ -44,6 +44,33 @@ def _needs_ray_tracing(vk_device):
         pytest.skip("no VK_KHR_acceleration_structure")
 
 
+@pytest.fixture(autouse=True)
+def _no_cuda(vk_device, monkeypatch):
+    """The host path behind the device face, also where a CUDA device is the same GPU (the
+    H200: benchmarks/bench_zerocopy.py checks the CUDA path there): RFW_CUDA=0, the link
+    found again for this test and after it."""
+    monkeypatch.setenv("RFW_CUDA", "0")
+    external._links.pop(vk_device, None)
+    yield
+    external._links.pop(vk_device, None)
+
+
+@pytest.fixture
+def memfd(vk_device):
+    """Skips where the exported fd cannot be mapped by the host (lavapipe's is a memfd;
+    NVIDIA's opaque fd is not): the tests that read the export through it."""
+    if external.EXTENSION not in vk_device.extensions:
+        pytest.skip(f"no {external.EXTENSION}")
+    probe = external.ExportedBuffer(vk_device, 256, ("transfer_dst",), link=None,
+                                    label="mappable?")
+    try:
+        probe.host_view()
+    except OSError as e:
+        pytest.skip(f"{vk_device.name}'s exported fd cannot be mapped here ({e})")
+    finally:
+        probe.release()
+
+
 def _rays(n: int = 200, shift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(7)
     o = np.column_stack([rng.uniform(-0.2, 1.2, (n, 2)) + shift, np.ones(n)]).astype(np.float32)
@@ -134,7 +161,7 @@ def test_dlpack_keeps_the_memory_alive():
     assert len(interop._live) == live - 1
 
 
-def test_exported_memory_holds_what_the_gpu_wrote(vk_device):
+def test_exported_memory_holds_what_the_gpu_wrote(memfd, vk_device):
     if external.EXTENSION not in vk_device.extensions:
         pytest.skip(f"no {external.EXTENSION}")
     buf = external.ExportedBuffer(vk_device, 4096, ("storage", "transfer_dst"), link=None,
@@ -154,7 +181,7 @@ def test_exported_memory_holds_what_the_gpu_wrote(vk_device):
 
 
 @pytest.mark.parametrize("method", ["ray_query", "ray_pipeline"])
-def test_the_shared_cast_traces_into_exported_buffers(vk_device, method):
+def test_the_shared_cast_traces_into_exported_buffers(memfd, vk_device, method):
     """The device path's command buffer, on lavapipe's memfds: rays written into the
     exported ray buffer, hits read from the exported hit buffer."""
     need = {"ray_query": "VK_KHR_ray_query", "ray_pipeline": "VK_KHR_ray_tracing_pipeline"}
@@ -190,7 +217,7 @@ def test_the_shared_cast_traces_into_exported_buffers(vk_device, method):
         vscene.destroy()
 
 
-def test_an_image_copied_into_exported_memory(vk_device):
+def test_an_image_copied_into_exported_memory(memfd, vk_device):
     if external.EXTENSION not in vk_device.extensions:
         pytest.skip(f"no {external.EXTENSION}")
     img = Image(vk_device, 24, 16, "rgba16float", ("transfer_src", "transfer_dst", "sampled"),
@@ -327,7 +354,7 @@ def test_strided_rays_on_the_host_path_equal_contiguous_ones(vk_device):
         assert not np.array_equal(moved["t"], want["t"])
 
 
-def test_frames_copy_their_outputs_into_exported_memory(vk_device):
+def test_frames_copy_their_outputs_into_exported_memory(memfd, vk_device):
     """export_outputs: each frame's own command buffer copies the output into its slot's
     exported buffer (read here through lavapipe's memfd); the control: the buffer of the
     slot the frame did not use keeps the zeros written into it."""
@@ -365,7 +392,7 @@ def test_frames_copy_their_outputs_into_exported_memory(vk_device):
     assert seen[0][1] is False  # frame 1's slot alone was written (the other never was)
 
 
-def test_device_rays_are_the_ray_buffer_a_cast_reads_in_place(vk_device):
+def test_device_rays_are_the_ray_buffer_a_cast_reads_in_place(memfd, vk_device):
     """``SharedRays.device_rays`` on lavapipe's memfd: rays written into the views are what
     the trace reads, with nothing copied in (``in_place``); the controls: a copy of the
     views, and views made for another ray count, are not in place, and other rays written

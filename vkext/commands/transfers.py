@@ -39,6 +39,16 @@ def copy_image_to_buffer(cmd: Any, image: Image, buffer: Buffer, *, mip: int = 0
                                             layer)])
 
 
+def copy_image_out(cmd: Any, image: Image, buffer: Buffer, now: State,
+                   after: State | None) -> None:
+    """Record ``image`` (in state ``now``) copied into ``buffer`` at offset 0, with its
+    barriers: into TRANSFER_SRC, and back to ``after`` (None or TRANSFER_SRC: it stays)."""
+    barrier(cmd, [ImageBarrier(image, now, TRANSFER_SRC)])
+    copy_image_to_buffer(cmd, image, buffer)
+    if after is not None and after != TRANSFER_SRC:
+        barrier(cmd, [ImageBarrier(image, TRANSFER_SRC, after)])
+
+
 def copy_into_uniforms(cmd: Any, source: Buffer, dst: Buffer, region: Any,
                        readers: State) -> None:
     """Record the copy of ``region`` (a ``VkBufferCopy*``) of ``source`` into ``dst``, a

@@ -1,0 +1,51 @@
+"""Zero-copy arrays where a CUDA device is the same GPU as the Vulkan device (the H200), with
+torch: rays from torch tensors, contiguous and transposed, give the host cast's hits bit
+for bit as CUDA tensors, with no hit copied to the host; the control: other rays differ.
+Skipped where there is no such device (lavapipe: tests/vkext/test_zero_copy.py covers the
+host path there). benchmarks/bench_zerocopy.py times the same calls."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rfw
+from rfw import interop
+
+from .test_ray_scene import _FACES, _TRI
+from .test_zero_copy import _rays
+
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture
+def scene(vk_device):
+    if "VK_KHR_acceleration_structure" not in vk_device.caps:
+        pytest.skip("no VK_KHR_acceleration_structure")
+    if not torch.cuda.is_available():
+        pytest.skip("torch has no CUDA device")
+    with rfw.RayScene(_TRI, _FACES, device=vk_device) as s:
+        if not s.zero_copy:
+            pytest.skip(f"no zero-copy casts here: {s.zero_copy_reason}")
+        yield s
+
+
+def test_torch_rays_give_the_host_hits_as_cuda_tensors(scene):
+    o, d = _rays(4096)
+    want = scene.cast(o, d)
+    before = dict(interop.copies)
+    ot, dt = (torch.from_numpy(a).cuda() for a in (o, d))
+    got = {k: torch.from_dlpack(v) for k, v in scene.cast(ot, dt).items()}
+    torch.cuda.synchronize()
+    assert interop.copies["device_to_host"] == before["device_to_host"]
+    assert set(got) == set(want)
+    for k, t in got.items():
+        assert t.is_cuda, k
+        np.testing.assert_array_equal(t.cpu().numpy(), want[k], err_msg=k)
+    # transposed views (strides (1, N) elements) are gathered on the device
+    ott, dtt = (torch.from_numpy(np.ascontiguousarray(a.T)).cuda().T for a in (o, d))
+    assert not ott.is_contiguous()
+    again = torch.from_dlpack(scene.cast(ott, dtt)["t"]).cpu().numpy()
+    np.testing.assert_array_equal(again, want["t"])
+    other = scene.cast(*(torch.from_numpy(a).cuda() for a in _rays(4096, shift=0.37)))
+    assert not np.array_equal(torch.from_dlpack(other["t"]).cpu().numpy(), want["t"])
