@@ -17,7 +17,7 @@ Profiles
 ``nvidia``
     NVIDIA's block-linear layout: 64-byte x 8-row GOBs, a block height per level of the
     smallest power of two of GOBs that holds the level's rows, at most 16 (128 rows), rows
-    padded to 64 bytes, MSAA as a wider and taller image; images aligned and padded to 64 KiB
+    padded to 64 bytes, MSAA as a wider and taller image; images aligned and padded to 1 KiB (the H200's driver; 64 KiB
     pages. This is the layout NVIDIA's Tegra documentation and nouveau describe; the
     proprietary driver's private padding (compression tags, its own block-height choice) is
     not public: ``benchmarks/device_memplan.sh`` measures how far it is off on a device.
@@ -92,7 +92,10 @@ class Nvidia(Profile):
     gob_bytes: int = 64  # a GOB is 64 bytes wide
     gob_rows: int = 8  # and 8 rows tall
     max_block_gobs: int = 16  # block height in GOBs, at most
-    page: int = 64 * 1024  # images sit in big pages
+    # image sizes and alignment: 1 KiB on the H200 (driver 580.159.04: its requirements for
+    # 240 probed images, benchmarks/results/2026-12-03/memplan_h200/); 64 KiB pages, the
+    # guess before that, gave the same totals there but no small image's size
+    page: int = 1024
 
     def image(self, format, width, height, *, mips=1, layers=1, samples=1, usages=()):
         info = format_info(format)
@@ -119,7 +122,8 @@ PROFILES: dict[str, Profile] = {
     "lavapipe": Lavapipe("lavapipe", "Mesa lavapipe (llvmpipe layout, x86 cache lines); "
                                      "exact on Mesa 22-23"),
     "nvidia": Nvidia("nvidia", "NVIDIA block-linear (64x8-byte GOBs, blocks of <= 16 GOBs, "
-                               "64 KiB pages); driver-private padding not modelled"),
+                               "1 KiB alignment; measured on the H200, driver 580); "
+                               "driver-private padding not modelled"),
 }
 
 
