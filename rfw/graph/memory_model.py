@@ -17,8 +17,9 @@ Profiles
 ``nvidia``
     NVIDIA's block-linear layout: 64-byte x 8-row GOBs, a block height per level of the
     smallest power of two of GOBs that holds the level's rows, at most 16 (128 rows), rows
-    padded to 64 bytes, MSAA as a wider and taller image; images aligned and padded to 1 KiB (what the H200's driver asks for;
-    64 KiB pages were the first guess). This is the layout NVIDIA's Tegra documentation and nouveau describe; the
+    padded to 64 bytes, MSAA as a wider and taller image; images aligned and padded to
+    1 KiB (what the H200's driver asks for; 64 KiB pages were the first guess). This is
+    the layout NVIDIA's Tegra documentation and nouveau describe; the
     proprietary driver's private padding (compression tags, its own block-height choice) is
     not public: ``benchmarks/device_memplan.sh`` measures how far it is off on a device.
 """
