@@ -28,7 +28,6 @@ BUNDLE`` writes its report again from it alone.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
@@ -39,6 +38,7 @@ from typing import Any
 
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
+from .inputs import sha256
 
 SCHEMA = "rfw.bench.bundle"
 VERSION = 1
@@ -51,10 +51,6 @@ REPORT_FILES = ("report.md", "report.html")
 NOT_BUNDLED = {*REPORT_FILES, "results.csv", "truth.csv", "charts", "images", NAME,
                "compare", "original", "inputs", "replay.json"}
 RUN_NOT_BUNDLED = {"record.json", "log.txt"}  # record.json is its line of results.jsonl
-
-
-def sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------

@@ -33,7 +33,8 @@ import numpy as np
 
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
-from .bundle import REPORT_FILES, RESULTS, Bundle, read_bundle, sha256
+from .bundle import REPORT_FILES, RESULTS, Bundle, read_bundle
+from .inputs import sha256
 
 ORIGINAL = "original"
 VERDICTS = "replay.json"
