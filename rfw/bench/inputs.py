@@ -22,7 +22,7 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -55,31 +55,30 @@ def _stable(path: Path) -> str:
 
 
 @contextmanager
-def watching_shaders() -> Iterator[dict[Path, bytes]]:
+def _watching(registry: list[dict[Any, Any]]) -> Iterator[dict[Any, Any]]:
+    """Inside: a new dict in ``registry`` (a compiler's list of watchers), removed after."""
+    seen: dict[Any, Any] = {}
+    registry.append(seen)
+    try:
+        yield seen
+    finally:
+        registry.remove(seen)
+
+
+def watching_shaders() -> AbstractContextManager[dict[Path, bytes]]:
     """Inside: every shader file read for a compile, with its bytes (both compilers read a
     shader and its includes through :func:`rfw.shaders.read_source`)."""
     from ..shaders import watchers
 
-    seen: dict[Path, bytes] = {}
-    watchers.append(seen)
-    try:
-        yield seen
-    finally:
-        watchers.remove(seen)
+    return _watching(watchers)
 
 
-@contextmanager
-def watching_spirv() -> Iterator[dict[str, str]]:
+def watching_spirv() -> AbstractContextManager[dict[str, str]]:
     """Inside: every SPIR-V module :func:`rfw.spirv.compile_glsl` returned, as
     ``{"<file from the rfw checkout> <target> -DK=V...": sha256 of the SPIR-V}``."""
     from ..spirv import spirv_watchers
 
-    seen: dict[str, str] = {}
-    spirv_watchers.append(seen)
-    try:
-        yield seen
-    finally:
-        spirv_watchers.remove(seen)
+    return _watching(spirv_watchers)
 
 
 def spirv_names(seen: dict[str, str]) -> dict[str, str]:
