@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .stats import RESAMPLES, SEED, no_mark, summarize
+from .stats import RESAMPLES, SEED, no_mark
 
 TOTAL, RESIDUAL = "frame total", "residual"
 KINDS = ("changed", "added", "removed", RESIDUAL, "total")
@@ -76,7 +76,7 @@ class Attribution:
 class _Side:
     runs: list[np.ndarray]  # per run (frames, 1 + passes): frame total, then each pass
     timed: set[str]  # the passes with a GPU time in some frame
-    summary: dict[str, Any] | None  # stats.summarize of the frame totals (n, runs)
+    summary: dict[str, Any] | None  # {n, runs} of the frame totals (stats.no_mark reads them)
     untimed: int  # pass values missing in frames that have a frame total
 
 
@@ -87,7 +87,7 @@ def _gpu(values: Any, i: int) -> float | None:
 def _side(records: list[dict[str, Any]], names: list[str]) -> _Side:
     """The frames of ``records`` as matrices; a pass without a time in a frame counts 0 there
     (its time, if any, is then in that frame's residual)."""
-    runs, totals, timed, untimed = [], [], set(), 0
+    runs, timed, untimed = [], set(), 0
     for r in records:
         total = [x for x in ((r.get("frame") or {}).get("gpu_ms") or [])]
         by_name = {p["name"]: p.get("gpu_ms") or [] for p in r.get("passes") or []}
@@ -104,8 +104,8 @@ def _side(records: list[dict[str, Any]], names: list[str]) -> _Side:
         timed.update(n for n, v in by_name.items() if any(x is not None for x in v))
         if rows:
             runs.append(np.asarray(rows, np.float64))
-            totals.append([row[0] for row in rows])
-    return _Side(runs, timed, summarize(totals) if totals else None, untimed)
+    summary = {"n": sum(m.shape[0] for m in runs), "runs": len(runs)} if runs else None
+    return _Side(runs, timed, summary, untimed)
 
 
 def _with_residual(m: np.ndarray) -> np.ndarray:
