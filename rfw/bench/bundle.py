@@ -62,17 +62,18 @@ def write_bundle(folder: Path, plan: Any, *, reference: str | None = None,
     """Write ``folder/bundle.tar`` of the bench in ``folder`` (its ``results.jsonl``, run
     images and reports written) run from ``plan`` (:class:`rfw.bench.runner.Plan`)."""
     from .. import __version__
-    from .runner import load_results
+    from .records import parse_results
 
     folder = Path(folder)
     members: dict[str, bytes] = {RESULTS: (folder / RESULTS).read_bytes()}
     for path in sorted(folder.rglob("*")):
         rel = path.relative_to(folder)
         if not path.is_file() or path.is_symlink() or rel.parts[0] in NOT_BUNDLED \
-                or rel.parts[0].startswith(".") or rel.name in RUN_NOT_BUNDLED:
+                or rel.parts[0].startswith(".") or rel.name in RUN_NOT_BUNDLED \
+                or rel.as_posix() == RESULTS:
             continue
         members[rel.as_posix()] = path.read_bytes()
-    records = load_results(folder / RESULTS)
+    records = parse_results(members[RESULTS], folder / RESULTS)
     embedded = [0]  # scene bytes embedded so far
     jobs = [_job(j, plan, members, embedded) for j in plan.jobs]
     first = records[0] if records else {}
@@ -126,13 +127,14 @@ def _job(job: Any, plan: Any, members: dict[str, bytes], embedded: list[int]
 
     config = Path(job.config)
     data = config.read_bytes()
-    member = f"inputs/{sha256(data)[:12]}/{config.name}"
+    digest = sha256(data)
+    member = f"inputs/{digest[:12]}/{config.name}"
     members[member] = data
     w, h = plan.size
     cfg = _check(config, [*job.sets, f"size={w}x{h}"])
     graph = to_toml(build(cfg).graph).encode()
     members[f"inputs/graphs/{job.id}.toml"] = graph
-    out.update(config={"member": member, "path": str(config), "sha256": sha256(data)},
+    out.update(config={"member": member, "path": str(config), "sha256": digest},
                graph={"member": f"inputs/graphs/{job.id}.toml", "sha256": sha256(graph)},
                camera=json.loads(json.dumps(cfg.camera, default=list)),
                scene=_scene(job.scene or cfg.scene, members, embedded))
@@ -146,32 +148,38 @@ def _scene(scene: str | None, members: dict[str, bytes], embedded: list[int]
     fit in ``MAX_EMBED``."""
     from .. import __version__
     from ..scene import is_builtin
-    from .inputs import _gltf_files, scene_hash
+    from .inputs import scene_file_hash, scene_names
 
     p = Path(scene) if scene else None
     if p is None or not p.is_file():
         name = scene or "default"
         return {"kind": "builtin" if name == "default" or is_builtin(name) else "missing",
                 "name": name, "rfw_version": __version__}
-    digest = scene_hash(str(p))
-    files = [p.name, *(_gltf_files(p) if p.suffix.lower() == ".gltf" else [])]
+    data = p.read_bytes()
+    names = scene_names(p, data)
+    files = [p.name, *names]
+    safe = all(_safe_name(f) for f in files)
+    sizes = [(p.parent / f).stat().st_size for f in files if (p.parent / f).is_file()]
+    fits = embedded[0] + sum(sizes) <= MAX_EMBED
+    kept: dict[str, bytes] = {}  # the files it names, read for the hash, kept to embed
+    digest = scene_file_hash(p, data, names, kept if safe and fits else None)
     out = {"kind": "file", "name": p.name, "path": str(p), "sha256": digest,
            "embedded": None}
     base = f"inputs/{digest[:12]}"
     if f"{base}/{p.name}" in members:
         out["embedded"] = f"{base}/{p.name}"
         return out
-    safe = all(_safe_name(f) for f in files)
-    sizes = [(p.parent / f).stat().st_size for f in files if (p.parent / f).is_file()]
     if not safe:
         out["why"] = "a file it names is outside its folder: not embedded"
-    elif embedded[0] + sum(sizes) > MAX_EMBED:
+    elif not fits:
         out["why"] = (f"over the {MAX_EMBED >> 20} MiB of scene files a bundle embeds: "
                       "replay needs this file at this path with this sha256")
     else:
         for f in files:
-            if (p.parent / f).is_file():
-                members[f"{base}/{f}"] = (p.parent / f).read_bytes()
+            if f == p.name:
+                members[f"{base}/{f}"] = data
+            elif f in kept:
+                members[f"{base}/{f}"] = kept[f]
         embedded[0] += sum(sizes)
         out["embedded"] = f"{base}/{p.name}"
     return out

@@ -99,20 +99,37 @@ def scene_hash(scene: str) -> str:
         if scene in ("default", "") or is_builtin(scene):
             return sha256(f"builtin:{scene or 'default'}".encode())
         return sha256(f"missing:{scene}".encode())
-    h = hashlib.sha256(p.read_bytes())
-    if p.suffix.lower() == ".gltf":
-        for name in _gltf_files(p):
-            extra = p.parent / name
-            if extra.is_file():
-                h.update(b"\0" + name.encode() + b"\0" + extra.read_bytes())
+    data = p.read_bytes()
+    return scene_file_hash(p, data, scene_names(p, data))
+
+
+def scene_names(path: Path, data: bytes) -> list[str]:
+    """The files beside the scene file ``path`` (its bytes ``data``) that it names: a
+    ``.gltf``'s buffers and images (:func:`_gltf_files`), none for other formats."""
+    return _gltf_files(data) if path.suffix.lower() == ".gltf" else []
+
+
+def scene_file_hash(path: Path, data: bytes, names: list[str],
+                    keep: dict[str, bytes] | None = None) -> str:
+    """:func:`scene_hash` of the scene file ``path`` (its bytes ``data``) with the files
+    ``names`` beside it that exist, each read once; into ``keep``, when given, their bytes
+    by name."""
+    h = hashlib.sha256(data)
+    for name in names:
+        extra = path.parent / name
+        if extra.is_file():
+            more = extra.read_bytes()
+            h.update(b"\0" + name.encode() + b"\0" + more)
+            if keep is not None:
+                keep[name] = more
     return h.hexdigest()
 
 
-def _gltf_files(path: Path) -> list[str]:
-    """The relative buffer and image URIs a glTF names (data: URIs are in the JSON)."""
+def _gltf_files(data: bytes) -> list[str]:
+    """The relative buffer and image URIs a glTF's bytes name (data: URIs are in the JSON)."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, OSError, RecursionError):
+        doc = json.loads(data.decode("utf-8"))
+    except (ValueError, RecursionError):
         return []
     names = []
     for key in ("buffers", "images"):

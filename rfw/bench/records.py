@@ -27,6 +27,12 @@ def read_results(path: Path) -> list[dict[str, Any]]:
         data = path.read_bytes()
     except OSError as e:
         raise RfwError(f"cannot read: {e.strerror or e}", file=str(path)) from None
+    return parse_results(data, path)
+
+
+def parse_results(data: bytes, path: str | Path) -> list[dict[str, Any]]:
+    """The checked records of ``data``, a ``results.jsonl``'s bytes already read; errors
+    name ``path`` as :func:`read_results` does."""
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
