@@ -58,9 +58,10 @@ RUN_NOT_BUNDLED = {"record.json", "log.txt"}  # record.json is its line of resul
 
 
 def write_bundle(folder: Path, plan: Any, *, reference: str | None = None,
-                 diff_scale: str = "own") -> Path:
+                 diff_scale: str = "own") -> tuple[Path, dict[str, Any]]:
     """Write ``folder/bundle.tar`` of the bench in ``folder`` (its ``results.jsonl``, run
-    images and reports written) run from ``plan`` (:class:`rfw.bench.runner.Plan`)."""
+    images and reports written) run from ``plan`` (:class:`rfw.bench.runner.Plan`); returns
+    its path and the manifest written into it."""
     from .. import __version__
     from .records import parse_results
 
@@ -107,8 +108,7 @@ def write_bundle(folder: Path, plan: Any, *, reference: str | None = None,
                     if (folder / n).is_file()},
     }
     path = folder / NAME
-    pack(path, manifest, members)
-    return path
+    return path, pack(path, manifest, members)
 
 
 def _job(job: Any, plan: Any, members: dict[str, bytes], embedded: list[int]
@@ -185,10 +185,10 @@ def _scene(scene: str | None, members: dict[str, bytes], embedded: list[int]
     return out
 
 
-def pack(path: Path, manifest: dict[str, Any], members: dict[str, bytes]) -> None:
+def pack(path: Path, manifest: dict[str, Any], members: dict[str, bytes]) -> dict[str, Any]:
     """Write the tar: ``manifest`` (its ``files`` set to the members' sha256) first, then
     ``members`` sorted, each with a fixed time, owner and mode (the same bench, the same
-    bytes)."""
+    bytes); returns the manifest as written."""
     manifest = {**manifest, "files": {n: sha256(members[n]) for n in sorted(members)}}
     items = [(MANIFEST, (json.dumps(manifest, indent=1, sort_keys=True) + "\n").encode()),
              *((n, members[n]) for n in sorted(members))]
@@ -201,6 +201,7 @@ def pack(path: Path, manifest: dict[str, Any], members: dict[str, bytes]) -> Non
                 tar.addfile(info, io.BytesIO(data))
 
     atomic_write(path, write)
+    return manifest
 
 
 # ---------------------------------------------------------------------------------------------

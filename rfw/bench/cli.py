@@ -220,8 +220,9 @@ def run(args: argparse.Namespace) -> int:
             from .bundle import write_bundle
 
             # everything that defines this bench, in one file (rfw bench replay BUNDLE)
-            written.append(write_bundle(folder.staging, plan, reference=args.reference,
-                                        diff_scale=args.diff_scale))
+            bundle, _ = write_bundle(folder.staging, plan, reference=args.reference,
+                                     diff_scale=args.diff_scale)
+            written.append(bundle)
         except BaseException as e:
             _keep_partial(folder, len(plan.schedule()), e)
             raise

@@ -44,6 +44,7 @@ def replay(bundle_path: Path, out: Path, *, progress: bool = True) -> int:
     from ..outdir import OutputFolder
     from .bundle import write_bundle
     from .compare import compare
+    from .records import parse_results
     from .report import write_report
     from .runner import load_results, run_plan
 
@@ -68,11 +69,12 @@ def replay(bundle_path: Path, out: Path, *, progress: bool = True) -> int:
         if parse_truth(reference) is not None:  # the references are not rendered again
             reference = None
         write_report(stage, reference=reference, diff_scale=p.get("diff_scale") or "own")
-        write_bundle(stage, plan, reference=reference, diff_scale=p.get("diff_scale") or "own")
-        old = load_results(stage / ORIGINAL / RESULTS)
+        _, manifest = write_bundle(stage, plan, reference=reference,
+                                   diff_scale=p.get("diff_scale") or "own")
+        old = parse_results(bundle.members[RESULTS], stage / ORIGINAL / RESULTS)
         new = load_results(results)
         verdict = judge(old, new, stage / ORIGINAL, stage)
-        verdict["graphs"] = _graphs(bundle, plan)
+        verdict["graphs"] = _graphs(bundle, plan, manifest)
         verdict["spirv"] = _spirv(old, new)
         verdict["rfw"] = {"bundle": bundle.manifest.get("rfw"),
                           "now": {"commit": (new[0] if new else {}).get("rfw_commit")}}
@@ -253,25 +255,16 @@ def _rgba(path: Path) -> np.ndarray:
         return np.asarray(im.convert("RGBA"))
 
 
-def _graphs(bundle: Bundle, plan: Any) -> list[str]:
+def _graphs(bundle: Bundle, plan: Any, manifest: dict[str, Any]) -> list[str]:
     """The variants whose graph, built again from the bundle's config and settings by this
-    rfw, is not the bundle's (a pass's defaults or slots changed since)."""
-    from ..config import build
-    from ..graph import to_toml
-    from .runner import _check
-
+    rfw (``manifest``: the replay's own bundle, :func:`rfw.bench.bundle.write_bundle`), is
+    not the bundle's (a pass's defaults or slots changed since)."""
     out = []
-    w, h = plan.size
-    for j, job in zip(bundle.manifest["jobs"], plan.jobs, strict=True):
+    for j, job, now in zip(bundle.manifest["jobs"], plan.jobs, manifest["jobs"], strict=True):
         g = j.get("graph") or {}
         if job.kind != "rfw" or not g.get("sha256"):
             continue
-        try:
-            now = to_toml(build(_check(Path(job.config), [*job.sets, f"size={w}x{h}"])).graph)
-        except RfwError as e:
-            out.append(f"{job.label}: does not build any more ({e})")
-            continue
-        if sha256(now.encode()) != g["sha256"]:
+        if (now.get("graph") or {}).get("sha256") != g["sha256"]:
             out.append(f"{job.label}: the graph differs from the bundle's ({g.get('member')})")
     return out
 
