@@ -224,10 +224,11 @@ class Bundle:
         """The members that make the bench folder (results, run images, references)."""
         return [n for n in self.members if not n.startswith("inputs/")]
 
-    def extract(self, dest: Path, names: list[str] | None = None) -> None:
-        """Write ``names`` (default: every member) under ``dest``, at their member paths."""
+    def extract(self, dest: Path, names: list[str] | None = None, *, strip: str = "") -> None:
+        """Write ``names`` (default: the bench files) under ``dest``, at their member paths
+        less the prefix ``strip``; a file already holding a member's bytes is left as it is."""
         for name in self.bench_files() if names is None else names:
-            target = inside(dest, name)
+            target = inside(dest, name.removeprefix(strip))
             target.parent.mkdir(parents=True, exist_ok=True)
             data = self.members[name]
             if not (target.is_file() and target.read_bytes() == data):

@@ -159,11 +159,7 @@ def _unpack(bundle: Bundle, out: Path, names: list[str]) -> Path:
     digest = sha256(b"".join(n.removeprefix(base).encode() + b"\0" + bundle.members[n]
                              + b"\0" for n in sorted(names)))
     folder = inside(out, f"inputs/{digest[:12]}")
-    for n in names:
-        target = inside(folder, n.removeprefix(base))
-        target.parent.mkdir(parents=True, exist_ok=True)
-        if not (target.is_file() and target.read_bytes() == bundle.members[n]):
-            atomic_write(target, lambda f, d=bundle.members[n]: f.write(d))
+    bundle.extract(folder, names, strip=base)
     return inside(folder, names[0].removeprefix(base))
 
 
