@@ -24,11 +24,7 @@ PYTHON=${PYTHON:-python3}
 export PYTHONUNBUFFERED=1
 mkdir -p "$OUT"
 
-if [[ -d .whl ]] && ! "$PYTHON" -c "import rfw, vulkan" 2>/dev/null; then
-    set +eu  # device_env.sh is written for a plain shell
-    . "$(dirname "$0")/device_env.sh" >"$OUT/env.log" 2>&1
-    set -eu
-fi
+. "$(dirname "$0")/device_ready.sh" "rfw, vulkan"
 if ! "$PYTHON" -c "import numpy, vulkan, rfw" 2>/dev/null; then
     echo "device_memplan.sh: $PYTHON cannot import numpy, vulkan and rfw: set PYTHONPATH" >&2
     exit 1

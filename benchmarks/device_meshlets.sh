@@ -51,11 +51,7 @@ export RFW_CACHE_SPIRV=${RFW_CACHE_SPIRV:-/tmp/rfw-cache/spirv}
 export PYTHONUNBUFFERED=1
 mkdir -p "$OUT"
 
-if [[ -d .whl ]] && ! "$PYTHON" -c "import rfw, vulkan, meshoptimizer" 2>/dev/null; then
-    set +eu  # device_env.sh is written for a plain shell
-    . "$(dirname "$0")/device_env.sh" >"$OUT/env.log" 2>&1
-    set -eu
-fi
+. "$(dirname "$0")/device_ready.sh" "rfw, vulkan, meshoptimizer"
 
 missing=0
 for f in dragon.npz city.npz; do

@@ -16,9 +16,7 @@ set -uo pipefail
 : "${OUT:?set OUT to the folder for the results}"
 mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
-if [[ -d .whl ]] && ! "$PYTHON" -c "import rfw, vulkan" 2>/dev/null; then
-    . "$(dirname "$0")/device_env.sh" >"$OUT/env.log" 2>&1
-fi
+. "$(dirname "$0")/device_ready.sh" "rfw, vulkan"
 # caches in /tmp: the machine starts bare and its home may not be writable
 export RFW_CACHE_SPIRV=${RFW_CACHE_SPIRV:-/tmp/rfw-cache/spirv}
 export PYTHONUNBUFFERED=1

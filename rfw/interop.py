@@ -168,14 +168,6 @@ class CudaDriver:
         with self.push(ordinal):
             self.call("cuCtxSynchronize")
 
-    def copy_dtod(self, dst: int, src: int, nbytes: int, ordinal: int) -> None:
-        """A device-to-device copy, done when this returns."""
-        with self.push(ordinal):
-            self.call("cuMemcpyDtoD_v2", ctypes.c_ulonglong(dst), ctypes.c_ulonglong(src),
-                      ctypes.c_size_t(nbytes))
-            self.call("cuCtxSynchronize")  # a DtoD copy may return before it is done
-        copies["device_to_device"] += 1
-
     def gather(self, plan: list[Copy2D], stream: int = 0) -> None:
         """Queue ``plan``'s copies (device to device) on ``stream`` of the current context."""
         for c in plan:
@@ -244,15 +236,6 @@ def cuda() -> CudaDriver:
         if _driver is None:
             raise RfwError(_driver_error or "CUDA is not available")
         return _driver
-
-
-def cuda_reason() -> str | None:
-    """Why there is no CUDA driver here (None where there is one)."""
-    try:
-        cuda()
-    except RfwError as e:
-        return e.message
-    return None
 
 
 # ---------------------------------------------------------------------------------------------

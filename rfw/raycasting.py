@@ -84,7 +84,12 @@ def _interval(name: str, value: Any, n: int) -> np.ndarray | float:
 
 def _intervals(t_min: Any, t_max: Any, n: int, names: tuple[str, str],
                ) -> tuple[np.ndarray | float, np.ndarray | float]:
-    lo, hi = _interval(names[0], t_min, n), _interval(names[1], t_max, n)
+    return _ordered(_interval(names[0], t_min, n), _interval(names[1], t_max, n), names)
+
+
+def _ordered(lo: np.ndarray | float, hi: np.ndarray | float, names: tuple[str, str],
+             ) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """``lo``, ``hi`` (checked by :func:`_interval`) unless ``hi`` is below ``lo``."""
     below = np.asarray(hi) < np.asarray(lo)
     if below.any():
         first = int(np.argmax(below)) if below.ndim else 0
@@ -387,7 +392,7 @@ class RayScene:
             else:
                 bounds.append(_interval(name, interop.host_of(a), n))
         if not any(isinstance(b, interop.CudaView) for b in bounds):
-            bounds = list(_intervals(t_min, t_max, n, ("t_min", "t_max")))
+            bounds = list(_ordered(*bounds, ("t_min", "t_max")))
         return scene.cast_device(*views, *bounds, hits=self._keys())
 
     def _keys(self) -> tuple[str, ...]:

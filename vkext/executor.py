@@ -231,7 +231,6 @@ class VkExecutor(ExecutorCore):
         self.transients = None
         # graph outputs the frames copy into exported memory (vkext.external.export_outputs)
         self.frame_exports: Any = None
-        self._ending = False
         self.allocator: BlockAllocator | None = None
         self.programs = self.descriptors = self.ring = None
         self.bundles: BundleCache | None = None
@@ -615,8 +614,7 @@ class VkExecutor(ExecutorCore):
         its fence, then read its timestamps. A flush (not ``last``) that submits splits the
         frame (no longer one submit kept for replay); the frame's last submit records what
         the slot's command buffer now holds, for a frame to replay."""
-        self._ending = last
-        fence = self._send_frame()
+        fence = self._send_frame(last=last)
         if last and fence is not None and self.frame_exports is not None:
             self.frame_exports.submitted(slot)  # the frame copied its device outputs
         if not last:
@@ -631,8 +629,9 @@ class VkExecutor(ExecutorCore):
         pending, self._pending = self._pending, []
         return lambda append: self._finish(slot, None, pending, append)
 
-    def _send_frame(self) -> Any:
-        """End the command buffer and submit it: its fence, or None if nothing was recorded.
+    def _send_frame(self, *, last: bool) -> Any:
+        """End the command buffer and submit it: its fence, or None if nothing was recorded
+        (``last``: the frame's last submit, which copies the device outputs).
         A replayed frame submits the slot's command buffer as it is (or records the rest
         of it first, if the frame had fewer passes)."""
         slot = self._frame_slot
@@ -646,7 +645,7 @@ class VkExecutor(ExecutorCore):
             return None
         self._recording = False
         try:
-            if self._ending and self.frame_exports is not None:  # outputs to exported memory
+            if last and self.frame_exports is not None:  # outputs to exported memory
                 self.frame_exports.record(self.cmd, slot)
             _check(lib.vkEndCommandBuffer(self.cmd))
         except BaseException:

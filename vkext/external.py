@@ -42,7 +42,7 @@ from .commands import (
     as_state,
     copy_image_out,
     readback_bytes,
-    texels,
+    texel_layout,
 )
 from .consts import const, ffi, lib, vk
 from .device import VkDevice
@@ -342,8 +342,7 @@ class ImageExport:
         self.device, self.image = device, image
         self.label = label or f"{image.label}:export"
         size = readback_bytes(image)
-        probe = texels(np.zeros(size, np.uint8), image)  # the format's shape and dtype
-        self.shape, self.dtype = probe.shape, probe.dtype
+        self.shape, self.dtype = texel_layout(image)
         self.buffer = ExportedBuffer(device, size, ("transfer_dst",), link=link,
                                      label=self.label)
         try:
@@ -444,9 +443,8 @@ class FrameExports:
         key = (id(slot), name)
         view = self.views.get(key)
         if view is None:
-            image = self.executor.image(name)
-            probe = texels(np.zeros(readback_bytes(image), np.uint8), image)
-            view = self.views[key] = self.buffers[key].array(0, probe.shape, probe.dtype)
+            shape, dtype = texel_layout(self.executor.image(name))
+            view = self.views[key] = self.buffers[key].array(0, shape, dtype)
         return view
 
     def read_timer(self) -> float | None:

@@ -91,10 +91,10 @@ def readback_bytes(image: Image, *, mip: int = 0, aspect: str | int | None = Non
     return w * h * _texel_bytes(image.format, _copy_aspect(image.format, aspect))
 
 
-def texels(raw: np.ndarray, image: Image, *, mip: int = 0,
-           aspect: str | int | None = None) -> np.ndarray:
-    """Bytes from ``copy_image_to_buffer`` as an (h, w, channels) array of the format's
-    channel type (depth-stencil: uint32 depth words or uint8 stencil)."""
+def texel_layout(image: Image, *, mip: int = 0, aspect: str | int | None = None,
+                 ) -> tuple[tuple[int, int, int], np.dtype]:
+    """The (h, w, channels) shape and channel dtype :func:`texels` gives ``image``'s bytes
+    (depth-stencil: uint32 depth words or uint8 stencil)."""
     w, h = max(1, image.width >> mip), max(1, image.height >> mip)
     info = format_info(image.format)
     if info.depth and info.stencil:
@@ -102,7 +102,15 @@ def texels(raw: np.ndarray, image: Image, *, mip: int = 0,
         dtype, channels = np.dtype(np.uint8 if stencil else np.uint32), 1
     else:
         dtype, channels = numpy_dtype(image.format)
-    return raw.view(dtype).reshape(h, w, channels)
+    return (h, w, channels), np.dtype(dtype)
+
+
+def texels(raw: np.ndarray, image: Image, *, mip: int = 0,
+           aspect: str | int | None = None) -> np.ndarray:
+    """Bytes from ``copy_image_to_buffer`` as an (h, w, channels) array of the format's
+    channel type (:func:`texel_layout`)."""
+    shape, dtype = texel_layout(image, mip=mip, aspect=aspect)
+    return raw.view(dtype).reshape(shape)
 
 
 def _copy_region(aspect: int, w: int, h: int, mip: int, layer: int) -> Any:

@@ -15,7 +15,7 @@ from ..accel import SceneAccel
 from ..device import VkDevice
 from .batches import DEFAULT_BATCH
 from .caster import RayBuffers, Raycaster, device_lock, pick_method
-from .streams import check_rays, hit_arrays
+from .streams import check_rays, fill_misses, hit_arrays
 
 
 def raycaster(device: VkDevice, method: str = "auto") -> Raycaster:
@@ -82,11 +82,7 @@ class RayScene:
         if self.accel is None:  # nothing to hit: no GPU work, so the host checks the rays
             origins, directions = (np.asarray(a, np.float32) for a in (origins, directions))
             check_rays(origins, directions)
-            arrays = hit_arrays(len(origins), hits, out)
-            for name, value in (("t", np.inf), ("primitive", -1), ("instance", -1),
-                                ("barycentrics", 0.0)):
-                if name in arrays:
-                    arrays[name][...] = value
+            arrays = fill_misses(hit_arrays(len(origins), hits, out))
             self._last = {"method": self.method, "rays": len(origins), "batches": 0}
             self._pending_gpu = None
             return {k: arrays[k] for k in hits}
@@ -116,17 +112,23 @@ class RayScene:
         into them (``torch.from_dlpack(o).copy_(...)``) and :meth:`cast_device` them, and
         nothing is copied in. Valid until a cast of more rays grows the buffer (older views
         then still work, copied like any caller's array)."""
-        from .shared import SharedRays, link_of
-
         with self.lock:
             if self.closed:
                 raise RfwError("the ray scene is closed: make a new rfw.RayScene")
             if self.accel is None:
                 raise RfwError("a ray scene with nothing to hit has no ray buffer")
-            if self.shared is None:
-                self.shared = SharedRays(self.caster, self.accel.tlas,
-                                         link_of(self.device), label=self.label)
-            return self.shared.device_rays(n)
+            return self.shared_rays().device_rays(n)
+
+    def shared_rays(self, link: Any = None) -> Any:
+        """The scene's :class:`.shared.SharedRays` (made on first use; ``link``: the device's
+        CUDA link where the caller has it), under :attr:`lock`, with something to hit."""
+        if self.shared is None:
+            from .shared import SharedRays, link_of
+
+            self.shared = SharedRays(self.caster, self.accel.tlas,
+                                     link if link is not None else link_of(self.device),
+                                     label=self.label)
+        return self.shared
 
     def sharing(self) -> str | None:
         """None where casts can keep rays and hits on the GPU (the device shares memory

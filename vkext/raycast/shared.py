@@ -24,6 +24,7 @@ the host (that would read the hits back): their ``t`` is NaN and ``primitive`` t
 
 from __future__ import annotations
 
+import ctypes
 import time
 from typing import Any
 
@@ -90,11 +91,6 @@ class SharedRays:
         if timer is not None:
             timer.write(cmd, "ALL_COMMANDS", 3)
         self.submitter.end(key)
-
-    def gpu_ms(self) -> float | None:
-        """The last cast's trace in GPU ms (between the ownership barriers)."""
-        parts = self.gpu_parts()
-        return None if parts is None else parts["gpu_ms"]
 
     def gpu_parts(self) -> dict[str, float] | None:
         """The last cast's GPU ms: the trace (``gpu_ms``), the acquire barrier before it and
@@ -214,14 +210,9 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
         if scene.closed:
             raise RfwError("the ray scene is closed: make a new rfw.RayScene")
         t0 = clock()
-        shared = scene.shared
-        if shared is None:
-            shared = scene.shared = SharedRays(scene.caster, scene.accel.tlas
-                                               if scene.accel is not None else None, link,
-                                               label=scene.label) \
-                if scene.accel is not None else None
-        if shared is None:  # nothing to hit: misses written on the host, copied up
-            return _misses(scene, n, hits, link)
+        if scene.accel is None:  # nothing to hit: misses written on the host
+            return _misses(scene, n, hits)
+        shared = scene.shared_rays(link)
         shared.reserve(max(n, 1))
         per_ray = not (np.ndim(tmin) == 0 and not isinstance(tmin, CudaView)
                        and np.ndim(tmax) == 0 and not isinstance(tmax, CudaView))
@@ -239,9 +230,11 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
                     drv.gather(gather_copies(src.ptr, src.shape, src.strides, 4,
                                              base + offset))
                     copies["device_to_device"] += 1
-                else:
-                    drv.copy_htod(base + offset, np.ascontiguousarray(src, np.float32),
-                                  link.ordinal)
+                else:  # the context is current: the copy alone (CudaDriver.copy_htod)
+                    src = np.ascontiguousarray(src, np.float32)
+                    drv.call("cuMemcpyHtoD_v2", ctypes.c_ulonglong(base + offset),
+                             ctypes.c_void_p(src.ctypes.data), ctypes.c_size_t(src.nbytes))
+                    copies["host_to_device"] += 1
             t_copies = clock()
             if jobs:
                 drv.call("cuCtxSynchronize")  # the copies landed before Vulkan reads
@@ -278,13 +271,9 @@ def _stream(x: Any, n: int) -> Any:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(x, np.float32), (n,)))
 
 
-def _misses(scene: Any, n: int, hits: tuple[str, ...], link: CudaLink) -> dict[str, Any]:
-    from .streams import hit_arrays
+def _misses(scene: Any, n: int, hits: tuple[str, ...]) -> dict[str, Any]:
+    from .streams import fill_misses, hit_arrays
 
-    arrays = hit_arrays(n, hits)
-    for name, value in (("t", np.inf), ("primitive", -1), ("instance", -1),
-                        ("barycentrics", 0.0)):
-        if name in arrays:
-            arrays[name][...] = value
+    arrays = fill_misses(hit_arrays(n, hits))
     scene._last = {"method": scene.method, "rays": n, "batches": 0, "path": "host"}
     return {k: DeviceArray.of_host(arrays[k]) for k in hits}

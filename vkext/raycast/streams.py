@@ -46,6 +46,16 @@ def hit_arrays(n: int, names: Any, out: dict[str, np.ndarray] | None = None,
     return arrays
 
 
+def fill_misses(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``arrays`` (of :func:`hit_arrays`) written as every ray missed: ``t`` inf, no
+    primitive or instance (-1), zero barycentrics."""
+    for name, value in (("t", np.inf), ("primitive", -1), ("instance", -1),
+                        ("barycentrics", 0.0)):
+        if name in arrays:
+            arrays[name][...] = value
+    return arrays
+
+
 def _describe(a: Any) -> str:
     if not isinstance(a, np.ndarray):
         return type(a).__name__
