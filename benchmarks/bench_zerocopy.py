@@ -16,7 +16,9 @@ Measures, in one run (results as JSON into ``$OUT/bench_zerocopy.json``, or ``--
   ``forward.hdr`` through ``rfw.interop.read_device`` twice: per read (a submit of the copy
   and a wait) and in-frame (``rfw.interop.device_outputs``: the frame's own command buffer
   copies it, ordered by the frame's fence), with the frame's GPU ms with and without that
-  copy (``cost``); each checked against the host readback inside the frame. Rays also
+  copy (``cost``), and in-frame with ``read_device(..., wrap=torch.from_dlpack)`` (each
+  slot's buffer wrapped once, that tensor handed out again: ``render_in_frame_wrapped``);
+  each checked against the host readback inside the frame. Rays also
   come as strided tensors (transposed, a slice of (N, 8)), gathered on the device.
 - ``copies``: no device-to-host copy during the timed casts, shown four ways: rfw's own
   counters (``rfw.interop.copies``), every ``vkMapMemory`` and ``Buffer.map`` call counted
@@ -625,6 +627,7 @@ def image_section(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
     out["export"] = image_export(args, torch)
     out["render"] = image_render(args, torch, in_frame=False)
     out["render_in_frame"] = image_render(args, torch, in_frame=True)
+    out["render_in_frame_wrapped"] = image_render(args, torch, in_frame=True, wrapped=True)
     per, inf = out["render"], out["render_in_frame"]
     if "frame_gpu_ms_passes" in per and "frame_gpu_ms_passes" in inf:
         copy = inf.get("in_frame_copy_gpu_ms") or 0.0
@@ -632,7 +635,9 @@ def image_section(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
                        "frame_gpu_ms_with_in_frame_copy": inf["frame_gpu_ms_passes"] + copy,
                        "in_frame_copy_gpu_ms": inf.get("in_frame_copy_gpu_ms"),
                        "per_read_us": per.get("median_us"),
-                       "in_frame_read_us": inf.get("median_us")}
+                       "in_frame_read_us": inf.get("median_us"),
+                       "in_frame_wrapped_read_us":
+                           out["render_in_frame_wrapped"].get("median_us")}
     return out
 
 
@@ -680,13 +685,15 @@ def image_export(args: argparse.Namespace, torch: Any) -> dict[str, Any]:
         dev.destroy()
 
 
-def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dict[str, Any]:
+def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool,
+                 wrapped: bool = False) -> dict[str, Any]:
     """forward.hdr of a real vk render as a torch tensor, in each_frame through
     rfw.interop.read_device: the frames drained (the render done), then timed to the tensor
     usable. ``in_frame``: after frame 0, ``rfw.interop.device_outputs`` makes each frame's
     own command buffer copy the output into exported memory (ordered by the frame's fence),
     so the read is the wrapper alone; else each read submits the copy and waits (the old
-    path). The tensor is checked against the host readback inside the frame (the device
+    path). ``wrapped``: ``read_device(..., wrap=torch.from_dlpack)``, which wraps each slot's
+    buffer once and hands that tensor out again (no dlpack exchange per read). The tensor is checked against the host readback inside the frame (the device
     goes with the render)."""
     from rfw import interop
     from rfw.config import apply_overrides, load_config
@@ -707,24 +714,34 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool) -> dic
         frame.drain()  # the render done
         torch.cuda.synchronize()
         t0 = time.perf_counter()
-        a = interop.read_device(frame, "forward.hdr")
-        t = torch.from_dlpack(a) if a.zero_copy else None
+        if wrapped:
+            t = interop.read_device(frame, "forward.hdr", wrap=torch.from_dlpack)
+        else:
+            a = interop.read_device(frame, "forward.hdr")
+            t = torch.from_dlpack(a) if a.zero_copy else None
         torch.cuda.synchronize()
         if k >= args.warmup:
             times.append(time.perf_counter() - t0)
             # the same steps timed one by one after the timed read (where the time goes)
             c0 = time.perf_counter()
-            a = interop.read_device(frame, "forward.hdr")
-            c1 = time.perf_counter()
-            t = torch.from_dlpack(a) if a.zero_copy else None
-            c2 = time.perf_counter()
+            if wrapped:
+                t = interop.read_device(frame, "forward.hdr", wrap=torch.from_dlpack)
+                c1 = c2 = time.perf_counter()
+            else:
+                a = interop.read_device(frame, "forward.hdr")
+                c1 = time.perf_counter()
+                t = torch.from_dlpack(a) if a.zero_copy else None
+                c2 = time.perf_counter()
             torch.cuda.synchronize()
             c3 = time.perf_counter()
             for part, v in (("read_device", c1 - c0), ("from_dlpack", c2 - c1),
                             ("synchronize", c3 - c2)):
                 parts.setdefault(part, []).append(v * 1e6)
         if k == args.warmup:  # checked here: the arrays die with the render's device
-            keep["zero_copy"], keep["device"] = a.zero_copy, a.device
+            if wrapped:
+                keep["zero_copy"], keep["device"] = bool(t.is_cuda), str(t.device)
+            else:
+                keep["zero_copy"], keep["device"] = a.zero_copy, a.device
             if t is not None:
                 keep["equal_host_readback"] = bool(np.array_equal(
                     t.cpu().numpy(), frame.read("forward.hdr")))
@@ -765,6 +782,7 @@ def verdicts(rec: dict[str, Any]) -> dict[str, Any]:
     cast = rays.get("torch", {}).get("median_ms")
     embree = rays.get("embree", {}).get("median_ms")
     image = img.get("render_in_frame", {}).get("median_us")
+    wrapped = img.get("render_in_frame_wrapped", {}).get("median_us")
     torch_rec = rays.get("torch", {})
     out = {"cast_ms": cast, "cast_ms_target": TARGETS["cast_ms"],
            "cast_ok": cast is not None and cast <= TARGETS["cast_ms"],
@@ -772,6 +790,8 @@ def verdicts(rec: dict[str, Any]) -> dict[str, Any]:
            "embree_ratio_target": TARGETS["embree_ratio"],
            "image_us": image, "image_us_target": TARGETS["image_us"],
            "image_ok": image is not None and image <= TARGETS["image_us"],
+           "image_wrapped_us": wrapped,
+           "image_wrapped_ok": wrapped is not None and wrapped <= TARGETS["image_us"],
            "zero_device_to_host": (
                torch_rec.get("rfw_copies_during_casts", {}).get("device_to_host") == 0
                and not any(torch_rec.get("maps_during_casts", {"x": 1}).values())

@@ -664,18 +664,25 @@ def device_outputs(frame: Any, names: Any) -> dict[str, str | None]:
     return out
 
 
-def read_device(frame: Any, resource: str) -> DeviceArray:
+def read_device(frame: Any, resource: str, *, wrap: Any = None) -> Any:
     """A graph output of a running :class:`rfw.frame.Frame` (e.g. in ``rfw.render``'s
     ``each_frame(k, frame)``) as a :class:`DeviceArray`, after its frames in flight: on vk
     with a GPU that CUDA shares memory with, copied on the GPU into exported memory
     (``zero_copy`` True; the same memory each read of the frame's resource, so the next
     read overwrites it; after :func:`device_outputs` the copy the frame made itself, one
     buffer per frame in flight, nothing submitted here); elsewhere a host copy
-    (``zero_copy`` False)."""
+    (``zero_copy`` False).
+
+    ``wrap`` (e.g. ``torch.from_dlpack``): the array as ``wrap`` makes it. Where the frames
+    copy the output themselves (:func:`device_outputs`), ``wrap`` runs once per buffer and
+    its result is handed out again (the same tensor for every frame that used that buffer:
+    like the array, a view that a later frame overwrites), so a read costs no dlpack
+    exchange; elsewhere ``wrap`` runs on each read."""
     frame.drain()
     owner = frame.frame_plan.owner[resource]
     backend = frame.backends.get(owner)
     read = getattr(backend, "read_device", None)
     if read is None:
-        return DeviceArray.of_host(frame.read(resource))
-    return read(frame.executors[owner], resource)
+        a = DeviceArray.of_host(frame.read(resource))
+        return a if wrap is None else wrap(a)
+    return read(frame.executors[owner], resource, wrap=wrap)

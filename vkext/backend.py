@@ -93,12 +93,13 @@ class VkBackend(BackendBase):
             upload_image(executor.device, executor.image(resource), data, layout_after=state,
                          layout_before=state)
 
-    def read_device(self, executor: VkExecutor, resource: str) -> Any:
-        """A graph output as an ``rfw.interop.DeviceArray``: zero-copy where the device
-        shares memory with CUDA, else a host copy (:func:`vkext.external.read_output`)."""
+    def read_device(self, executor: VkExecutor, resource: str, *, wrap: Any = None) -> Any:
+        """A graph output as an ``rfw.interop.DeviceArray`` (or as ``wrap`` makes it):
+        zero-copy where the device shares memory with CUDA, else a host copy
+        (:func:`vkext.external.read_output`)."""
         from .external import read_output
 
-        return read_output(executor, resource)
+        return read_output(executor, resource, wrap=wrap)
 
     def export_outputs(self, executor: VkExecutor, names: Any) -> str | None:
         """From the next frame on, the frames copy the images ``names`` into exported memory

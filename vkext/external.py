@@ -394,6 +394,8 @@ class FrameExports:
         self.buffers: dict[tuple[int, str], ExportedBuffer] = {}
         self.timers: dict[int, Any] = {}
         self.views: dict[tuple[int, str], DeviceArray] = {}
+        # what read_device's wrap made of a view, by (slot, name, wrap): made once
+        self.wrapped: dict[tuple[int, str, Any], Any] = {}
         self.last: Any = None  # the slot of the last frame submitted with the copies
         self.gpu_ms: list[float] = []
         self._timed: set[int] = set()
@@ -435,8 +437,10 @@ class FrameExports:
         self.last = slot
         self._timed.discard(id(slot))
 
-    def array(self, name: str) -> DeviceArray:
-        """The last finished frame's ``name`` (the caller waited for its fence)."""
+    def array(self, name: str, wrap: Any = None) -> Any:
+        """The last finished frame's ``name`` (the caller waited for its fence); with
+        ``wrap``, what ``wrap`` made of that view the first time (kept until
+        :meth:`destroy`)."""
         slot = self.last
         if slot is None:
             raise RfwError(f"no frame has copied '{name}' into exported memory yet")
@@ -445,7 +449,12 @@ class FrameExports:
         if view is None:
             shape, dtype = texel_layout(self.executor.image(name))
             view = self.views[key] = self.buffers[key].array(0, shape, dtype)
-        return view
+        if wrap is None:
+            return view
+        made = self.wrapped.get((*key, wrap))
+        if made is None:
+            made = self.wrapped[(*key, wrap)] = wrap(view)
+        return made
 
     def read_timer(self) -> float | None:
         """The last finished frame's copy time in GPU ms (appended to ``gpu_ms`` once per
@@ -465,7 +474,8 @@ class FrameExports:
             timer.destroy()
         for buf in self.buffers.values():
             buf.release()  # arrays handed out keep theirs
-        self.timers, self.buffers, self.views, self.last = {}, {}, {}, None
+        # the wrapped tensors hold their views, which hold the memory: let go of both
+        self.timers, self.buffers, self.views, self.wrapped, self.last = {}, {}, {}, {}, None
 
 
 def export_outputs(executor: Any, names: Any, *, record_without_cuda: bool = False) -> str | None:
@@ -498,17 +508,24 @@ def export_outputs(executor: Any, names: Any, *, record_without_cuda: bool = Fal
     return None
 
 
-def read_output(executor: Any, resource: str) -> DeviceArray:
+def read_output(executor: Any, resource: str, *, wrap: Any = None) -> Any:
     """A vk executor's image ``resource`` (a graph output) as a :class:`DeviceArray`, after
     every frame in flight: zero-copy where the device shares memory with CUDA. Where the
     frames copy it themselves (:func:`export_outputs`), the last frame's copy (nothing
     submitted here); else the export recorded once per executor and image, so a read is one
-    submit and a wait. Without a link a host copy (``zero_copy`` False)."""
+    submit and a wait. Without a link a host copy (``zero_copy`` False). ``wrap``: the
+    array as it makes it (:func:`rfw.interop.read_device`): once per buffer where the
+    frames copy, else on each read."""
     executor.drain()
     frames = getattr(executor, "frame_exports", None)
     if frames is not None and frames.link is not None and resource in frames.names \
             and frames.last is not None:
-        return frames.array(resource)
+        return frames.array(resource, wrap)
+    array = _read_output(executor, resource)
+    return array if wrap is None else wrap(array)
+
+
+def _read_output(executor: Any, resource: str) -> DeviceArray:
     device = executor.device
     link = cuda_link(device)
     if resource in executor.buffers or not isinstance(link, CudaLink):

@@ -274,6 +274,30 @@ def test_a_graph_output_through_read_device(vk_device):
     assert np.ptp(want[..., :3]) > 0  # a picture, not a cleared image
 
 
+def test_read_device_wraps_each_host_read(vk_device):
+    """``wrap`` (torch.from_dlpack where there is CUDA) gets the read array and its result
+    comes back; on the host path it runs on every read (each read is a new copy). The
+    control: without it the read is a DeviceArray."""
+    cfg = apply_overrides(load_config(FORWARD), ["size=32x18", "frames=3"])
+    cfg = replace(cfg, outputs=["forward.hdr"])
+    calls, got, plain = [], [], []
+
+    def wrap(a):
+        calls.append(a)
+        return ("wrapped", np.from_dlpack(a).copy())
+
+    def each(k, frame):
+        got.append(interop.read_device(frame, "forward.hdr", wrap=wrap))
+        plain.append(interop.read_device(frame, "forward.hdr"))
+
+    result = render(cfg, device=vk_device, backend="vk", each_frame=each)
+    assert len(calls) == 3 and len({id(a) for a in calls}) == 3
+    assert all(isinstance(a, interop.DeviceArray) and not a.zero_copy for a in calls)
+    assert [g[0] for g in got] == ["wrapped"] * 3
+    assert all(isinstance(p, interop.DeviceArray) for p in plain)
+    np.testing.assert_array_equal(got[-1][1], result.images["forward.hdr"])
+
+
 def test_exported_memory_lives_as_long_as_its_arrays(vk_device):
     if external.EXTENSION not in vk_device.extensions:
         pytest.skip(f"no {external.EXTENSION}")

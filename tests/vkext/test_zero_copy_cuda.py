@@ -49,3 +49,44 @@ def test_torch_rays_give_the_host_hits_as_cuda_tensors(scene):
     np.testing.assert_array_equal(again, want["t"])
     other = scene.cast(*(torch.from_numpy(a).cuda() for a in _rays(4096, shift=0.37)))
     assert not np.array_equal(torch.from_dlpack(other["t"]).cpu().numpy(), want["t"])
+
+
+def test_frames_hand_out_one_tensor_per_buffer(vk_device):
+    """After device_outputs, read_device(..., wrap=torch.from_dlpack) wraps each frame
+    slot's exported buffer once and hands the same tensor out again: each frame's tensor
+    holds that frame's image (the host readback, bit for bit), and the tensors are as many
+    as the slots used, not the frames. The control: a frame's tensor differs from the
+    image of a frame rendered with another camera."""
+    from dataclasses import replace
+
+    from rfw.config import apply_overrides, load_config
+    from rfw.render import render
+
+    from .test_zero_copy import FORWARD
+
+    if not torch.cuda.is_available():
+        pytest.skip("torch has no CUDA device")
+    cfg = apply_overrides(load_config(FORWARD), ["size=64x36", "frames=6",
+                                                 "camera.path=orbit"])
+    cfg = replace(cfg, outputs=["forward.hdr"])
+    seen, wraps = [], []
+
+    def wrap(a):
+        wraps.append(a)
+        return torch.from_dlpack(a)
+
+    def each(k, frame):
+        if k == 0:
+            why = interop.device_outputs(frame, ["forward.hdr"])["forward.hdr"]
+            if why:
+                pytest.skip(f"no in-frame device outputs: {why}")
+            return
+        t = interop.read_device(frame, "forward.hdr", wrap=wrap)
+        torch.cuda.synchronize()
+        seen.append((id(t), np.array_equal(t.cpu().numpy(), frame.read("forward.hdr")),
+                     t.cpu().numpy().copy()))
+
+    render(cfg, device=vk_device, backend="vk", each_frame=each)
+    assert len(seen) == 5 and all(s[1] for s in seen)
+    assert 1 <= len(wraps) == len({s[0] for s in seen}) < len(seen)
+    assert not np.array_equal(seen[0][2], seen[-1][2])  # the camera moved: other images
