@@ -78,6 +78,7 @@ class CudaDriver:
             raise RfwError(f"CUDA is not available: cannot load {library} ({e})") from None
         self._contexts: dict[int, ctypes.c_void_p] = {}
         self._fns: dict[str, Any] = {}
+        self._gathers: dict[int, ctypes.c_void_p] = {}  # the gather kernel, by device
         self._lock = threading.Lock()
         # driver calls by name since load (what a cast costs: benchmarks count them)
         self.calls: dict[str, int] = {}
@@ -168,20 +169,35 @@ class CudaDriver:
         with self.push(ordinal):
             self.call("cuCtxSynchronize")
 
-    def gather(self, plan: list[Copy2D], stream: int = 0) -> None:
-        """Queue ``plan``'s copies (device to device) on ``stream`` of the current context."""
-        for c in plan:
-            if c.height == 1:
-                self.call("cuMemcpyDtoDAsync_v2", ctypes.c_ulonglong(c.dst),
-                          ctypes.c_ulonglong(c.src), ctypes.c_size_t(c.width),
-                          ctypes.c_void_p(stream))
-                continue
-            m = _Memcpy2D()
-            m.srcMemoryType = m.dstMemoryType = _CU_MEMORYTYPE_DEVICE
-            m.srcDevice, m.srcPitch = c.src, c.src_pitch
-            m.dstDevice, m.dstPitch = c.dst, c.dst_pitch
-            m.WidthInBytes, m.Height = c.width, c.height
-            self.call("cuMemcpy2DAsync_v2", ctypes.byref(m), ctypes.c_void_p(stream))
+    def gather(self, g: Gather, ordinal: int, stream: int = 0) -> None:
+        """Queue ``g`` on ``stream`` of device ``ordinal``'s context (current): a contiguous
+        source is one ``cuMemcpyDtoDAsync``, any other one launch of :data:`GATHER_PTX`."""
+        if g.rows * g.cols == 0:
+            return
+        if g.contiguous:
+            self.call("cuMemcpyDtoDAsync_v2", ctypes.c_ulonglong(g.dst),
+                      ctypes.c_ulonglong(g.src), ctypes.c_size_t(g.rows * g.cols * 4),
+                      ctypes.c_void_p(stream))
+            return
+        args = [ctypes.c_uint64(x) for x in (g.dst, g.src, g.rows * g.cols, g.cols,
+                                             g.row_stride, g.col_stride)]
+        params = (ctypes.c_void_p * len(args))(*(ctypes.addressof(x) for x in args))
+        blocks = min(-(-g.rows * g.cols // _GATHER_BLOCK), _GATHER_GRID)
+        self.call("cuLaunchKernel", self._gather_function(ordinal), ctypes.c_uint(blocks),
+                  ctypes.c_uint(1), ctypes.c_uint(1), ctypes.c_uint(_GATHER_BLOCK),
+                  ctypes.c_uint(1), ctypes.c_uint(1), ctypes.c_uint(0),
+                  ctypes.c_void_p(stream), params, None)
+
+    def _gather_function(self, ordinal: int) -> ctypes.c_void_p:
+        """:data:`GATHER_PTX`'s kernel in device ``ordinal``'s context (current), loaded
+        (the driver compiles the PTX for its GPU) on first use."""
+        fn = self._gathers.get(ordinal)
+        if fn is None:
+            module, fn = ctypes.c_void_p(), ctypes.c_void_p()
+            self.call("cuModuleLoadData", ctypes.byref(module), ctypes.c_char_p(GATHER_PTX))
+            self.call("cuModuleGetFunction", ctypes.byref(fn), module, b"rfw_gather32")
+            self._gathers[ordinal] = fn
+        return fn
 
     def copy_htod(self, dst: int, src: np.ndarray, ordinal: int) -> None:
         src = np.ascontiguousarray(src)
@@ -484,8 +500,8 @@ class SharedMemory:
 @dataclass(frozen=True)
 class CudaView:
     """A caller's CUDA array as rfw reads it: ``shape`` of ``dtype`` on device ``ordinal``,
-    element ``strides`` in bytes (None: C-contiguous); :func:`gather_copies` says how to
-    copy it into contiguous memory."""
+    element ``strides`` in bytes (None: C-contiguous); :func:`gather_of` says how to copy
+    it into contiguous memory."""
 
     ptr: int
     shape: tuple[int, ...]
@@ -495,62 +511,97 @@ class CudaView:
     strides: tuple[int, ...] | None = None
 
 
-class _Memcpy2D(ctypes.Structure):
-    # cuda.h's CUDA_MEMCPY2D
-    _fields_ = [("srcXInBytes", ctypes.c_size_t), ("srcY", ctypes.c_size_t),
-                ("srcMemoryType", ctypes.c_int), ("srcHost", ctypes.c_void_p),
-                ("srcDevice", ctypes.c_ulonglong), ("srcArray", ctypes.c_void_p),
-                ("srcPitch", ctypes.c_size_t),
-                ("dstXInBytes", ctypes.c_size_t), ("dstY", ctypes.c_size_t),
-                ("dstMemoryType", ctypes.c_int), ("dstHost", ctypes.c_void_p),
-                ("dstDevice", ctypes.c_ulonglong), ("dstArray", ctypes.c_void_p),
-                ("dstPitch", ctypes.c_size_t),
-                ("WidthInBytes", ctypes.c_size_t), ("Height", ctypes.c_size_t)]
+# rfw_gather32: dst[i] = src[(i / cols) * row + (i % cols) * col] for i < count, 4-byte
+# elements (strides in elements), a grid-stride loop. PTX written for this (ISA 6.0, sm_52:
+# any driver since CUDA 9 compiles it for its GPU); no CUDA toolkit is needed.
+GATHER_PTX = b"""
+.version 6.0
+.target sm_52
+.address_size 64
+
+.visible .entry rfw_gather32(.param .u64 p_dst, .param .u64 p_src, .param .u64 p_count,
+                             .param .u64 p_cols, .param .u64 p_row, .param .u64 p_col)
+{
+    .reg .pred %p<2>;
+    .reg .b32 %r<6>;
+    .reg .b64 %rd<14>;
+
+    ld.param.u64 %rd1, [p_dst];
+    ld.param.u64 %rd2, [p_src];
+    ld.param.u64 %rd3, [p_count];
+    ld.param.u64 %rd4, [p_cols];
+    ld.param.u64 %rd5, [p_row];
+    ld.param.u64 %rd6, [p_col];
+    cvta.to.global.u64 %rd1, %rd1;
+    cvta.to.global.u64 %rd2, %rd2;
+    mov.u32 %r1, %ctaid.x;
+    mov.u32 %r2, %ntid.x;
+    mov.u32 %r3, %tid.x;
+    mov.u32 %r4, %nctaid.x;
+    mul.wide.u32 %rd7, %r1, %r2;
+    cvt.u64.u32 %rd8, %r3;
+    add.s64 %rd7, %rd7, %rd8;          // i
+    mul.wide.u32 %rd9, %r4, %r2;       // the grid's stride
+$L_loop:
+    setp.ge.u64 %p1, %rd7, %rd3;
+    @%p1 bra $L_done;
+    div.u64 %rd10, %rd7, %rd4;         // row
+    mul.lo.s64 %rd11, %rd10, %rd4;
+    sub.s64 %rd11, %rd7, %rd11;        // column
+    mul.lo.s64 %rd12, %rd10, %rd5;
+    mad.lo.s64 %rd12, %rd11, %rd6, %rd12;
+    shl.b64 %rd12, %rd12, 2;
+    add.s64 %rd12, %rd2, %rd12;
+    ld.global.u32 %r5, [%rd12];
+    shl.b64 %rd13, %rd7, 2;
+    add.s64 %rd13, %rd1, %rd13;
+    st.global.u32 [%rd13], %r5;
+    add.s64 %rd7, %rd7, %rd9;
+    bra.uni $L_loop;
+$L_done:
+    ret;
+}
+\0"""
+_GATHER_BLOCK, _GATHER_GRID = 256, 4096  # threads a block; blocks at most (then the loop)
 
 
 @dataclass(frozen=True)
-class Copy2D:
-    """One pitched copy (``cuMemcpy2D``'s terms): ``height`` rows of ``width`` bytes, row
-    ``r`` from ``src + r * src_pitch`` to ``dst + r * dst_pitch``."""
+class Gather:
+    """An (N,) or (N, W) array of 4-byte elements at ``src`` made C-contiguous at ``dst``:
+    element ``(r, k)`` read at ``src + 4 * (r * row_stride + k * col_stride)`` (strides in
+    elements), written at ``dst + 4 * (r * cols + k)`` (:meth:`CudaDriver.gather`)."""
 
     src: int
-    src_pitch: int
     dst: int
-    dst_pitch: int
-    width: int
-    height: int
+    rows: int
+    cols: int
+    row_stride: int
+    col_stride: int
+
+    @property
+    def contiguous(self) -> bool:
+        return (self.rows <= 1 or self.row_stride == self.cols) and \
+            (self.cols <= 1 or self.col_stride == 1)
 
 
-def gather_copies(ptr: int, shape: tuple[int, ...], strides: tuple[int, ...] | None,
-                  itemsize: int, dst: int) -> list[Copy2D]:
-    """The copies that gather an (N,) or (N, W) array at ``ptr`` with element ``strides``
-    (bytes; None: C-contiguous) into C-contiguous memory at ``dst``: one linear copy if it
-    is contiguous, one pitched copy if its rows are (a slice of a wider array), else one
-    pitched copy per column (a transposed view)."""
+def gather_of(ptr: int, shape: tuple[int, ...], strides: tuple[int, ...] | None,
+              dst: int) -> Gather:
+    """The :class:`Gather` of a 4-byte (N,) or (N, W) array at ``ptr`` with ``strides`` in
+    bytes (None: C-contiguous) into ``dst``."""
     n = int(shape[0])
     w = int(shape[1]) if len(shape) > 1 else 1
-    row = w * itemsize
-    if n == 0 or row == 0:
-        return []
     if strides is None:
-        return [Copy2D(ptr, n * row, dst, n * row, n * row, 1)]
-    s0 = int(strides[0]) if n > 1 else row
-    s1 = int(strides[1]) if len(shape) > 1 and w > 1 else itemsize
-    if s1 == itemsize and s0 == row:
-        return [Copy2D(ptr, n * row, dst, n * row, n * row, 1)]
-    if s1 == itemsize and s0 >= row:
-        return [Copy2D(ptr, s0, dst, row, row, n)]
-    return [Copy2D(ptr + j * s1, s0, dst + j * itemsize, row, itemsize, n) for j in range(w)]
+        return Gather(ptr, dst, n, w, w, 1)
+    return Gather(ptr, dst, n, w, int(strides[0]) // 4 if n > 1 else w,
+                  int(strides[1]) // 4 if len(shape) > 1 and w > 1 else 1)
 
 
-def run_copies_on_host(copies: list[Copy2D], src: np.ndarray, dst: np.ndarray) -> None:
-    """``copies`` done on host bytes (``src``/``dst`` uint8, pointers as offsets into them):
-    what ``cuMemcpy2D`` does on the device, for tests where there is no CUDA."""
-    for c in copies:
-        rows = np.arange(c.height, dtype=np.int64)[:, None]
-        cols = np.arange(c.width, dtype=np.int64)[None, :]
-        dst[(c.dst + rows * c.dst_pitch + cols).ravel()] = \
-            src[(c.src + rows * c.src_pitch + cols).ravel()]
+def run_gather_on_host(g: Gather, src: np.ndarray, dst: np.ndarray) -> None:
+    """``g`` done on host words as the kernel does it (``src``/``dst`` uint32, pointers as
+    byte offsets into them), for tests where there is no CUDA."""
+    i = np.arange(g.rows * g.cols, dtype=np.int64)
+    r, k = i // g.cols, i % g.cols
+    dst[g.dst // 4 + i] = src[g.src // 4 + r * g.row_stride + k * g.col_stride]
 
 
 def is_device_array(a: Any) -> bool:
@@ -595,7 +646,7 @@ def host_of(a: Any) -> Any:
 def device_view(name: str, a: Any, width: int | None, dtype: Any = np.float32) -> CudaView:
     """``a`` (a CUDA array) checked as ``dtype`` of shape (N, width) (or (N,) with ``width``
     None), any element strides that are positive multiples of the item size (a transposed
-    view, a slice of a wider array: :func:`gather_copies`); one :class:`RfwError` line
+    view, a slice of a wider array: :func:`gather_of`); one :class:`RfwError` line
     naming ``name`` otherwise."""
     dtype = np.dtype(dtype)
     want = f"(N, {width})" if width else "(N,)"
@@ -629,7 +680,7 @@ def device_view(name: str, a: Any, width: int | None, dtype: Any = np.float32) -
         tuple(int(x) for x in strides)
     if strides is not None:
         # any element strides that are positive multiples of the item size: gathered on the
-        # device (gather_copies); a single row or column's stride does not matter
+        # device (gather_of); a single row or column's stride does not matter
         used = [x for x, n in zip(strides, shape, strict=True) if n > 1]
         if any(x <= 0 or x % dtype.itemsize for x in used):
             raise RfwError(f"{name} is a device array with strides {tuple(strides)} bytes; "

@@ -322,47 +322,46 @@ def test_the_driver_structs_have_cuda_h_and_dlpack_h_sizes():
     assert ctypes.sizeof(interop._DLTensor) == 48
     assert ctypes.sizeof(interop._DLManagedTensor) == 64
     assert interop._ExternalMemoryHandleDesc.size.offset == 24
-    assert ctypes.sizeof(interop._Memcpy2D) == 128  # CUDA_MEMCPY2D
-    assert interop._Memcpy2D.dstXInBytes.offset == 56
 
 
 @pytest.mark.parametrize("make", [
     lambda a: a,                                   # contiguous: one linear copy
-    lambda a: np.ascontiguousarray(a.T).T,         # a transposed view: a copy per column
-    lambda a: np.pad(a, ((0, 0), (0, 5)))[:, :3],  # a slice of an (N, 8) array: one pitched
+    lambda a: np.ascontiguousarray(a.T).T,         # a transposed view
+    lambda a: np.pad(a, ((0, 0), (0, 5)))[:, :3],  # a slice of an (N, 8) array
     lambda a: np.pad(a, ((0, 0), (2, 3)))[:, 2:5],  # ... at an offset
     lambda a: a[::2],                              # every other row
 ])
-def test_strided_rays_are_gathered_by_the_copies_planned(make):
-    """gather_copies' descriptors (cuMemcpy2D's terms) run on host bytes: the gathered
-    buffer is the array made contiguous; the control: the descriptors of a contiguous
-    array over the same memory gather something else."""
+def test_strided_rays_are_gathered_as_the_kernel_reads_them(make):
+    """gather_of's Gather run on host words with the kernel's index arithmetic
+    (run_gather_on_host): the gathered buffer is the array made contiguous, and only a
+    contiguous array is left to the linear copy; the control: the Gather of a contiguous
+    array over the same memory gathers something else."""
     rays = np.arange(60, dtype=np.float32).reshape(20, 3) * 1.5 + 0.25
     view = make(rays)
     base = view.base if view.base is not None else view
     while base.base is not None:
         base = base.base
-    raw = np.frombuffer(base.tobytes(), np.uint8)
+    words = np.frombuffer(base.tobytes(), np.uint32)
     ptr = view.ctypes.data - base.ctypes.data
     strides = None if view.flags.c_contiguous else view.strides
-    copies = interop.gather_copies(ptr, view.shape, strides, 4, 0)
-    out = np.zeros(view.nbytes, np.uint8)
-    interop.run_copies_on_host(copies, raw, out)
+    g = interop.gather_of(ptr, view.shape, strides, 0)
+    assert g.contiguous == (strides is None)
+    out = np.zeros(view.size, np.uint32)
+    interop.run_gather_on_host(g, words, out)
     np.testing.assert_array_equal(out.view(np.float32).reshape(view.shape), view)
     if strides is not None:
-        assert len(copies) in (1, 3)
         wrong = np.zeros_like(out)
-        interop.run_copies_on_host(interop.gather_copies(ptr, view.shape, None, 4, 0), raw,
-                                   wrong)
+        interop.run_gather_on_host(interop.gather_of(ptr, view.shape, None, 0), words, wrong)
         assert not np.array_equal(wrong, out)
 
 
-def test_a_column_stream_and_single_rows_need_one_copy():
-    assert interop.gather_copies(64, (10,), (32,), 4, 0) == [
-        interop.Copy2D(64, 32, 0, 4, 4, 10)]
-    assert interop.gather_copies(8, (1, 3), (10**6, 4), 4, 0) == [
-        interop.Copy2D(8, 12, 0, 12, 12, 1)]
-    assert interop.gather_copies(8, (0, 3), (4, 0), 4, 0) == []
+def test_a_column_stream_and_single_rows():
+    col = interop.gather_of(64, (10,), (32,), 0)
+    assert (col.rows, col.cols, col.row_stride, col.contiguous) == (10, 1, 8, False)
+    one = interop.gather_of(8, (1, 3), (10**6, 4), 0)
+    assert one.contiguous and (one.rows, one.cols) == (1, 3)
+    assert interop.gather_of(8, (0, 3), (4, 0), 0).rows == 0
+    assert interop.GATHER_PTX.endswith(b"\0") and b".entry rfw_gather32(" in interop.GATHER_PTX
 
 
 def test_strided_rays_on_the_host_path_equal_contiguous_ones(vk_device):

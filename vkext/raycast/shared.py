@@ -1,9 +1,9 @@
 """Casts whose rays and hits stay on the GPU: :class:`SharedRays`, the ray and hit buffers of
 a scene exported to CUDA (``vkext.external``), and :func:`cast_shared`, one cast through them.
 
-The caller's CUDA rays are copied device to device (``cuMemcpyDtoDAsync``, or
-``cuMemcpy2DAsync`` gathering a strided view: ``rfw.interop.gather_copies``; after
-``cuCtxSynchronize`` so every stream's writes landed) into the exported ray buffer, which the
+The caller's CUDA rays are copied device to device (``cuMemcpyDtoDAsync``, or a strided
+view gathered by one kernel launch: ``rfw.interop.gather_of``; after ``cuCtxSynchronize`` so
+every stream's writes landed) into the exported ray buffer, which the
 trace reads as it is; the trace writes the exported hit buffer, and the hits go back as
 zero-copy :class:`rfw.interop.DeviceArray` views of it once the fence is waited for. Nothing
 is mapped, staged or copied to the host. All rays of a cast are one dispatch (the buffers
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from rfw.errors import RfwError
-from rfw.interop import CudaView, DeviceArray, copies, cuda, gather_copies
+from rfw.interop import CudaView, DeviceArray, copies, cuda, gather_of
 
 from ..commands import TimestampPool
 from ..external import CudaLink, ExportedBuffer, Submitter, cuda_link, ownership
@@ -226,9 +226,9 @@ def cast_shared(scene: Any, origins: CudaView | np.ndarray, directions: CudaView
             drv.call("cuCtxSynchronize")
             t_sync = clock()
             for src, offset in jobs:
-                if isinstance(src, CudaView):  # strided views gathered by pitched copies
-                    drv.gather(gather_copies(src.ptr, src.shape, src.strides, 4,
-                                             base + offset))
+                if isinstance(src, CudaView):  # strided views gathered by a kernel
+                    drv.gather(gather_of(src.ptr, src.shape, src.strides, base + offset),
+                               link.ordinal)
                     copies["device_to_device"] += 1
                 else:  # the context is current: the copy alone (CudaDriver.copy_htod)
                     src = np.ascontiguousarray(src, np.float32)
