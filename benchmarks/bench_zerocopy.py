@@ -382,26 +382,44 @@ class MapCounter:
         self._buffer.map = self._map
 
 
+WARMUP_S = 1.0  # casts before the counted warm-up ones: the GPU's clocks settle
+
+
 def timed_casts(scene: Any, o: Any, d: Any, casts: int, warmup: int, wrap: Any,
                 sync: Any, *, write: Any = None,
                 phases: list[dict[str, float]] | None = None) -> tuple[list[float], Any]:
     """Wall per cast: sync, (``write``: the rays written in place, a row of its own), cast,
-    wrap the hits (from_dlpack), sync. ``phases``: each timed cast's ``phases_us`` (the
-    cast's own clock, read after the timed region)."""
+    wrap the hits (from_dlpack), sync; after :data:`WARMUP_S` of such casts and ``warmup``
+    more. ``phases``: each timed cast's ``phases_us`` (the cast's own clock, read after the
+    timed region) with the timed region's own steps (``loop_write``, ``loop_cast``,
+    ``loop_wrap``, ``loop_sync``: where the time outside the cast goes)."""
     got = None
     times = []
-    for i in range(warmup + casts):
-        sync()
-        t0 = time.perf_counter()
+    clock = time.perf_counter
+    until = clock() + WARMUP_S
+    while clock() < until:
         if write is not None:
             write()
-        hits = scene.cast(o, d)
-        got = {k: wrap(v) for k, v in hits.items()}
+        got = {k: wrap(v) for k, v in scene.cast(o, d).items()}
         sync()
+    for i in range(warmup + casts):
+        sync()
+        t0 = clock()
+        if write is not None:
+            write()
+        t1 = clock()
+        hits = scene.cast(o, d)
+        t2 = clock()
+        got = {k: wrap(v) for k, v in hits.items()}
+        t3 = clock()
+        sync()
+        t4 = clock()
         if i >= warmup:
-            times.append(time.perf_counter() - t0)
+            times.append(t4 - t0)
             if phases is not None:
-                phases.append(dict(scene._scene._last.get("phases_us") or {}))
+                phases.append({**(scene._scene._last.get("phases_us") or {}),
+                               "loop_write": (t1 - t0) * 1e6, "loop_cast": (t2 - t1) * 1e6,
+                               "loop_wrap": (t3 - t2) * 1e6, "loop_sync": (t4 - t3) * 1e6})
     return times, got
 
 
@@ -488,10 +506,13 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
             out["torch"]["profiler"] = profiler_proof(torch, rs, ot, dt)
             for name, (os_, ds_) in strided_rays(torch, ot, dt).items():
                 try:
+                    ph: list[dict[str, float]] = []
                     times, got = timed_casts(rs, os_, ds_, args.casts, args.warmup,
-                                             torch.from_dlpack, torch.cuda.synchronize)
+                                             torch.from_dlpack, torch.cuda.synchronize,
+                                             phases=ph)
                     out[f"torch_{name}"] = {
                         **summary(times), "strides": [list(os_.stride()), list(ds_.stride())],
+                        "phases_us_median": median_phases(ph),
                         "last": rs.last, "t_equal_host_path": bool(np.array_equal(
                             got["t"].cpu().numpy(), want["t"]))}
                 except Exception as e:
@@ -507,15 +528,21 @@ def rays_section(args: argparse.Namespace, torch: Any, cupy: Any) -> dict[str, A
         if cupy is not None:
             oc, dc = cupy.asarray(o), cupy.asarray(d)
             sync = cupy.cuda.runtime.deviceSynchronize
-            times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync)
+            ph = []
+            times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync,
+                                     phases=ph)
             out["cupy"] = {**summary(times), "last": rs.last, "strides": [oc.strides, dc.strides],
+                           "phases_us_median": median_phases(ph),
                            "t_equal_host_path": bool(np.array_equal(cupy.asnumpy(got["t"]),
                                                                     want["t"]))}
             # cupy.asarray keeps primary_rays' transposed layout (above): C-contiguous here
             oc, dc = cupy.asarray(np.ascontiguousarray(o)), cupy.asarray(np.ascontiguousarray(d))
-            times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync)
+            ph = []
+            times, got = timed_casts(rs, oc, dc, args.casts, args.warmup, cupy.asarray, sync,
+                                     phases=ph)
             out["cupy_contiguous"] = {
                 **summary(times), "last": rs.last, "strides": [oc.strides, dc.strides],
+                "phases_us_median": median_phases(ph),
                 "t_equal_host_path": bool(np.array_equal(cupy.asnumpy(got["t"]), want["t"]))}
     finally:
         rs.close()

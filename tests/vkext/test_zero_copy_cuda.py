@@ -99,7 +99,7 @@ def test_strided_tensors_are_gathered_by_the_kernel(scene, layout):
     it were contiguous gives other hits."""
     o, d = _rays(3000)
     tmax = np.full(3000, 50.0, np.float32)
-    want = scene.cast(o, d, 0.0, tmax)
+    want = scene.cast(o, d, t_max=tmax)
 
     def lay(a):
         t = torch.from_numpy(np.ascontiguousarray(a)).cuda()
@@ -115,10 +115,10 @@ def test_strided_tensors_are_gathered_by_the_kernel(scene, layout):
 
     ot, dt, tt = lay(o), lay(d), lay(tmax)
     assert not ot.is_contiguous() and (layout == "transposed" or not tt.is_contiguous())
-    got = scene.cast(ot, dt, 0.0, tt)
+    got = scene.cast(ot, dt, t_max=tt)
     for k in want:
         np.testing.assert_array_equal(torch.from_dlpack(got[k]).cpu().numpy(), want[k],
                                       err_msg=k)
     flat = torch.as_strided(ot, ot.shape, (3, 1))  # the same storage read as contiguous
-    wrong = scene.cast(flat, dt, 0.0, tt)["t"]
+    wrong = scene.cast(flat, dt, t_max=tt)["t"]
     assert not np.array_equal(torch.from_dlpack(wrong).cpu().numpy(), want["t"])
