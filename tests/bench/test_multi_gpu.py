@@ -246,3 +246,24 @@ def test_each_ray_task_renders_on_the_gpu_it_was_given(tmp_path, two_gpus, backe
     assert "## Per device" in md and "### Device against device" in md
     row = _ratio_row(md.replace(f"| flat@{backend} |", "| a@wgpu |"))
     assert row[3] == "-" and row[5] == "n=2<6"  # 2 frames, 1 run a device: it says why not
+
+
+# ---------------------------------------------------------------------------------------------
+# benchmarks/bench_gpu_matrix.py's arithmetic (its sessions run on the fake layer by hand)
+
+
+def test_the_matrix_bench_splits_the_fixed_cost_and_names_the_fake_gpus(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_gpu_matrix",
+                                                  ROOT / "benchmarks" / "bench_gpu_matrix.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    recs = [{"elapsed_s": 3.0, "process_s": 2.0, "frame": {"wall_ms": [100.0, 400.0]}},
+            {"elapsed_s": 5.0, "process_s": 3.0, "frame": {"wall_ms": [500.0]}},
+            {"error": "exit 1", "elapsed_s": 99.0}]  # a failed run counts for nothing
+    cost = mod.fixed_cost(recs)
+    assert cost == {"fixed_s": 3.5, "start_s": 1.5, "setup_s": 2.0, "runs": 2}
+    # its fake nvidia-smi names the GPUs as the fake device layer does
+    smi = mod.fake_smi(tmp_path, 3)
+    assert gpus.parse_smi((smi / "table.csv").read_text()) == {i: fake_uuid(i) for i in range(3)}
