@@ -47,8 +47,10 @@ class Backend(Protocol):
     def owns(self, device: Any) -> bool:
         """Whether ``device`` is one of this backend's (a run may be handed any backend's)."""
 
-    def describe(self, device: Any) -> dict[str, str]:
-        """timings.json's ``device``, ``driver``, ``api`` and ``backend``."""
+    def describe(self, device: Any) -> dict[str, Any]:
+        """timings.json's ``device``, ``driver``, ``api`` and ``backend``; optionally
+        ``uuid`` (32 hex digits, or None with ``uuid_note`` saying why), which a bench run
+        records (docs/multi-gpu.md)."""
 
     def caps(self, device: Any) -> frozenset[str]:
         """The capabilities the device gives passes (``Pass.requires`` names them)."""

@@ -284,7 +284,11 @@ def list_devices() -> list[dict[str, Any]]:
     info = ffi.new("VkInstanceCreateInfo*")
     info.sType = const("VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO")
     info.pApplicationInfo = app
-    instance = vk.vkCreateInstance(info, None)
+    try:
+        instance = vk.vkCreateInstance(info, None)
+    except vk.VkError as e:
+        raise VkUnavailableError(f"vkCreateInstance failed ({type(e).__name__}): no usable "
+                                 "Vulkan driver is installed") from None
     try:
         out = []
         for index, (pd, uuid) in enumerate(physical_devices(instance)):

@@ -118,6 +118,22 @@ def test_a_run_on_another_device_than_rays_is_an_error():
 # choosing a device by UUID (the CLI, both backends, on two fake devices)
 
 
+def test_a_uuid_names_one_device_of_either_kind():
+    from rfw.backend import pick_gpu
+    from rfw.errors import RfwError
+
+    devices = [("cpu", ("llvmpipe", "aa" * 16)), ("gpu", ("H200", "bb" * 16)),
+               ("gpu", ("H200", "cc" * 16))]
+    uuid_of = lambda d: d[1]  # noqa: E731
+    assert pick_gpu(devices, "uuid:" + "cc" * 16, "", uuid_of=uuid_of)[1] == "cc" * 16
+    assert pick_gpu(devices, "uuid:" + "aa" * 16, "", uuid_of=uuid_of)[0] == "llvmpipe"
+    assert pick_gpu(devices, 1, "", uuid_of=uuid_of)[1] == "cc" * 16  # an index: GPUs only
+    with pytest.raises(RfwError, match="no device has UUID dd"):
+        pick_gpu(devices, "uuid:" + "dd" * 16, "", uuid_of=uuid_of)
+    with pytest.raises(RfwError, match="report no UUID"):  # a backend that cannot tell
+        pick_gpu(devices, "uuid:" + "cc" * 16, "H200, H200")
+
+
 @pytest.mark.parametrize("backend", ["vk", "wgpu"])
 def test_a_uuid_picks_its_device_and_one_nobody_has_is_one_line(tmp_path, backend):
     def run(gpu: str, out: str):

@@ -39,9 +39,16 @@ class Device:
             listed = [("cpu" if a.info.get("adapter_type") == "CPU" else "gpu", i)
                       for i, a in enumerate(adapters)]
             found = ", ".join(a.info.get("device", "?") for a in adapters) or "none"
-            if isinstance(gpu, str):
-                gpu = self._index_of_uuid(gpu)
-            self.index = pick_gpu(listed, 0 if gpu is None else gpu, found)
+            if isinstance(gpu, str):  # the UUID's place among the Vulkan devices of its kind
+                kind, nth = self._place_of_uuid(gpu)
+                pool = [i for k, i in listed if k == kind]
+                if nth >= len(pool):
+                    raise RfwError(f"asks for device {gpu}, Vulkan's {kind.upper()} device "
+                                   f"{nth}, and wgpu lists {len(pool)}: {found}",
+                                   element=GPU_ENV)
+                self.index = pool[nth]
+            else:
+                self.index = pick_gpu(listed, 0 if gpu is None else gpu, found)
             self.adapter = adapters[self.index]
         if self.adapter is None:
             raise RuntimeError("no wgpu adapter found (is a Vulkan driver installed?)")
@@ -61,9 +68,10 @@ class Device:
                 "backend": "wgpu", "uuid": None, "uuid_note": NO_UUID, "index": self.index,
                 "uuid_via": self.uuid_via}
 
-    def _index_of_uuid(self, choice: str) -> int:
-        """The index among the Vulkan adapters of the device ``uuid:<hex>`` names, as the
-        vk backend lists them; wgpu lists its Vulkan adapters in the same driver order."""
+    def _place_of_uuid(self, choice: str) -> tuple[str, int]:
+        """The kind (``gpu``, ``cpu``) of the device ``uuid:<hex>`` names and its index among
+        that kind's Vulkan devices, as the vk backend lists them; wgpu lists its Vulkan
+        adapters in the same driver order (assumed, docs/multi-gpu.md)."""
         try:
             listed = get_backend("vk").list_devices()
         except RfwError as e:
@@ -73,8 +81,8 @@ class Device:
         pick = pick_gpu([(d["kind"], d) for d in listed], choice,
                         ", ".join(d["name"] for d in listed), uuid_of=lambda d: d["uuid"])
         self.uuid_via = choice.removeprefix(UUID_PREFIX)
-        return [d["index"] for d in listed if d["kind"] == pick["kind"]].index(pick["index"])
-
+        same = [d["index"] for d in listed if d["kind"] == pick["kind"]]
+        return pick["kind"], same.index(pick["index"])
 
 
 def _timestamp_period(device: Any) -> float:
