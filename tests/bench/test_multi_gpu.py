@@ -222,14 +222,37 @@ def two_gpus(tmp_path_factory):
         ray.init(address="local", num_gpus=2, num_cpus=2, include_dashboard=False,
                  log_to_driver=False, logging_level="ERROR")
     try:
-        yield ray.get_runtime_context().gcs_address
+        yield ray.get_runtime_context().gcs_address, smi
     finally:
         ray.shutdown()
 
 
-@pytest.mark.parametrize("backend", ["vk", "wgpu"])
-def test_each_ray_task_renders_on_the_gpu_it_was_given(tmp_path, two_gpus, backend):
-    done = rfw_cli("bench", f"flat@{backend}", "--executor", "ray", "--ray-address", two_gpus,
+def test_each_ray_task_renders_on_the_gpu_it_was_given(tmp_path, two_gpus):
+    # one test for both backends: under xdist, a module's tests may land on two workers,
+    # and each would start a Ray of its own
+    address, smi = two_gpus
+    for backend in ("vk", "wgpu"):
+        _bench_on_two_gpus(tmp_path / backend, address, backend)
+    # negative control: nvidia-smi naming Ray's GPUs by UUIDs no device has (a mapping gone
+    # wrong): every run is an error saying so, none renders on some other device
+    table = (smi / "table.csv").read_text()
+    try:
+        (smi / "table.csv").write_text(f"0, {_dashed(NOBODY[5:])}\n1, {_dashed(NOBODY[5:])}\n")
+        done = rfw_cli("bench", "flat@vk", "--executor", "ray", "--ray-address", address,
+                       "--repeat", "2", "--out", "o", *TINY, cwd=tmp_path, tree=True)
+    finally:
+        (smi / "table.csv").write_text(table)
+    assert "Traceback" not in done.stderr
+    recs = [json.loads(x) for x in (tmp_path / "o" / "results.jsonl").read_text().splitlines()]
+    assert len(recs) == 2 and all(f"no device has UUID {NOBODY[5:]}" in r["error"]
+                                  for r in recs), [r.get("error") for r in recs]
+    assert not any((tmp_path / "o" / r["image"]).is_file() for r in recs if r.get("image"))
+
+
+def _bench_on_two_gpus(tmp_path: Path, address: str, backend: str) -> None:
+    """One variant, two runs submitted at once to two GPUs: one run on each."""
+    tmp_path.mkdir()
+    done = rfw_cli("bench", f"flat@{backend}", "--executor", "ray", "--ray-address", address,
                    "--repeat", "2", "--out", "o", *TINY, cwd=tmp_path, tree=True)
     assert done.returncode == 0, done.stderr
     out = tmp_path / "o"
