@@ -14,11 +14,11 @@ for it by name (``rfw run --backend NAME``, a pass pinned with ``backend = "NAME
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from .errors import RfwError, did_you_mean
-from .options import DEFAULT, ENVIRONMENT, RunOptions
+from .options import DEFAULT, ENVIRONMENT, UUID_PREFIX, RunOptions
 from .plugins import entry_points
 
 if TYPE_CHECKING:
@@ -47,8 +47,10 @@ class Backend(Protocol):
     def owns(self, device: Any) -> bool:
         """Whether ``device`` is one of this backend's (a run may be handed any backend's)."""
 
-    def describe(self, device: Any) -> dict[str, str]:
-        """timings.json's ``device``, ``driver``, ``api`` and ``backend``."""
+    def describe(self, device: Any) -> dict[str, Any]:
+        """timings.json's ``device``, ``driver``, ``api`` and ``backend``; optionally
+        ``uuid`` (32 hex digits, or None with ``uuid_note`` saying why), which a bench run
+        records (docs/multi-gpu.md)."""
 
     def caps(self, device: Any) -> frozenset[str]:
         """The capabilities the device gives passes (``Pass.requires`` names them)."""
@@ -117,6 +119,11 @@ class BackendBase:
     def destroy_device(self, device: Any) -> None:
         return None
 
+    def list_devices(self) -> list[dict[str, Any]]:
+        """The machine's devices in the driver's order (``index``, ``name``, ``kind``,
+        ``uuid``), where the backend can list them without opening one; else []."""
+        return []
+
 
 MEMBERS = ("name", "auto_variants", "host_writes_depth", "make_device", "owns", "describe",
            "caps", "timestamps", "fit", "check", "scene", "executor", "read_bridge",
@@ -128,16 +135,35 @@ _loaded: dict[str, Backend] = {}
 GPU_ENV = ENVIRONMENT["gpu"]  # which GPU of the machine a backend opens (RunOptions.gpu)
 
 
-def pick_gpu(devices: list[tuple[str, Any]], index: int, found: str) -> Any:
-    """Device ``index`` (the run option ``gpu``) of ``devices`` ((kind, device) in the
-    driver's order; kind ``gpu`` or ``cpu``): counted among the GPUs, or among the CPU
-    devices where there is no GPU."""
+def fake_uuid(index: int) -> str:
+    """The synthetic UUID of device ``index`` under ``RFW_FAKE_GPUS`` (a test aid): 32 hex
+    digits no real device has."""
+    return "fa4e" * 6 + f"{index:08x}"
+
+
+def pick_gpu(devices: list[tuple[str, Any]], choice: int | str, found: str, *,
+             uuid_of: Callable[[Any], str | None] | None = None) -> Any:
+    """The device ``choice`` (the run option ``gpu``) names among ``devices`` ((kind,
+    device) in the driver's order; kind ``gpu`` or ``cpu``): an index counts among the GPUs,
+    or among the CPU devices where there is no GPU; ``uuid:<hex>`` is the device whose
+    ``uuid_of`` (32 lowercase hex digits) it is, of either kind."""
+    if isinstance(choice, str):
+        want = choice.removeprefix(UUID_PREFIX)
+        if uuid_of is None:
+            raise RfwError(f"asks for device {choice}, and these devices report no UUID: "
+                           f"{found}", element=GPU_ENV)
+        match = [d for _, d in devices if uuid_of(d) == want]
+        if not match:
+            have = ", ".join(str(uuid_of(d)) for _, d in devices) or "none"
+            raise RfwError(f"no device has UUID {want} (this machine's have {have})",
+                           element=GPU_ENV)
+        return match[0]
     kind = "gpu" if any(k == "gpu" for k, _ in devices) else "cpu"
     pool = [d for k, d in devices if k == kind]
-    if index >= len(pool):
-        raise RfwError(f"asks for device {index}, and this machine has {len(pool)} "
+    if choice >= len(pool):
+        raise RfwError(f"asks for device {choice}, and this machine has {len(pool)} "
                        f"{kind.upper()} device(s): {found}", element=GPU_ENV)
-    return pool[index]
+    return pool[choice]
 
 
 def installed() -> list[str]:

@@ -102,6 +102,37 @@ def word(name: str, pattern: str, expected: str) -> str | None:
     return raw
 
 
+UUID_PREFIX = "uuid:"  # RFW_GPU=uuid:<32 hex digits>: the device with that UUID
+_UUID = re.compile(r"(?:uuid:)?(?:GPU-)?([0-9a-fA-F-]+)")
+MAX_FAKE_GPUS = 64  # RFW_FAKE_GPUS, a test aid
+
+
+def uuid_hex(text: str) -> str | None:
+    """A device UUID as 32 lowercase hex digits, from ``uuid:<hex>``, NVML's
+    ``GPU-xxxxxxxx-xxxx-xxxx-xxxx-xxxxxxxxxxxx`` or plain hex (dashes anywhere); None when
+    ``text`` is none of them."""
+    m = _UUID.fullmatch(text.strip())
+    if m is None:
+        return None
+    digits = m.group(1).replace("-", "").lower()
+    return digits if len(digits) == 32 else None
+
+
+def gpu(name: str) -> int | str | None:
+    """A device index (a whole number from 0) or ``uuid:<hex>`` / ``GPU-...`` (a device
+    UUID, returned as ``uuid:`` and 32 lowercase hex digits)."""
+    raw = value(name)
+    if raw is None:
+        return None
+    if _INTEGER.fullmatch(raw):
+        return integer(name, 0, what="a device index")
+    digits = uuid_hex(raw) if raw.startswith((UUID_PREFIX, "GPU-")) else None
+    if digits is None:
+        raise _refuse(name, "a device index (from 0), uuid:<32 hex digits> or GPU-<uuid>",
+                      raw)
+    return UUID_PREFIX + digits
+
+
 VIEW_FORMATS = ("bgra8unorm", "rgba8unorm", "bgra8unorm-srgb", "rgba8unorm-srgb")
 RAYCAST_PLACEMENTS = ("0", "1", "rays", "hits", "host", "auto")
 
@@ -112,7 +143,10 @@ READERS: dict[str, Callable[[], Any]] = {
     "RFW_CACHE_SPIRV": lambda: folder("RFW_CACHE_SPIRV"),
     "RFW_CACHE_MESHLETS": lambda: folder("RFW_CACHE_MESHLETS"),
     "RFW_CACHE_TRUTH": lambda: folder("RFW_CACHE_TRUTH"),
-    "RFW_GPU": lambda: integer("RFW_GPU", 0, what="a device index"),
+    "RFW_GPU": lambda: gpu("RFW_GPU"),
+    # a test aid: the device enumerations (vkext.device, rfw.backends.wgpu.device) list
+    # their first device this many times, the vk copies with synthetic UUIDs
+    "RFW_FAKE_GPUS": lambda: integer("RFW_FAKE_GPUS", 1, MAX_FAKE_GPUS, what="a device count"),
     "RFW_FRAMES_IN_FLIGHT": lambda: integer("RFW_FRAMES_IN_FLIGHT", 1, MAX_FRAMES_IN_FLIGHT),
     "RFW_ORDER_SEED": lambda: integer("RFW_ORDER_SEED", 0, MAX_SEED, what="a seed"),
     "RFW_POISON": lambda: flag("RFW_POISON"),

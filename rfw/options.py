@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import env
-from .env import ASYNC_QUEUES, MAX_FRAMES_IN_FLIGHT, MAX_SEED
+from .env import ASYNC_QUEUES, MAX_FRAMES_IN_FLIGHT, MAX_SEED, UUID_PREFIX
 from .errors import (
     RfwTypeError,
     RfwValueError,
@@ -64,7 +64,8 @@ class RunOptions:
     transients); ``bundles`` / ``frame_replay``: vk's record-once caches (off: the
     baseline a benchmark measures them against); ``frame_span``: vk async compute on one
     queue family; ``async_queue``: ``family`` (a compute-only family) or ``graphics``;
-    ``gpu``: the device index among the machine's GPUs (None: the first)."""
+    ``gpu``: the device index among the machine's GPUs, or ``uuid:<hex>`` (NVML's
+    ``GPU-...`` is taken too): the device with that UUID (None: the first)."""
 
     frames: int | None = None
     warmup: int = 1
@@ -78,12 +79,21 @@ class RunOptions:
     frame_replay: bool = True
     frame_span: bool = False
     async_queue: str = "family"
-    gpu: int | None = None
+    gpu: int | str | None = None
 
     def __post_init__(self) -> None:
         where = "options"
+        if isinstance(self.gpu, str):  # a UUID, kept as uuid:<32 lowercase hex digits>
+            digits = env.uuid_hex(self.gpu) if self.gpu.startswith(
+                (UUID_PREFIX, "GPU-")) else None
+            if digits is None:
+                raise RfwValueError(f"'gpu' must be a device index, uuid:<32 hex digits> or "
+                                    f"GPU-<uuid>, not {self.gpu!r}", element=where)
+            object.__setattr__(self, "gpu", UUID_PREFIX + digits)
         for name in ("frames", "frames_in_flight", "order_seed", "gpu"):
             value = getattr(self, name)
+            if name == "gpu" and isinstance(value, str):
+                continue
             if value is not None:
                 hi = {"frames": None, "frames_in_flight": MAX_FRAMES_IN_FLIGHT,
                       "order_seed": MAX_SEED, "gpu": None}[name]

@@ -23,7 +23,7 @@ from rfw.render import render
 from rfw.scene.model import Scene
 
 from .commands import read_buffer, read_image, upload_buffer, upload_image
-from .device import VkDevice
+from .device import VkDevice, list_devices
 from .executor import VkExecutor
 from .fitting import check_passes, fit_graph
 from .frame_stats import accel_stats, culling_counters
@@ -42,6 +42,9 @@ class VkBackend(BackendBase):
 
     def owns(self, device: Any) -> bool:
         return isinstance(device, VkDevice)
+
+    def list_devices(self) -> list[dict[str, Any]]:
+        return list_devices()
 
     def describe(self, device: VkDevice) -> dict[str, str]:
         return device.describe()

@@ -16,7 +16,8 @@ from collections import Counter
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
-from rfw.backend import pick_gpu
+from rfw import env
+from rfw.backend import fake_uuid, pick_gpu
 from rfw.errors import RfwError
 
 from .consts import IMPORT_ERROR, VALUE_RETURNING, call_api, const, ffi, lib, vk
@@ -249,6 +250,57 @@ if ffi is not None:
         return 0  # VK_FALSE: do not abort the call
 
 
+def physical_uuid(pd: Any) -> str:
+    """Vulkan's ``deviceUUID`` of a physical device (``VkPhysicalDeviceIDProperties``), as
+    32 lowercase hex digits: the UUID CUDA and NVML name the same GPU by."""
+    ids = ffi.new("VkPhysicalDeviceIDProperties*")
+    ids.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ID_PROPERTIES")
+    head = ffi.new("VkPhysicalDeviceProperties2*")
+    head.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2")
+    head.pNext = ids
+    vk.vkGetPhysicalDeviceProperties2(pd, head)
+    return bytes(ffi.buffer(ids.deviceUUID, 16)).hex()
+
+
+def physical_devices(instance: Any) -> list[tuple[Any, str]]:
+    """The instance's physical devices in the driver's order, each with its UUID. With
+    ``RFW_FAKE_GPUS=N`` (a test aid): the first one N times, with the synthetic UUIDs
+    :func:`rfw.backend.fake_uuid` gives (the driver's own UUID is not theirs)."""
+    pds = list(vk.vkEnumeratePhysicalDevices(instance))
+    fakes = env.get("RFW_FAKE_GPUS")
+    if fakes and pds:
+        return [(pds[0], fake_uuid(i)) for i in range(fakes)]
+    return [(pd, physical_uuid(pd)) for pd in pds]
+
+
+def list_devices() -> list[dict[str, Any]]:
+    """Every Vulkan device of the machine in the driver's order: ``index``, ``name``,
+    ``kind`` (``gpu`` or ``cpu``) and ``uuid``, from an instance made for the look."""
+    if vk is None:
+        raise VkUnavailableError(f"the Vulkan loader could not be loaded ({IMPORT_ERROR})")
+    app = ffi.new("VkApplicationInfo*")
+    app.sType = const("VK_STRUCTURE_TYPE_APPLICATION_INFO")
+    app.apiVersion = API_VERSION
+    info = ffi.new("VkInstanceCreateInfo*")
+    info.sType = const("VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO")
+    info.pApplicationInfo = app
+    try:
+        instance = vk.vkCreateInstance(info, None)
+    except vk.VkError as e:
+        raise VkUnavailableError(f"vkCreateInstance failed ({type(e).__name__}): no usable "
+                                 "Vulkan driver is installed") from None
+    try:
+        out = []
+        for index, (pd, uuid) in enumerate(physical_devices(instance)):
+            props = vk.vkGetPhysicalDeviceProperties(pd)
+            cpu = props.deviceType == vk.VK_PHYSICAL_DEVICE_TYPE_CPU
+            out.append({"index": index, "name": _str(props.deviceName),
+                        "kind": "cpu" if cpu else "gpu", "uuid": uuid})
+        return out
+    finally:
+        vk.vkDestroyInstance(instance, None)
+
+
 def compute_queue_choice(families: list[tuple[int, int, int]], graphics: int,
                          prefer: str = "family") -> tuple[int, int] | None:
     """The second queue for async compute (``rfw.graph.queues``), as (family, index), from
@@ -422,7 +474,7 @@ class VkDevice:
     def _pick_physical_device(self, prefer: str | None) -> None:
         candidates = []
         seen = []
-        for index, pd in enumerate(vk.vkEnumeratePhysicalDevices(self.instance)):
+        for index, (pd, uuid) in enumerate(physical_devices(self.instance)):
             props = vk.vkGetPhysicalDeviceProperties(pd)
             name = _str(props.deviceName)
             seen.append(f"{name} (Vulkan {_version(props.apiVersion)})")
@@ -431,7 +483,7 @@ class VkDevice:
                 continue
             kind = next((rank for n, rank in _DEVICE_TYPES.items()
                          if props.deviceType == getattr(vk, n)), 4)
-            candidates.append((kind, index, pd, name, family))
+            candidates.append((kind, index, pd, name, family, uuid))
         if prefer:
             matches = [c for c in candidates if prefer.lower() in c[3].lower()]
             if not matches:
@@ -442,10 +494,11 @@ class VkDevice:
             raise VkUnavailableError("no Vulkan 1.3 device with a graphics+compute queue; found: "
                                      + (", ".join(seen) or "no devices"))
         pick = min(candidates, key=lambda c: (c[0], c[1]))
-        if self.gpu is not None:  # that GPU, in the driver's order
+        if self.gpu is not None:  # that GPU, in the driver's order, or the one with that UUID
             pick = pick_gpu([("cpu" if c[0] == 3 else "gpu", c) for c in
-                             sorted(candidates, key=lambda c: c[1])], self.gpu, ", ".join(seen))
-        _, _, self.physical_device, self.name, self.queue_family = pick
+                             sorted(candidates, key=lambda c: c[1])], self.gpu, ", ".join(seen),
+                            uuid_of=lambda c: c[5])
+        _, self.index, self.physical_device, self.name, self.queue_family, self.uuid = pick
 
     @staticmethod
     def _queue_family(pd: Any) -> int | None:
@@ -626,7 +679,7 @@ class VkDevice:
     def describe(self) -> dict[str, str]:
         """Device, driver and API, in the shape of the wgpu backend's ``describe()``."""
         return {"device": self.name, "driver": self.driver, "api": f"Vulkan {self.api_version}",
-                "backend": "vk"}
+                "backend": "vk", "uuid": self.uuid}
 
     def properties(self) -> dict[str, Any]:
         """Everything vkext read about the device, for reports and benchmark records."""

@@ -45,7 +45,7 @@ from .commands import (
     texel_layout,
 )
 from .consts import const, ffi, lib, vk
-from .device import VkDevice
+from .device import VkDevice, physical_uuid
 
 EXTENSION = "VK_KHR_external_memory_fd"
 QUEUE_FAMILY_EXTERNAL = 0xFFFFFFFE  # VK_QUEUE_FAMILY_EXTERNAL (~1U)
@@ -67,14 +67,9 @@ _links: weakref.WeakKeyDictionary[VkDevice, CudaLink | str] = weakref.WeakKeyDic
 
 
 def device_uuid(device: VkDevice) -> bytes:
-    """Vulkan's ``deviceUUID`` of the device (``VkPhysicalDeviceIDProperties``)."""
-    ids = ffi.new("VkPhysicalDeviceIDProperties*")
-    ids.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ID_PROPERTIES")
-    head = ffi.new("VkPhysicalDeviceProperties2*")
-    head.sType = const("VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2")
-    head.pNext = ids
-    vk.vkGetPhysicalDeviceProperties2(device.physical_device, head)
-    return bytes(ffi.buffer(ids.deviceUUID, 16))
+    """Vulkan's ``deviceUUID`` of the device (``VkPhysicalDeviceIDProperties``), read from
+    the driver (under ``RFW_FAKE_GPUS``, not the synthetic one ``device.uuid`` holds)."""
+    return bytes.fromhex(physical_uuid(device.physical_device))
 
 
 def cuda_link(device: VkDevice) -> CudaLink | str:

@@ -6,7 +6,10 @@ A task runs the usual worker process (:func:`rfw.bench.runner.run_one`) in a scr
 its node and returns the record, image and log, which are written under ``--out`` here: the
 nodes need the same rfw install and the same config and scene paths, not a shared disk.
 Every record notes where it ran (``ray``: node, host, GPU ids), which the report's device
-column and per-device tables read.
+column and per-device tables read. Where Ray gives a task a GPU, the task finds that GPU's
+UUID (:mod:`rfw.bench.gpus`) and the worker opens the device by it (``RFW_GPU=uuid:...``);
+the record notes the UUID asked for and the one each backend rendered on, and a run on
+another device is an error (docs/multi-gpu.md).
 
 Without ``--ray-address`` a local Ray instance is started and stopped by rfw; with one, the
 tasks go to that cluster (``auto``, ``ray://HOST:10001`` or ``HOST:6379``), which is left
@@ -27,6 +30,7 @@ from typing import Any
 from ..backend import GPU_ENV
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
+from .gpus import uuid_of_gpu
 from .runner import ROOT, Job, Plan, clear_run_files, run_one
 
 INSTALL = "pip install 'rfw[scale]' (or: pip install ray)"
@@ -67,20 +71,49 @@ def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
 
     scratch = Path(tempfile.mkdtemp(prefix="rfw-bench-"))
     gpus = [str(g) for g in ray.get_gpu_ids()]
-    # the worker opens the GPU Ray gave this task, not the machine's first one
-    env = {GPU_ENV: str(int(gpus[0]))} if gpus else None
+    where: dict[str, Any] = {"gpu_ids": gpus}
+    env = None
+    if gpus:  # the worker opens the GPU Ray gave this task, by its UUID
+        uuid, source = uuid_of_gpu(gpus[0])
+        where.update(uuid_asked=uuid, uuid_source=source)
+        env = {GPU_ENV: f"uuid:{uuid}"} if uuid else None
     try:
-        record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None, env=env)
+        if gpus and env is None:  # no guessing which Vulkan device Ray's GPU is
+            record: dict[str, Any] = {"error": f"ray gave GPU {gpus[0]}, and {source}"}
+        else:
+            record = run_one(job, plan, scratch, cwd=cwd if os.path.isdir(cwd) else None,
+                             env=env)
         image, log = scratch / "image.png", scratch / "log.txt"
         ctx = ray.get_runtime_context()
         record["executor"] = "ray"
-        record["ray"] = {"node": ctx.get_node_id(), "host": socket.gethostname(),
-                         "gpu_ids": gpus}
+        record["ray"] = {"node": ctx.get_node_id(), "host": socket.gethostname(), **where}
+        if gpus and not record.get("error"):
+            check_device(record)
         return {"record": record,
                 "image": image.read_bytes() if image.is_file() else None,
                 "log": log.read_text(errors="replace") if log.is_file() else ""}
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+
+
+def check_device(record: dict[str, Any]) -> None:
+    """Note in ``record["ray"]`` the UUID each backend rendered on, and make a run whose
+    device is not the GPU Ray gave it an error: a backend that reports no UUID (wgpu) is
+    noted as unchecked, with the UUID it was picked by."""
+    where = record["ray"]
+    asked = where.get("uuid_asked")
+    ids = record.get("device_ids") or {}
+    where["uuid_rendered"] = {name: d.get("uuid") for name, d in ids.items()}
+    unchecked = [name for name, d in ids.items() if d.get("uuid") is None]
+    if unchecked:
+        where["unchecked"] = {name: ids[name].get("uuid_note", "no UUID") for name in unchecked}
+    wrong = {name: d["uuid"] for name, d in ids.items() if d.get("uuid") not in (None, asked)}
+    if not ids:
+        wrong = {"?": "nothing"}  # a worker that recorded no device ids proves nothing
+    if wrong:
+        got = ", ".join(f"{name} on {u}" for name, u in wrong.items())
+        record["error"] = (f"rendered on another device than Ray's GPU "
+                           f"{where['gpu_ids'][0]} (UUID {asked}): {got}")
 
 
 def ray_runs(schedule: list[tuple[int, int, Job]], plan: Plan, out_dir: Path, *,

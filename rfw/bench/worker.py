@@ -34,6 +34,18 @@ EXTRA_KEYS = ("memory", "culling", "rays", "bridges", "bridge_ms_total", "defaul
               "frames_in_flight", "camera_path")
 
 
+ID_KEYS = ("uuid", "index", "uuid_via", "uuid_note")
+
+
+def device_ids(timings: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per backend of the run, what its device said of itself: ``uuid`` (32 hex digits, or
+    None where the backend cannot tell, with ``uuid_note`` saying why), ``index`` (its
+    place in the driver's order, where a choice picked it) and ``uuid_via`` (the UUID a
+    backend without UUIDs picked it by)."""
+    sides = timings.get("backends") or {timings.get("backend"): timings}
+    return {str(name): {k: d.get(k) for k in ID_KEYS if k in d} for name, d in sides.items()}
+
+
 class FrameClock:
     """Wall time of every frame: wraps ``frame()`` of the executors while active."""
 
@@ -138,6 +150,7 @@ def run(config: str, sets: list[str], *, scene: str | None, size: tuple[int, int
     for key in EXTRA_KEYS:
         if key in timings:
             record[key] = timings[key]
+    record["device_ids"] = device_ids(timings)  # which device of the machine each side used
     check_times(record)
     if "memory" not in record and hasattr(plan, "transient_bytes"):
         # wgpu allocates per texture: the plan's numbers are what there is

@@ -102,11 +102,13 @@ def test_a_ray_task_hands_its_gpu_to_the_worker_and_leaves_its_environment(tmp_p
                                      get_runtime_context=lambda: ctx)
     monkeypatch.setitem(sys.modules, "ray", fake_ray)
     monkeypatch.setattr(runner, "_worker", fake_worker)
+    monkeypatch.setattr(ray_executor, "uuid_of_gpu", lambda g: ("ab" * 15 + f"{int(g):02x}",
+                                                                "nvml"))
     monkeypatch.setenv(GPU_ENV, "7")
     job = runner.Job("rfw", "flat", "flat", config="configs/flat.toml")
     plan = runner.Plan([job], (8, 8), 1, 0, 1)
     done = ray_executor.run_task(job, plan, str(tmp_path))
-    assert seen["env"][GPU_ENV] == "2"
+    assert seen["env"][GPU_ENV] == "uuid:" + "ab" * 15 + "02"  # GPU 2, by its UUID
     assert ray_executor.os.environ[GPU_ENV] == "7"
     assert done["record"]["ray"]["gpu_ids"] == ["2"]
     assert done["record"]["error"] == "exit 1: no worker here"

@@ -85,7 +85,8 @@ def test_the_environment_is_read_in_one_module():
     # environment for what is not rfw's: whether there is a display, XDG_CACHE_HOME, and
     # the environment a child process (a bench worker, a registry client) starts with
     others = {"rfw/view.py", "rfw/meshlet_view/__init__.py", "rfw/spirv.py",
-              "rfw/bench/runner.py", "rfw/scene/fetch/download.py"}
+              "rfw/bench/runner.py", "rfw/scene/fetch/download.py",
+              "rfw/bench/gpus.py"}  # CUDA_VISIBLE_DEVICES: CUDA's ordinals of a Ray task
     found = {}
     for folder in ("rfw", "vkext", "passes"):
         for name, tree in _sources(folder).items():

@@ -81,6 +81,9 @@ def test_only_rfw_env_reads_rfw_variables_from_the_environment():
     ("RFW_VK_FRAME_REPLAY", "0", False), ("RFW_VK_FRAME_SPAN", "1", True),
     ("RFW_VK_FRAME_SPAN", "", False), ("RFW_POISON", "true", True),
     ("RFW_GPU", "0", 0), ("RFW_GPU", "3", 3), ("RFW_GPU", "", None), ("RFW_GPU", "+1", 1),
+    ("RFW_GPU", "uuid:" + "AB" * 16, "uuid:" + "ab" * 16),
+    ("RFW_GPU", "GPU-6b2b8a3c-1d2e-4f50-8a9b-0c1d2e3f4a5b", "uuid:6b2b8a3c1d2e4f508a9b0c1d2e3f4a5b"),
+    ("RFW_FAKE_GPUS", "2", 2),
     ("RFW_FRAMES_IN_FLIGHT", "1", 1), ("RFW_FRAMES_IN_FLIGHT", "8", 8),
     ("RFW_ORDER_SEED", "4294967295", 4294967295), ("RFW_ORDER_SEED", "", None),
     ("RFW_VK_ASYNC_QUEUE", "graphics", "graphics"), ("RFW_VK_ASYNC_QUEUE", "", "family"),
@@ -97,9 +100,11 @@ def test_valid_values_and_empty_as_unset(monkeypatch, name, raw, value):
 @pytest.mark.parametrize(("name", "raw", "says"), [
     ("RFW_FETCH", "maybe", "expected 0 or 1 (or true/false, yes/no, on/off), not 'maybe'"),
     ("RFW_VK_BUNDLES", "2", "expected 0 or 1 (or true/false, yes/no, on/off), not '2'"),
-    ("RFW_GPU", "gpu0", "expected a device index (from 0), not 'gpu0'"),
+    ("RFW_GPU", "gpu0", "expected a device index (from 0), uuid:<32 hex digits> or "
+                        "GPU-<uuid>, not 'gpu0'"),
+    ("RFW_GPU", "uuid:12ab", "or GPU-<uuid>, not 'uuid:12ab'"),  # 4 hex digits, not 32
     ("RFW_GPU", "-1", "expected a device index (from 0), not '-1'"),
-    ("RFW_GPU", "²", "expected a device index (from 0), not '²'"),  # isdigit() took it
+    ("RFW_GPU", "²", "or GPU-<uuid>, not '²'"),  # isdigit() took it
     ("RFW_GPU", "1_0", "not '1_0'"), ("RFW_GPU", "1.0", "not '1.0'"),
     ("RFW_FRAMES_IN_FLIGHT", "9", "expected a whole number from 1 to 8, not '9'"),
     ("RFW_FRAMES_IN_FLIGHT", "0", "from 1 to 8, not '0'"),

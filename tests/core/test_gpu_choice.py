@@ -37,7 +37,8 @@ def test_the_chosen_device_renders_and_a_missing_one_is_one_line(tmp_path, backe
     assert np.array_equal(a, b)
     for bad, says in (("99", r"asks for device 99, and this machine has \d+ (GPU|CPU) "
                              r"device\(s\): \S"),
-                      ("gpu0", r"expected a device index \(from 0\), not 'gpu0'")):
+                      ("gpu0", r"expected a device index \(from 0\), uuid:<32 hex digits> "
+                               r"or GPU-<uuid>, not 'gpu0'")):
         done = _run(tmp_path, backend, bad, f"bad{bad}")
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2, done.stderr

@@ -212,6 +212,9 @@ ENV_READERS = {
     "rfw/bench/truth.py": "RFW_CACHE_TRUTH",
     "rfw/view.py": "RFW_VIEW_FORMAT", "rfw/bench/runner.py": "RFW_COMMIT",
     "vkext/raycast/placement.py": "RFW_RAYCAST_MAPPED", "vkext/external.py": "RFW_CUDA",
+    # RFW_FAKE_GPUS, a test aid read by the device enumerations only
+    "vkext/device.py": "RFW_FAKE_GPUS", "rfw/backends/wgpu/device.py": "RFW_FAKE_GPUS",
+    "rfw/bench/gpus.py": "uuid_hex (no variable): a GPU-<uuid> as RFW_GPU takes it",
 }
 # the edges: where a run starts and its options are built
 EDGES = {

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..stats import difference, no_mark, significant
 from ..summary import VariantSummary, summarize_results
 from .document import Cell, Doc, ci, ms
 
@@ -86,3 +87,69 @@ def _devices(doc: Doc, rfw: list[VariantSummary], *, parts: Parts) -> None:
                 row += [ms(s), ci(s)]
             rows.append(row)
     doc.table(headers, rows)
+    _ratios(doc, done, devices, split)
+    _uuids(doc, [r for v in done for r in v.records])
+
+
+def device_ratios(variant: str, devices: list[str], split: dict[str, VariantSummary]
+                  ) -> list[dict[str, Any]]:
+    """Each device's frame GPU ms against the first device's (``devices``' order) for one
+    variant: ``ratio``, ``lo``, ``hi`` (Welch's 95% CI of the ratio of run medians,
+    :func:`rfw.bench.stats.difference`) and ``verdict``: ``differs`` (the CI excludes 1 with
+    enough samples and runs), ``within the noise``, or why there is no verdict."""
+    present = [d for d in devices if d in split]
+    if len(present) < 2:
+        return []
+    base_dev = present[0]
+    base = split[base_dev].frame.get("gpu_ms")
+    out = []
+    for d in present[1:]:
+        own = split[d].frame.get("gpu_ms")
+        diff = difference(base, own)
+        why = "no GPU times" if not base or not own else no_mark(base, own)
+        if why is None and diff is None:
+            why = "fewer than 2 runs a device"
+        verdict = why or ("differs" if significant(base, own) else "within the noise")
+        out.append({"variant": variant, "device": d, "against": base_dev, "verdict": verdict,
+                    **({k: diff[k] for k in ("ratio", "lo", "hi")} if diff else {})})
+    return out
+
+
+def _ratios(doc: Doc, done: list[VariantSummary], devices: list[str],
+            split: dict[str, dict[str, VariantSummary]]) -> None:
+    """The device-to-device ratio table: per variant, each device against the first."""
+    rows: list[list[Cell]] = []
+    differ = []
+    for v in done:
+        for r in device_ratios(v.label, devices, split[v.label]):
+            has = "ratio" in r
+            rows.append([v.label, r["device"], r["against"],
+                         f"{r['ratio']:.3f}" if has else "-",
+                         f"[{r['lo']:.3f}, {r['hi']:.3f}]" if has else "-", r["verdict"]])
+            if r["verdict"] == "differs":
+                differ.append(f"{v.label} on {r['device']} ({r['ratio']:.3f}x)")
+    if not rows:
+        return
+    doc.h(3, "Device against device")
+    doc.p("Frame GPU ms on each device over the first device's, per variant: the ratio of "
+          "the run medians' geometric means with its 95% CI (Welch's t-test of the log run "
+          "medians, as the variant comparisons); `differs` where the CI excludes 1.")
+    doc.table(["variant", "device", "against", "frame GPU ms ratio", "95% CI", "verdict"],
+              rows)
+    doc.p("Devices differ beyond their CIs: " + "; ".join(differ) + "." if differ else
+          "No variant's devices differ beyond their CIs (or too few runs to tell).")
+
+
+def _uuids(doc: Doc, records: list[dict[str, Any]]) -> None:
+    """Which device UUID each device column rendered on, from the runs' records."""
+    seen: dict[str, set[str]] = {}
+    for r in records:
+        for backend, d in (r.get("device_ids") or {}).items():
+            uuid = d.get("uuid") or (f"none ({d['uuid_note']}; picked by {d['uuid_via']})"
+                                     if d.get("uuid_via") else d.get("uuid_note"))
+            if uuid:
+                seen.setdefault(device_of(r), set()).add(f"{backend}: {uuid}")
+    if seen:
+        doc.p("The device UUID each column's runs rendered on, as their records say "
+              "(docs/multi-gpu.md):")
+        doc.bullets([f"{dev}: {', '.join(sorted(u))}" for dev, u in seen.items()])
