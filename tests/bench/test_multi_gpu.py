@@ -47,14 +47,20 @@ def _fake_smi(folder: Path, table: list[str]) -> Path:
 # the UUID sources of a Ray task (no Ray, no GPU)
 
 
+def _no_cuda() -> dict[int, str]:
+    raise RuntimeError("CUDA is not available (the test hides it)")
+
+
 def test_nvidia_smi_names_rays_gpu_and_the_sources_fall_through(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pynvml", None)  # no NVML here
+    monkeypatch.setattr(gpus, "_cuda", _no_cuda)  # nor CUDA (a GPU machine has it)
     table = [_dashed(fake_uuid(i)) for i in range(4)]
     monkeypatch.setenv("PATH", f"{_fake_smi(tmp_path, table)}{os.pathsep}/usr/bin:/bin")
     assert gpus.uuid_of_gpu("2") == (fake_uuid(2), "nvidia-smi")
     # a GPU the table lacks, then junk where a UUID should be: no guess, and every source's why
     uuid, why = gpus.uuid_of_gpu("7")
     assert uuid is None and "nvidia-smi: no GPU 7 among 4" in why and "nvml:" in why
+    assert "cuda: CUDA is not available" in why
     (tmp_path / "table.csv").write_text("0, not-a-uuid\n")
     uuid, why = gpus.uuid_of_gpu("0")
     assert uuid is None and "nvidia-smi gave 'not-a-uuid', not a UUID" in why
