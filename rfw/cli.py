@@ -539,7 +539,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: list[str]) -> int:
-    from .signals import Interrupted
+    from .signals import Interrupted, tell
 
     try:
         args = parser().parse_args(argv)  # a refused command line touches no output folder
@@ -548,7 +548,7 @@ def _main(argv: list[str]) -> int:
         check_all()  # every RFW_* variable set, read or not by this command
         return args.func(args)
     except Interrupted as e:
-        print(e.line(), file=sys.stderr)
+        tell(e.line())  # a second signal meanwhile adds no line
         return e.exit_code
     except RfwError as e:  # every error a user can cause (vkext's included) is one
         return _fail(str(e))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 from collections.abc import Iterator
 from types import FrameType
 
@@ -68,8 +69,37 @@ def _quiet_unraisable(hook):
     return unraisable
 
 
+_told = False  # the one line is on stderr: a later signal ends the process without another
+
+
+def tell(line: str) -> None:
+    """Write ``line`` (the interruption's one line) to stderr with the signals held back,
+    so that one arriving meanwhile cannot add a second line (it ends the process silently
+    once they are let through: :func:`_again`)."""
+    global _told
+    held = _hold()
+    try:
+        if not _told:
+            sys.stderr.flush()
+            os.write(2, (line + "\n").encode())
+            _told = True
+    finally:
+        if held:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
+
+
+def _hold() -> bool:
+    try:
+        signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+        return True
+    except (AttributeError, OSError, ValueError):  # no pthread_sigmask here
+        return False
+
+
 def _again(signum: int, frame: FrameType | None) -> None:
-    os.write(2, b"rfw: interrupted\n")
+    if not _told:
+        _hold()  # never let through again: the process ends here
+        os.write(2, b"rfw: interrupted\n")
     os._exit(128 + signum)
 
 
@@ -77,8 +107,6 @@ def early() -> None:
     """When this process is the ``rfw`` command (the console script or ``python -m
     rfw.cli``), end it with the one line and 128 + signal should SIGINT or SIGTERM come
     while it imports, before ``rfw.cli.main`` installs the handlers that clean up."""
-    import sys
-
     argv = list(getattr(sys, "orig_argv", sys.argv))
     command = os.path.basename(sys.argv[0]) == "rfw" if sys.argv else False
     if not (command or argv[1:3] == ["-m", "rfw.cli"]):
@@ -94,9 +122,7 @@ def early() -> None:
 def installed() -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` within the block (in the main thread;
     elsewhere nothing changes), the handlers before it are put back after it."""
-    import sys
-
-    global _pending
+    global _pending, _told
     try:
         old = {s: signal.signal(s, _first) for s in SIGNALS}
     except ValueError:  # not the main thread
@@ -107,7 +133,7 @@ def installed() -> Iterator[None]:
     try:
         yield
     finally:
-        _pending = None
+        _pending, _told = None, False
         sys.unraisablehook = hook
         for s, handler in old.items():
             signal.signal(s, handler)

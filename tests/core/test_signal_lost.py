@@ -90,3 +90,43 @@ def test_a_signal_after_the_commit_says_the_results_are_written(tmp_path, commit
     line = caught.value.line()
     assert line == (f"rfw: interrupted (after its results were written to {out})"
                     if committed else "rfw: interrupted")
+
+
+# the second Ctrl-C arrives while the first one's line is being written (os.write sends it
+# to its own process first): with signals.tell the line is written once and the second
+# signal ends the process silently, with the same code; the control writes it as rfw used
+# to, with print, and the second signal's handler adds a second line
+TWICE = r"""
+import os, signal, sys, time
+from rfw import signals
+from rfw.signals import Interrupted
+
+write = os.write
+def write_after_a_signal(fd, data):
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.05)
+    return write(fd, data)
+
+with signals.installed():  # as rfw.cli.main: the line is told inside the block
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(5)
+    except Interrupted as e:
+        os.write = write_after_a_signal
+        if sys.argv[1] == "tell":
+            signals.tell(e.line())
+        else:
+            print(e.line(), file=sys.stderr, flush=True)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+        code = e.exit_code
+sys.exit(code)
+"""
+
+
+@pytest.mark.parametrize("mode, lines", [("tell", 1), ("print", 2)])
+def test_a_second_signal_while_the_line_is_written_adds_none(mode, lines):
+    got = subprocess.run([sys.executable, "-c", TWICE, mode], capture_output=True, text=True,
+                         timeout=60)
+    assert got.returncode == 130, got.stderr
+    assert got.stderr.splitlines() == ["rfw: interrupted"] * lines, got.stderr
