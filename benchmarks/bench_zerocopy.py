@@ -733,6 +733,16 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool,
     keep: dict[str, Any] = {}
     parts: dict[str, list[float]] = {}
 
+    def read(frame: Any) -> tuple[Any, Any, float]:
+        """(the array or None, the tensor, when read_device returned): with ``wrapped``
+        read_device makes the tensor itself (the from_dlpack part is then 0)."""
+        if wrapped:
+            t = interop.read_device(frame, "forward.hdr", wrap=torch.from_dlpack)
+            return None, t, time.perf_counter()
+        a = interop.read_device(frame, "forward.hdr")
+        read_at = time.perf_counter()
+        return a, (torch.from_dlpack(a) if a.zero_copy else None), read_at
+
     def each(k: int, frame: Any) -> None:
         if in_frame and k == 0:
             keep["why_not"] = interop.device_outputs(frame, ["forward.hdr"])["forward.hdr"]
@@ -741,34 +751,22 @@ def image_render(args: argparse.Namespace, torch: Any, *, in_frame: bool,
         frame.drain()  # the render done
         torch.cuda.synchronize()
         t0 = time.perf_counter()
-        if wrapped:
-            t = interop.read_device(frame, "forward.hdr", wrap=torch.from_dlpack)
-        else:
-            a = interop.read_device(frame, "forward.hdr")
-            t = torch.from_dlpack(a) if a.zero_copy else None
+        a, t, _ = read(frame)
         torch.cuda.synchronize()
         if k >= args.warmup:
             times.append(time.perf_counter() - t0)
             # the same steps timed one by one after the timed read (where the time goes)
             c0 = time.perf_counter()
-            if wrapped:
-                t = interop.read_device(frame, "forward.hdr", wrap=torch.from_dlpack)
-                c1 = c2 = time.perf_counter()
-            else:
-                a = interop.read_device(frame, "forward.hdr")
-                c1 = time.perf_counter()
-                t = torch.from_dlpack(a) if a.zero_copy else None
-                c2 = time.perf_counter()
+            a, t, c1 = read(frame)
+            c2 = time.perf_counter()
             torch.cuda.synchronize()
             c3 = time.perf_counter()
             for part, v in (("read_device", c1 - c0), ("from_dlpack", c2 - c1),
                             ("synchronize", c3 - c2)):
                 parts.setdefault(part, []).append(v * 1e6)
         if k == args.warmup:  # checked here: the arrays die with the render's device
-            if wrapped:
-                keep["zero_copy"], keep["device"] = bool(t.is_cuda), str(t.device)
-            else:
-                keep["zero_copy"], keep["device"] = a.zero_copy, a.device
+            keep["zero_copy"], keep["device"] = (bool(t.is_cuda), str(t.device)) if wrapped \
+                else (a.zero_copy, a.device)
             if t is not None:
                 keep["equal_host_readback"] = bool(np.array_equal(
                     t.cpu().numpy(), frame.read("forward.hdr")))
