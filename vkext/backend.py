@@ -46,7 +46,7 @@ class VkBackend(BackendBase):
     def list_devices(self) -> list[dict[str, Any]]:
         return list_devices()
 
-    def describe(self, device: VkDevice) -> dict[str, str]:
+    def describe(self, device: VkDevice) -> dict[str, Any]:
         return device.describe()
 
     def caps(self, device: VkDevice) -> frozenset[str]:

@@ -676,7 +676,7 @@ class VkDevice:
     # -----------------------------------------------------------------------------------------
     # public helpers
 
-    def describe(self) -> dict[str, str]:
+    def describe(self) -> dict[str, Any]:
         """Device, driver and API, in the shape of the wgpu backend's ``describe()``."""
         return {"device": self.name, "driver": self.driver, "api": f"Vulkan {self.api_version}",
                 "backend": "vk", "uuid": self.uuid}

@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..backend import GPU_ENV
+from ..backend import GPU_ENV, UUID_PREFIX
 from ..errors import RfwError
 from ..fileio import atomic_write, inside
 from .gpus import uuid_of_gpu
@@ -76,7 +76,7 @@ def run_task(job: Job, plan: Plan, cwd: str) -> dict[str, Any]:
     if gpus:  # the worker opens the GPU Ray gave this task, by its UUID
         uuid, source = uuid_of_gpu(gpus[0])
         where.update(uuid_asked=uuid, uuid_source=source)
-        env = {GPU_ENV: f"uuid:{uuid}"} if uuid else None
+        env = {GPU_ENV: f"{UUID_PREFIX}{uuid}"} if uuid else None
     try:
         if gpus and env is None:  # no guessing which Vulkan device Ray's GPU is
             record: dict[str, Any] = {"error": f"ray gave GPU {gpus[0]}, and {source}"}
